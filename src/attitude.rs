@@ -1,0 +1,84 @@
+//! Attitude: Wahba's problem by SVD in f64, and the quantities of the result record.
+
+use crate::camera::Camera;
+use crate::catalog::vector_to_radec;
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// The rotation R with v_cam = R · v_icrs that best maps `icrs[k]` onto `cam[k]` (least squares,
+/// equal weights): R = U diag(1, 1, det U · det V) Vᵀ for B = Σ cam·icrsᵀ = U S Vᵀ.
+/// None when fewer than two distinct directions are given.
+pub fn wahba(cam: &[Vector3<f64>], icrs: &[Vector3<f64>]) -> Option<Matrix3<f64>> {
+    if cam.len() < 2 || cam.len() != icrs.len() {
+        return None;
+    }
+    let b: Matrix3<f64> = cam.iter().zip(icrs).map(|(c, r)| c * r.transpose()).sum();
+    let svd = b.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let d = (u.determinant() * v_t.determinant()).signum();
+    let r = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t;
+    r.iter().all(|x| x.is_finite()).then_some(r)
+}
+
+/// The record's view of an attitude.
+#[derive(Clone, Copy, Debug)]
+pub struct Pointing {
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+    pub roll_deg: f64,
+    /// [w, x, y, z], Hamilton, w ≥ 0.
+    pub quaternion: [f64; 4],
+}
+
+/// Quaternion [w, x, y, z] (w ≥ 0) of a rotation matrix.
+pub fn quaternion(r: &Matrix3<f64>) -> [f64; 4] {
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*r));
+    let s = if q.w < 0.0 { -1.0 } else { 1.0 };
+    [s * q.w, s * q.i, s * q.j, s * q.k]
+}
+
+/// Rotation matrix of a quaternion [w, x, y, z].
+pub fn matrix_of_quaternion(q: [f64; 4]) -> Matrix3<f64> {
+    let uq = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
+    *uq.to_rotation_matrix().matrix()
+}
+
+/// RA/Dec of the image centre pixel and the roll (angle from image up to celestial north,
+/// counter-clockwise as displayed; tetra3's `Roll`).
+pub fn pointing(r: &Matrix3<f64>, camera: &Camera) -> Pointing {
+    let centre_cam = camera.centre_vector();
+    let centre = r.transpose() * centre_cam;
+    let (ra_deg, dec_deg) = vector_to_radec(&centre);
+    // North on the image: the pixel displacement of a small step toward the pole.
+    let pole = Vector3::z();
+    let mut north = pole - centre * pole.dot(&centre);
+    if north.norm() < 1e-12 {
+        // At a pole every direction is south; use the direction of RA 0 instead.
+        north = Vector3::x() - centre * centre.x;
+    }
+    let step = (centre + north.normalize() * 1e-6).normalize();
+    let roll_deg = match (
+        camera.vector_to_pixel(&centre_cam),
+        camera.vector_to_pixel(&(r * step)),
+    ) {
+        (Some((x0, y0)), Some((x1, y1))) => {
+            // Up is −y; counter-clockwise on screen turns up toward −x.
+            (-(x1 - x0))
+                .atan2(-(y1 - y0))
+                .to_degrees()
+                .rem_euclid(360.0)
+        }
+        _ => f64::NAN,
+    };
+    Pointing {
+        ra_deg,
+        dec_deg,
+        roll_deg,
+        quaternion: quaternion(r),
+    }
+}
+
+/// Angle of the rotation between two attitudes (radians).
+pub fn attitude_error(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
+    let d = a * b.transpose();
+    ((d.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+}

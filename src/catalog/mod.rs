@@ -1,0 +1,333 @@
+//! The star catalog: Hipparcos-2 stars, propagated to the observation epoch, cut to the
+//! camera's limiting magnitude, with the double stars the camera cannot separate handled.
+//!
+//! The repository ships `catalog/hip2_hp8.csv` (made by `gpustar catalog import`, see
+//! [`import_hip2`]); it is compiled into the binary so `gpustar` works with no files beside it.
+
+mod import;
+
+pub use import::import_hip2;
+
+use anyhow::{Context, Result, bail};
+use nalgebra::Vector3;
+use std::path::Path;
+
+/// The catalog compiled into the binary (Hipparcos-2, Hp ≤ 8.0).
+pub const BUILTIN_CSV: &str = include_str!("../../catalog/hip2_hp8.csv");
+/// Name of the compiled-in catalog, as `gpustar info` prints it.
+pub const BUILTIN_NAME: &str = "builtin:hip2_hp8.csv";
+
+/// Epoch of the Hipparcos-2 positions (Julian year).
+pub const HIPPARCOS_EPOCH: f64 = 1991.25;
+
+const MAS_TO_RAD: f64 = std::f64::consts::PI / (180.0 * 3600.0 * 1000.0);
+
+/// One catalog star as stored: ICRS position at J1991.25 and proper motion.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Star {
+    pub hip: u32,
+    /// Right ascension at J1991.25, radians.
+    pub ra_rad: f64,
+    /// Declination at J1991.25, radians.
+    pub dec_rad: f64,
+    /// Proper motion in RA·cos(Dec), mas/yr.
+    pub pmra_mas_yr: f64,
+    /// Proper motion in Dec, mas/yr.
+    pub pmdec_mas_yr: f64,
+    /// Hipparcos magnitude Hp.
+    pub mag: f64,
+}
+
+impl Star {
+    /// Unit vector (ICRS) at `epoch` (Julian year), propagated linearly along the tangent
+    /// plane and renormalised. Neglects radial velocity and parallax: for the Hipparcos stars
+    /// and a few decades the error stays far below an arcsecond (it grows as (μ·Δt)²/2).
+    pub fn vector_at(&self, epoch: f64) -> Vector3<f64> {
+        let (sa, ca) = self.ra_rad.sin_cos();
+        let (sd, cd) = self.dec_rad.sin_cos();
+        let p = Vector3::new(cd * ca, cd * sa, sd);
+        let e_ra = Vector3::new(-sa, ca, 0.0);
+        let e_dec = Vector3::new(-sd * ca, -sd * sa, cd);
+        let dt = epoch - HIPPARCOS_EPOCH;
+        let motion = (e_ra * self.pmra_mas_yr + e_dec * self.pmdec_mas_yr) * (MAS_TO_RAD * dt);
+        (p + motion).normalize()
+    }
+}
+
+/// The full catalog as loaded (sorted by HIP as in the file).
+#[derive(Clone, Debug)]
+pub struct Catalog {
+    pub stars: Vec<Star>,
+    /// Where it came from (a path, or [`BUILTIN_NAME`]).
+    pub source: String,
+    /// FNV-1a hash of the text it was parsed from: part of the distance-table cache key.
+    pub content_hash: u64,
+}
+
+impl Catalog {
+    /// The catalog compiled into the binary.
+    pub fn builtin() -> Catalog {
+        Catalog::parse(BUILTIN_CSV, BUILTIN_NAME).expect("the built-in catalog parses")
+    }
+
+    /// The built-in catalog, or the CSV file at `path` when given.
+    pub fn load(path: Option<&Path>) -> Result<Catalog> {
+        match path {
+            None => Ok(Catalog::builtin()),
+            Some(p) => {
+                let text = std::fs::read_to_string(p)
+                    .with_context(|| format!("cannot read catalog {}", p.display()))?;
+                Catalog::parse(&text, &p.display().to_string())
+            }
+        }
+    }
+
+    /// Parse gpustar's catalog CSV (`hip,ra_rad,dec_rad,pmra_mas_yr,pmdec_mas_yr,hp_mag`,
+    /// `#` comment lines, one header line).
+    pub fn parse(text: &str, source: &str) -> Result<Catalog> {
+        let mut stars = Vec::new();
+        let mut header_seen = false;
+        for (n, line) in text.lines().enumerate() {
+            let line = line.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            if !header_seen {
+                if !line.starts_with("hip,") {
+                    bail!(
+                        "{source}: line {}: expected the header 'hip,ra_rad,...'",
+                        n + 1
+                    );
+                }
+                header_seen = true;
+                continue;
+            }
+            let f: Vec<&str> = line.split(',').collect();
+            if f.len() != 6 {
+                bail!(
+                    "{source}: line {}: expected 6 fields, found {}",
+                    n + 1,
+                    f.len()
+                );
+            }
+            let num = |i: usize| -> Result<f64> {
+                f[i].parse::<f64>()
+                    .with_context(|| format!("{source}: line {}: bad number {:?}", n + 1, f[i]))
+            };
+            stars.push(Star {
+                hip: f[0]
+                    .parse()
+                    .with_context(|| format!("{source}: line {}: bad HIP {:?}", n + 1, f[0]))?,
+                ra_rad: num(1)?,
+                dec_rad: num(2)?,
+                pmra_mas_yr: num(3)?,
+                pmdec_mas_yr: num(4)?,
+                mag: num(5)?,
+            });
+        }
+        if stars.is_empty() {
+            bail!("{source}: no stars");
+        }
+        Ok(Catalog {
+            stars,
+            source: source.to_string(),
+            content_hash: fnv1a(text.as_bytes()),
+        })
+    }
+
+    /// Faintest magnitude in the catalog.
+    pub fn faintest(&self) -> f64 {
+        self.stars.iter().map(|s| s.mag).fold(f64::MIN, f64::max)
+    }
+}
+
+/// How stars closer together than the camera can separate are treated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DoubleStars {
+    /// Replace the group by one star at its flux-weighted photocentre with the summed flux:
+    /// that is what the detector sees (one blob), so the pair still serves identification.
+    Merge,
+    /// Remove every star of the group (seed 000's choice).
+    Drop,
+    /// Keep them as they are.
+    Keep,
+}
+
+/// What a run selects from the catalog.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Selection {
+    /// Julian year of the observation.
+    pub epoch: f64,
+    /// Faintest Hp kept.
+    pub mag_limit: f64,
+    pub double_stars: DoubleStars,
+    /// Separation below which two stars count as one for the camera, radians.
+    pub double_sep_rad: f64,
+}
+
+/// A catalog star ready for matching: index = its id in the distance table.
+#[derive(Clone, Copy, Debug)]
+pub struct RefStar {
+    /// HIP of the star, or of the brightest star of a merged group.
+    pub hip: u32,
+    /// ICRS unit vector at the selection's epoch.
+    pub v: Vector3<f64>,
+    pub mag: f64,
+    /// Number of catalog stars merged into this one (1 for a single star).
+    pub members: u32,
+}
+
+/// The stars a run matches against, brightest first (ids fit in u16 for the GPU's packing).
+#[derive(Clone, Debug)]
+pub struct RefCatalog {
+    pub stars: Vec<RefStar>,
+    pub selection: Selection,
+    /// Stars the double-star rule merged away or dropped.
+    pub doubles_removed: usize,
+}
+
+/// The largest number of stars a reference catalog may hold: ids are packed into 16 bits.
+pub const MAX_REF_STARS: usize = 0xFFFF;
+
+impl RefCatalog {
+    /// Select stars at or brighter than the magnitude limit, propagate them, and apply the
+    /// double-star rule.
+    pub fn select(catalog: &Catalog, selection: Selection) -> Result<RefCatalog> {
+        let mut stars: Vec<RefStar> = catalog
+            .stars
+            .iter()
+            .filter(|s| s.mag <= selection.mag_limit)
+            .map(|s| RefStar {
+                hip: s.hip,
+                v: s.vector_at(selection.epoch),
+                mag: s.mag,
+                members: 1,
+            })
+            .collect();
+        let before = stars.len();
+        if selection.double_stars != DoubleStars::Keep && selection.double_sep_rad > 0.0 {
+            stars = resolve_doubles(&stars, selection);
+        }
+        let doubles_removed = before - stars.len();
+        // Brightest first, ties by HIP: a stable id order that does not depend on the file.
+        stars.sort_by(|a, b| a.mag.total_cmp(&b.mag).then(a.hip.cmp(&b.hip)));
+        if stars.len() > MAX_REF_STARS {
+            bail!(
+                "{} catalog stars are brighter than magnitude {}: at most {} fit the distance \
+                 table's 16-bit ids; lower --mag-limit",
+                stars.len(),
+                selection.mag_limit,
+                MAX_REF_STARS
+            );
+        }
+        if stars.len() < 3 {
+            bail!(
+                "only {} catalog stars are brighter than magnitude {}; raise --mag-limit",
+                stars.len(),
+                selection.mag_limit
+            );
+        }
+        Ok(RefCatalog {
+            stars,
+            selection,
+            doubles_removed,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.stars.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.stars.is_empty()
+    }
+}
+
+/// Group stars closer than `double_sep_rad` (transitively) and merge or drop each group.
+fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
+    let n = stars.len();
+    let chord_max = 2.0 * (selection.double_sep_rad / 2.0).sin();
+    // Sort by z so that neighbours are found in a narrow z band: chord ≥ |Δz|.
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| stars[a].v.z.total_cmp(&stars[b].v.z));
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn find(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for (k, &a) in order.iter().enumerate() {
+        for &b in &order[k + 1..] {
+            if stars[b].v.z - stars[a].v.z > chord_max {
+                break;
+            }
+            if (stars[a].v - stars[b].v).norm() < chord_max {
+                let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+                if ra != rb {
+                    parent[ra.max(rb)] = ra.min(rb);
+                }
+            }
+        }
+    }
+    let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for i in 0..n {
+        let r = find(&mut parent, i);
+        groups.entry(r).or_default().push(i);
+    }
+    let mut out = Vec::with_capacity(n);
+    for members in groups.values() {
+        if members.len() == 1 {
+            out.push(stars[members[0]]);
+            continue;
+        }
+        if selection.double_stars == DoubleStars::Drop {
+            continue;
+        }
+        let flux = |s: &RefStar| 10f64.powf(-0.4 * s.mag);
+        let total: f64 = members.iter().map(|&i| flux(&stars[i])).sum();
+        let centre: Vector3<f64> = members
+            .iter()
+            .map(|&i| stars[i].v * flux(&stars[i]))
+            .sum::<Vector3<f64>>()
+            .normalize();
+        let brightest = members
+            .iter()
+            .copied()
+            .min_by(|&a, &b| stars[a].mag.total_cmp(&stars[b].mag))
+            .unwrap();
+        out.push(RefStar {
+            hip: stars[brightest].hip,
+            v: centre,
+            mag: -2.5 * total.log10(),
+            members: members.len() as u32,
+        });
+    }
+    out
+}
+
+/// 64-bit FNV-1a: a stable hash for cache keys (std's hasher may change between releases).
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// Unit vector of (RA, Dec) in degrees.
+pub fn radec_to_vector(ra_deg: f64, dec_deg: f64) -> Vector3<f64> {
+    let (sa, ca) = ra_deg.to_radians().sin_cos();
+    let (sd, cd) = dec_deg.to_radians().sin_cos();
+    Vector3::new(cd * ca, cd * sa, sd)
+}
+
+/// (RA in [0, 360), Dec) in degrees of a unit vector.
+pub fn vector_to_radec(v: &Vector3<f64>) -> (f64, f64) {
+    let ra = v.y.atan2(v.x).to_degrees().rem_euclid(360.0);
+    let dec = v.z.clamp(-1.0, 1.0).asin().to_degrees();
+    (ra, dec)
+}

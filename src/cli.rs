@@ -1,0 +1,499 @@
+//! The command line (clap derive). `main` calls [`run`].
+
+use crate::batch::{CameraSource, Counts, Format, Pipeline, RecordWriter, list_inputs};
+use crate::camera::Camera;
+use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
+use crate::evaluate;
+use crate::simulate::{self, SimSettings};
+use crate::solve::{Settings, auto_mag_limit};
+use crate::table;
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand};
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+const AFTER_HELP: &str = "\
+Examples:
+  gpustar simulate --out sim -n 20 --fov-deg 18      # 20 synthetic frames + truth.jsonl
+  gpustar batch sim --camera sim/camera.toml -o results.jsonl
+  gpustar evaluate --truth sim/truth.jsonl results.jsonl
+  gpustar solve frame.png --fov-deg 11.4 --epoch 2019.58
+
+Exit status: 0 when every input got a record and none is an error record; 1 when some input
+got an error record; 2 when the run could not start (bad options, unreadable camera or catalog).";
+
+/// Identify the stars in sky images and find the camera's attitude (lost in space).
+#[derive(Parser, Debug)]
+#[command(name = "gpustar", version, about, long_about = None, after_help = AFTER_HELP)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Solve every image in DIR (sorted by name); one record per file.
+    Batch {
+        /// Directory of images (PNG, JPEG, TIFF).
+        dir: PathBuf,
+        #[command(flatten)]
+        opts: SolveOpts,
+    },
+    /// Solve one image; one record.
+    Solve {
+        /// The image file.
+        image: PathBuf,
+        #[command(flatten)]
+        opts: SolveOpts,
+    },
+    /// Catalog summary and, for a camera, the reference stars and the distance table.
+    Info {
+        #[command(flatten)]
+        camera: CameraOpts,
+        /// Image size for --fov-deg, as WIDTHxHEIGHT.
+        #[arg(long, value_parser = parse_size)]
+        size: Option<(u32, u32)>,
+        #[command(flatten)]
+        catalog: CatalogOpts,
+    },
+    /// Write synthetic frames, truth.jsonl and camera.toml into a directory.
+    Simulate(SimulateArgs),
+    /// Compare result records with a truth file: solved, correct, wrong, attitude errors.
+    Evaluate {
+        /// Results (JSON Lines, as written by batch).
+        results: PathBuf,
+        /// Truth file (truth.jsonl of simulate, or of ../shared/data/real/*).
+        #[arg(long)]
+        truth: PathBuf,
+        /// A solution is correct when its attitude is within this angle of the truth.
+        #[arg(long, default_value_t = 0.1)]
+        tolerance_deg: f64,
+        /// A star ID is false when the star is not within this many pixels of where the truth
+        /// puts it.
+        #[arg(long, default_value_t = 3.0)]
+        id_tolerance_px: f64,
+        /// Also print one line per frame.
+        #[arg(long)]
+        per_frame: bool,
+    },
+    /// Catalog maintenance.
+    #[command(subcommand)]
+    Catalog(CatalogCommand),
+}
+
+#[derive(Subcommand, Debug)]
+pub enum CatalogCommand {
+    /// Make gpustar's catalog CSV from Hipparcos-2 hip2.dat (CDS I/311).
+    Import {
+        /// Path of hip2.dat.
+        hip2: PathBuf,
+        /// Keep stars with Hp at or below this.
+        #[arg(long, default_value_t = 8.0)]
+        max_mag: f64,
+        /// Output file (default: stdout).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct CameraOpts {
+    /// Camera model (TOML: width, height, fov_x_deg or fx_px, fy_px, cx_px, cy_px, k1, k2,
+    /// mirrored, mag_limit).
+    #[arg(long, conflicts_with = "fov_deg")]
+    pub camera: Option<PathBuf>,
+    /// Horizontal field of view in degrees: square pixels, centred, no distortion.
+    #[arg(long)]
+    pub fov_deg: Option<f64>,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct CatalogOpts {
+    /// Catalog CSV (default: the built-in Hipparcos-2 catalog, Hp ≤ 8).
+    #[arg(long)]
+    pub catalog: Option<PathBuf>,
+    /// Observation epoch (decimal year) for proper motion.
+    #[arg(long, default_value_t = 2000.0)]
+    pub epoch: f64,
+    /// Faintest catalog magnitude used [default: the camera file's mag_limit, else chosen from
+    /// the field of view so that about 40 catalog stars are in view].
+    #[arg(long)]
+    pub mag_limit: Option<f64>,
+    /// Stars the camera cannot separate: merge them into one at their photocentre, drop
+    /// them, or keep them.
+    #[arg(long, value_enum, default_value_t = DoubleStars::Merge)]
+    pub double_stars: DoubleStars,
+    /// Stars closer than this many pixels count as one.
+    #[arg(long, default_value_t = 2.0)]
+    pub double_star_px: f64,
+    /// Do not read or write the distance-table cache.
+    #[arg(long)]
+    pub no_cache: bool,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct SolveOpts {
+    #[command(flatten)]
+    pub camera: CameraOpts,
+    #[command(flatten)]
+    pub catalog: CatalogOpts,
+    /// Write the records here instead of stdout.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Record format.
+    #[arg(long, value_enum, default_value_t = Format::Jsonl)]
+    pub format: Format,
+    /// Detection threshold above the local background, in noise sigmas.
+    #[arg(long, default_value_t = 5.0)]
+    pub sigma: f32,
+    /// Brightest detected stars that take part in the vote.
+    #[arg(long, default_value_t = 30)]
+    pub vote_stars: usize,
+    /// Pair distance tolerance from centroid errors, pixels.
+    #[arg(long, default_value_t = 0.5)]
+    pub pair_tol_px: f64,
+    /// Pair distance tolerance from focal-length and distortion errors, relative.
+    #[arg(long, default_value_t = 0.0002)]
+    pub scale_tol: f64,
+    /// A detection matches a catalog star within this many pixels in refinement.
+    #[arg(long, default_value_t = 2.0)]
+    pub match_radius_px: f64,
+    /// Report `solved` only when the probability of a chance match is below this.
+    #[arg(long, default_value_t = 1e-6)]
+    pub max_false_prob: f64,
+    /// Do not print the summary to stderr.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Number of frames.
+    #[arg(short = 'n', long, default_value_t = 10)]
+    pub frames: usize,
+    /// Horizontal field of view, degrees.
+    #[arg(long, default_value_t = 18.0)]
+    pub fov_deg: f64,
+    /// Frame size, WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size, default_value = "1024x1024")]
+    pub size: (u32, u32),
+    /// Faintest catalog star drawn (Hp).
+    #[arg(long, default_value_t = 6.0)]
+    pub mag_limit: f64,
+    /// False stars per frame.
+    #[arg(long, default_value_t = 3)]
+    pub false_stars: usize,
+    /// Hot pixels per frame.
+    #[arg(long, default_value_t = 5)]
+    pub hot_pixels: usize,
+    /// Bits per pixel: 8 or 16.
+    #[arg(long, default_value_t = 8)]
+    pub bits: u8,
+    /// Random seed: the same seed gives the same frames.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Epoch of the star positions (decimal year).
+    #[arg(long, default_value_t = 2000.0)]
+    pub epoch: f64,
+    /// Gaussian PSF sigma, pixels.
+    #[arg(long, default_value_t = 1.0)]
+    pub psf_sigma: f64,
+    /// Sky background at the centre, electrons per pixel.
+    #[arg(long, default_value_t = 400.0)]
+    pub sky: f64,
+    /// Read noise, electrons.
+    #[arg(long, default_value_t = 15.0)]
+    pub read_noise: f64,
+    /// Fall-off of sky and stars from centre to corner (0 = none).
+    #[arg(long, default_value_t = 0.3)]
+    pub vignetting: f64,
+    /// Catalog CSV to draw stars from (default: built-in).
+    #[arg(long)]
+    pub catalog: Option<PathBuf>,
+}
+
+fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| format!("bad size {s:?}"))
+    };
+    Ok((p(w)?, p(h)?))
+}
+
+/// Run the command line; errors are printed once by `main`.
+pub fn run(cli: Cli) -> Result<ExitCode> {
+    match cli.command {
+        Command::Batch { dir, opts } => {
+            let inputs = list_inputs(&dir)?;
+            run_solve(inputs, &opts)
+        }
+        Command::Solve { image, opts } => {
+            let name = image.display().to_string();
+            run_solve(vec![(image, name)], &opts)
+        }
+        Command::Info {
+            camera,
+            size,
+            catalog,
+        } => info(&camera, size, &catalog),
+        Command::Simulate(a) => simulate_cmd(a),
+        Command::Evaluate {
+            results,
+            truth,
+            tolerance_deg,
+            id_tolerance_px,
+            per_frame,
+        } => {
+            let truth = simulate::read_truth(&truth)?;
+            let records = evaluate::read_records(&results)?;
+            let (s, frames) = evaluate::evaluate(&truth, &records, tolerance_deg, id_tolerance_px);
+            if per_frame {
+                for f in &frames {
+                    println!("{}", serde_json::to_string(f)?);
+                }
+            }
+            println!("{}", serde_json::to_string_pretty(&s)?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Catalog(CatalogCommand::Import {
+            hip2,
+            max_mag,
+            output,
+        }) => {
+            let text = std::fs::read_to_string(&hip2)
+                .with_context(|| format!("cannot read {}", hip2.display()))?;
+            let csv = crate::catalog::import_hip2(&text, max_mag)?;
+            match output {
+                Some(p) => std::fs::write(&p, csv)
+                    .with_context(|| format!("cannot write {}", p.display()))?,
+                None => std::io::stdout().write_all(csv.as_bytes())?,
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// The camera source and its optional magnitude limit.
+fn camera_source(c: &CameraOpts) -> Result<(CameraSource, Option<f64>)> {
+    match (&c.camera, c.fov_deg) {
+        (Some(path), _) => {
+            let (cam, mag) = Camera::from_toml_file(path)?;
+            Ok((CameraSource::Fixed(cam), mag))
+        }
+        (None, Some(fov)) => {
+            if !(fov > 0.0 && fov < 170.0) {
+                bail!("--fov-deg must be between 0 and 170, got {fov}");
+            }
+            Ok((CameraSource::Fov(fov), None))
+        }
+        (None, None) => bail!("give the camera: --camera FILE or --fov-deg DEG"),
+    }
+}
+
+fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
+    Settings {
+        epoch: c.epoch,
+        mag_limit: c.mag_limit.or(camera_mag),
+        double_stars: c.double_stars,
+        double_star_px: c.double_star_px,
+        table_cache: !c.no_cache,
+        ..Settings::default()
+    }
+}
+
+fn run_solve(inputs: Vec<(PathBuf, String)>, o: &SolveOpts) -> Result<ExitCode> {
+    let (camera, camera_mag) = camera_source(&o.camera)?;
+    let catalog = Catalog::load(o.catalog.catalog.as_deref())?;
+    let mut s = settings(&o.catalog, camera_mag);
+    s.detect.k_sigma = o.sigma;
+    s.identify.vote_stars = o.vote_stars;
+    s.identify.pair_tol_px = o.pair_tol_px;
+    s.identify.scale_tol = o.scale_tol;
+    s.refine.match_radius_px = o.match_radius_px;
+    s.refine.max_false_prob = o.max_false_prob;
+    let out: Box<dyn Write> = match &o.output {
+        Some(p) => Box::new(std::io::BufWriter::new(
+            std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
+        )),
+        None => Box::new(std::io::BufWriter::new(std::io::stdout())),
+    };
+    let mut writer = RecordWriter::new(out, o.format);
+    let mut pipeline = Pipeline::new(catalog, s, camera);
+    let mut counts = Counts::default();
+    let t0 = Instant::now();
+    for (path, name) in &inputs {
+        let rec = pipeline.process(path, name);
+        counts.add(&rec);
+        writer.write(&rec)?;
+    }
+    writer.flush()?;
+    let secs = t0.elapsed().as_secs_f64();
+    if !o.quiet {
+        eprintln!(
+            "gpustar: {} files: {} solved, {} unsolved, {} errors in {:.2} s ({:.1} images/s)",
+            counts.total(),
+            counts.solved,
+            counts.unsolved,
+            counts.errors,
+            secs,
+            counts.total() as f64 / secs.max(1e-9)
+        );
+    }
+    Ok(if counts.errors > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<ExitCode> {
+    let catalog = Catalog::load(o.catalog.as_deref())?;
+    println!("catalog: {}", catalog.source);
+    println!(
+        "  stars: {} (Hp {:.2} to {:.2}), positions at J1991.25, propagated to epoch {}",
+        catalog.stars.len(),
+        catalog.stars.iter().map(|s| s.mag).fold(f64::MAX, f64::min),
+        catalog.faintest(),
+        o.epoch
+    );
+    if c.camera.is_none() && c.fov_deg.is_none() {
+        println!("(give --camera FILE, or --fov-deg DEG --size WxH, to see the distance table)");
+        return Ok(ExitCode::SUCCESS);
+    }
+    let (source, camera_mag) = camera_source(c)?;
+    let camera = match source {
+        CameraSource::Fixed(cam) => cam,
+        CameraSource::Fov(fov) => {
+            let (w, h) = size.context("--fov-deg needs --size WIDTHxHEIGHT here")?;
+            Camera::from_fov(w, h, fov)?
+        }
+    };
+    let s = settings(o, camera_mag);
+    let mag_limit = s
+        .mag_limit
+        .unwrap_or_else(|| auto_mag_limit(&catalog, &camera));
+    println!(
+        "camera: {}x{} px, FOV {:.4} x {:.4} deg, diagonal {:.4} deg, {:.2} arcsec/px",
+        camera.width,
+        camera.height,
+        camera.fov_x_deg(),
+        camera.fov_y_deg(),
+        camera.diagonal_rad().to_degrees(),
+        camera.ifov_rad().to_degrees() * 3600.0
+    );
+    let refs = RefCatalog::select(
+        &catalog,
+        Selection {
+            epoch: s.epoch,
+            mag_limit,
+            double_stars: s.double_stars,
+            double_sep_rad: s.double_star_px * camera.ifov_rad(),
+        },
+    )?;
+    println!(
+        "reference stars: {} with Hp <= {mag_limit}{}; double stars ({:?}, < {} px): {} removed",
+        refs.len(),
+        if s.mag_limit.is_none() {
+            " (chosen from the FOV)"
+        } else {
+            ""
+        },
+        s.double_stars,
+        s.double_star_px,
+        refs.doubles_removed
+    );
+    let (t, origin) = table::load_or_build(
+        &refs,
+        catalog.content_hash,
+        camera.diagonal_rad(),
+        s.table_cache,
+    );
+    println!(
+        "distance table: {} rows, {} bytes (keys + pairs + k-vector of {} bins), pairs closer than {:.4} deg",
+        t.len(),
+        t.bytes(),
+        t.kvector.len() - 1,
+        t.max_sep_rad.to_degrees()
+    );
+    println!(
+        "  {} in {:.1} ms{}",
+        if origin.built {
+            "built"
+        } else {
+            "read from cache"
+        },
+        origin.seconds * 1e3,
+        origin
+            .cache_file
+            .as_ref()
+            .map(|f| format!("; cache {}", f.display()))
+            .unwrap_or_default()
+    );
+    if let Some(n) = origin.cache_note {
+        println!("  note: {n}");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
+    let catalog = Catalog::load(a.catalog.as_deref())?;
+    let s = SimSettings {
+        width: a.size.0,
+        height: a.size.1,
+        fov_x_deg: a.fov_deg,
+        mag_limit: a.mag_limit,
+        frames: a.frames,
+        seed: a.seed,
+        epoch: a.epoch,
+        psf_sigma_px: a.psf_sigma,
+        sky_e: a.sky,
+        read_noise_e: a.read_noise,
+        vignetting: a.vignetting,
+        bits: a.bits,
+        false_stars: a.false_stars,
+        hot_pixels: a.hot_pixels,
+        ..SimSettings::default()
+    };
+    let t0 = Instant::now();
+    simulate::write_set(&catalog, &s, &a.out, |_| {})?;
+    eprintln!(
+        "gpustar: wrote {} frames, truth.jsonl and camera.toml to {} in {:.1} s",
+        a.frames,
+        a.out.display(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Used by tests and `main`: parse arguments and run.
+pub fn main_with_args<I, T>(args: I) -> ExitCode
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+        }
+    };
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("gpustar: error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

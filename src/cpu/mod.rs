@@ -1,0 +1,8 @@
+//! The CPU twins of the GPU kernels: one module per stage, named as in `shaders/` and
+//! `src/gpu/`, written as loops over what the GPU runs in parallel. `--backend cpu` runs them.
+
+pub mod centroid;
+pub mod components;
+pub mod select;
+pub mod threshold;
+pub mod vote;

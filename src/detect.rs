@@ -1,0 +1,89 @@
+//! Detection: threshold → components → centroid, then the star list (brightest first).
+
+use crate::cpu;
+use crate::cpu::centroid::Blob;
+use crate::cpu::threshold::DetectParams;
+use crate::frame::Frame;
+use serde::Serialize;
+
+/// Settings of detection.
+#[derive(Clone, Copy, Debug)]
+pub struct DetectSettings {
+    /// Tile side for background and noise (pixels, 4–64).
+    pub tile: u32,
+    /// Threshold above the local background, in noise sigmas.
+    pub k_sigma: f32,
+    /// Smallest component kept (pixels): 2 rejects single hot pixels.
+    pub min_area: u32,
+    /// How many of the brightest stars go on to identification.
+    pub max_stars: usize,
+}
+
+impl Default for DetectSettings {
+    fn default() -> Self {
+        DetectSettings {
+            tile: 32,
+            k_sigma: 5.0,
+            min_area: 2,
+            max_stars: 100,
+        }
+    }
+}
+
+/// A detected star.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Detection {
+    pub x: f64,
+    pub y: f64,
+    /// Background-subtracted sum of the component (ADU).
+    pub flux: f64,
+    pub area: u32,
+    pub peak: u32,
+    /// Some pixel reached the format's maximum: the centroid is less certain.
+    pub saturated: bool,
+}
+
+/// The stage parameters for a frame under these settings.
+pub fn params(frame: &Frame, s: &DetectSettings) -> DetectParams {
+    DetectParams::new(
+        frame.width,
+        frame.height,
+        s.tile,
+        s.k_sigma,
+        frame.saturation as u32,
+    )
+}
+
+/// Run the CPU twins of the detection kernels: the blobs in label order.
+pub fn blobs_cpu(frame: &Frame, p: &DetectParams) -> Vec<Blob> {
+    let tiles = cpu::threshold::tile_stats(&frame.pixels, p);
+    let mask = cpu::threshold::threshold(&frame.pixels, &tiles, p);
+    let labels = cpu::components::components(&mask, p.width, p.height);
+    cpu::centroid::centroid(&frame.pixels, &labels, &tiles, p)
+}
+
+/// Turn blobs into the star list: drop those smaller than `min_area` (hot pixels), order by
+/// flux (ties by label, so the order is total), keep the brightest `max_stars`.
+pub fn star_list(blobs: &[Blob], s: &DetectSettings) -> Vec<Detection> {
+    let mut kept: Vec<&Blob> = blobs.iter().filter(|b| b.area >= s.min_area).collect();
+    kept.sort_by(|a, b| b.m0.cmp(&a.m0).then(a.label.cmp(&b.label)));
+    kept.truncate(s.max_stars);
+    kept.iter()
+        .map(|b| {
+            let (x, y) = b.centre();
+            Detection {
+                x,
+                y,
+                flux: b.m0 as f64,
+                area: b.area,
+                peak: b.peak,
+                saturated: b.saturated > 0,
+            }
+        })
+        .collect()
+}
+
+/// Detect stars in a frame on the CPU.
+pub fn detect(frame: &Frame, s: &DetectSettings) -> Vec<Detection> {
+    star_list(&blobs_cpu(frame, &params(frame, s)), s)
+}

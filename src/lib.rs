@@ -1,0 +1,26 @@
+//! gpustar: lost-in-space star identification and attitude determination for archives of sky
+//! frames.
+//!
+//! The pipeline, one module per stage:
+//! [`frame`] (decode) → [`detect`] (`cpu::threshold` → `cpu::components` → `cpu::centroid`) →
+//! [`identify`] (pair ranges → `cpu::vote` → `cpu::select` → verification) → [`attitude`]
+//! (Wahba by SVD) → [`refine`] (match, refit, false-match probability) → [`record`].
+//! [`catalog`] and [`table`] prepare the reference stars and the sorted distance table;
+//! [`solve`] ties a camera to them; [`batch`] runs many files; [`simulate`] and [`evaluate`]
+//! make and score synthetic sets.
+
+pub mod attitude;
+pub mod batch;
+pub mod camera;
+pub mod catalog;
+pub mod cli;
+pub mod cpu;
+pub mod detect;
+pub mod evaluate;
+pub mod frame;
+pub mod identify;
+pub mod record;
+pub mod refine;
+pub mod simulate;
+pub mod solve;
+pub mod table;

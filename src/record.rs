@@ -1,0 +1,103 @@
+//! The result record: one JSON object per input file (spec/INTERFACE.md). Scripts parse these;
+//! fields are only ever added.
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    Solved,
+    Unsolved,
+    Error,
+}
+
+/// One identified star.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MatchRecord {
+    pub x: f64,
+    pub y: f64,
+    pub hip: u32,
+    /// Catalog position at the observation epoch.
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+    pub mag: f64,
+    pub flux: f64,
+    pub residual_arcsec: f64,
+}
+
+/// Milliseconds spent per stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    pub decode: f64,
+    pub detect: f64,
+    pub identify: f64,
+    pub total: f64,
+}
+
+/// The record of one input file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Record {
+    /// Path relative to the batch directory (or as given to `solve`).
+    pub file: String,
+    pub status: Status,
+    /// Why an unsolved frame is unsolved: too_few_stars | no_consistent_match | low_confidence.
+    pub reason: Option<String>,
+    /// What went wrong with an `error` record, for a person to act on.
+    pub error: Option<String>,
+    pub ra_deg: Option<f64>,
+    pub dec_deg: Option<f64>,
+    pub roll_deg: Option<f64>,
+    pub quaternion: Option<[f64; 4]>,
+    pub rotation_matrix: Option<[[f64; 3]; 3]>,
+    pub fov_x_deg: Option<f64>,
+    pub fov_y_deg: Option<f64>,
+    pub stars_detected: Option<usize>,
+    pub stars_matched: Option<usize>,
+    pub rmse_arcsec: Option<f64>,
+    pub p90_arcsec: Option<f64>,
+    pub max_arcsec: Option<f64>,
+    pub false_match_prob: Option<f64>,
+    pub matches: Option<Vec<MatchRecord>>,
+    pub timing_ms: Timing,
+    pub backend: String,
+}
+
+impl Record {
+    pub fn empty(file: &str, backend: &str) -> Record {
+        Record {
+            file: file.to_string(),
+            status: Status::Unsolved,
+            reason: None,
+            error: None,
+            ra_deg: None,
+            dec_deg: None,
+            roll_deg: None,
+            quaternion: None,
+            rotation_matrix: None,
+            fov_x_deg: None,
+            fov_y_deg: None,
+            stars_detected: None,
+            stars_matched: None,
+            rmse_arcsec: None,
+            p90_arcsec: None,
+            max_arcsec: None,
+            false_match_prob: None,
+            matches: None,
+            timing_ms: Timing::default(),
+            backend: backend.to_string(),
+        }
+    }
+
+    pub fn error(file: &str, message: String, backend: &str) -> Record {
+        Record {
+            status: Status::Error,
+            error: Some(message),
+            ..Record::empty(file, backend)
+        }
+    }
+
+    /// The record as one line of JSON (no newline).
+    pub fn to_json_line(&self) -> String {
+        serde_json::to_string(self).expect("records serialise")
+    }
+}

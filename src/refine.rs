@@ -1,0 +1,220 @@
+//! Refinement and acceptance: from a first attitude, project the reference stars in view,
+//! match detections to them one to one, refit, and judge the result by the probability that a
+//! wrong attitude would match as many stars by chance.
+
+use crate::attitude::wahba;
+use crate::camera::{Camera, angle};
+use crate::catalog::RefCatalog;
+use crate::detect::Detection;
+use nalgebra::{Matrix3, Vector3};
+
+/// Settings of refinement and acceptance.
+#[derive(Clone, Copy, Debug)]
+pub struct RefineSettings {
+    /// A detection matches a projected catalog star within this distance (pixels).
+    pub match_radius_px: f64,
+    /// Accept a solution only when its false-match probability is below this.
+    pub max_false_prob: f64,
+    /// Refit rounds.
+    pub rounds: usize,
+}
+
+impl Default for RefineSettings {
+    fn default() -> Self {
+        RefineSettings {
+            match_radius_px: 2.0,
+            max_false_prob: 1e-6,
+            rounds: 3,
+        }
+    }
+}
+
+/// A detection matched to a reference star.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Match {
+    /// Index into the detections.
+    pub det: usize,
+    pub ref_id: u32,
+    /// Angle between the detection's direction and the star's (arcsec).
+    pub residual_arcsec: f64,
+}
+
+/// A refined solution.
+#[derive(Clone, Debug)]
+pub struct Refined {
+    pub r: Matrix3<f64>,
+    pub matches: Vec<Match>,
+    /// Reference stars that project inside the image.
+    pub in_view: usize,
+    pub rmse_arcsec: f64,
+    pub p90_arcsec: f64,
+    pub max_arcsec: f64,
+    pub false_match_prob: f64,
+}
+
+/// Reference stars projecting inside the image under `r`: (ref id, pixel).
+pub fn stars_in_view(r: &Matrix3<f64>, refs: &RefCatalog, camera: &Camera) -> Vec<(u32, f64, f64)> {
+    let boresight = r.transpose() * camera.centre_vector();
+    let cos_half = (camera.diagonal_rad() * 0.5 + 0.01)
+        .min(std::f64::consts::PI)
+        .cos();
+    refs.stars
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.v.dot(&boresight) >= cos_half)
+        .filter_map(|(id, s)| {
+            let (x, y) = camera.vector_to_pixel(&(r * s.v))?;
+            camera.contains(x, y).then_some((id as u32, x, y))
+        })
+        .collect()
+}
+
+/// One-to-one matches: a detection and a projected star that are each other's nearest, within
+/// the radius.
+fn mutual_nearest(dets: &[Detection], proj: &[(u32, f64, f64)], radius: f64) -> Vec<(usize, u32)> {
+    let r2 = radius * radius;
+    let d2 = |d: &Detection, p: &(u32, f64, f64)| (d.x - p.1).powi(2) + (d.y - p.2).powi(2);
+    let nearest_proj: Vec<Option<usize>> = dets
+        .iter()
+        .map(|d| {
+            (0..proj.len())
+                .filter(|&k| d2(d, &proj[k]) <= r2)
+                .min_by(|&a, &b| d2(d, &proj[a]).total_cmp(&d2(d, &proj[b])))
+        })
+        .collect();
+    let mut out = Vec::new();
+    for (di, np) in nearest_proj.iter().enumerate() {
+        let Some(k) = *np else { continue };
+        let back = (0..dets.len())
+            .min_by(|&a, &b| d2(&dets[a], &proj[k]).total_cmp(&d2(&dets[b], &proj[k])))
+            .unwrap();
+        if back == di {
+            out.push((di, proj[k].0));
+        }
+    }
+    out
+}
+
+/// Refine a first attitude; None when nothing matches.
+pub fn refine(
+    r0: Matrix3<f64>,
+    dets: &[Detection],
+    det_vectors: &[Vector3<f64>],
+    refs: &RefCatalog,
+    camera: &Camera,
+    hypotheses: u64,
+    s: &RefineSettings,
+) -> Option<Refined> {
+    let mut r = r0;
+    let mut pairs: Vec<(usize, u32)> = Vec::new();
+    let mut in_view = 0;
+    for _ in 0..s.rounds.max(1) {
+        let proj = stars_in_view(&r, refs, camera);
+        in_view = proj.len();
+        let next = mutual_nearest(dets, &proj, s.match_radius_px);
+        if next.len() < 2 {
+            return None;
+        }
+        let cam: Vec<_> = next.iter().map(|&(d, _)| det_vectors[d]).collect();
+        let icrs: Vec<_> = next
+            .iter()
+            .map(|&(_, id)| refs.stars[id as usize].v)
+            .collect();
+        r = wahba(&cam, &icrs)?;
+        let stable = next == pairs;
+        pairs = next;
+        if stable {
+            break;
+        }
+    }
+    let matches: Vec<Match> = pairs
+        .iter()
+        .map(|&(det, ref_id)| Match {
+            det,
+            ref_id,
+            residual_arcsec: angle(&det_vectors[det], &(r * refs.stars[ref_id as usize].v))
+                .to_degrees()
+                * 3600.0,
+        })
+        .collect();
+    let mut res: Vec<f64> = matches.iter().map(|m| m.residual_arcsec).collect();
+    res.sort_by(f64::total_cmp);
+    let rmse = (res.iter().map(|x| x * x).sum::<f64>() / res.len() as f64).sqrt();
+    let p90 = res[((res.len() as f64 * 0.9).ceil() as usize).clamp(1, res.len()) - 1];
+    let area = camera.width as f64 * camera.height as f64;
+    let p_single =
+        (dets.len() as f64 * std::f64::consts::PI * s.match_radius_px.powi(2) / area).min(1.0);
+    let false_match_prob = false_match_probability(matches.len(), in_view, p_single, hypotheses);
+    Some(Refined {
+        r,
+        in_view,
+        rmse_arcsec: rmse,
+        p90_arcsec: p90,
+        max_arcsec: *res.last().unwrap(),
+        matches,
+        false_match_prob,
+    })
+}
+
+/// Probability that a wrong attitude matches `matched` of the `in_view` catalog stars by chance
+/// (tetra3's binomial test): two stars fix a hypothesis, each other star in view lands within
+/// the match radius of some detection with probability `p_single`; the tail is multiplied by the
+/// number of hypotheses voting considered (Bonferroni).
+pub fn false_match_probability(
+    matched: usize,
+    in_view: usize,
+    p_single: f64,
+    hypotheses: u64,
+) -> f64 {
+    if matched < 3 || in_view < matched {
+        return 1.0;
+    }
+    let tail = binomial_tail(in_view - 2, matched - 2, p_single);
+    (tail * hypotheses.max(1) as f64).min(1.0)
+}
+
+/// P(X ≥ k) for X ~ Binomial(n, p), summed in log space.
+pub fn binomial_tail(n: usize, k: usize, p: f64) -> f64 {
+    if k == 0 {
+        return 1.0;
+    }
+    if k > n || p <= 0.0 {
+        return 0.0;
+    }
+    if p >= 1.0 {
+        return 1.0;
+    }
+    let ln_fact: Vec<f64> = std::iter::once(0.0)
+        .chain((1..=n).scan(0.0, |acc, i| {
+            *acc += (i as f64).ln();
+            Some(*acc)
+        }))
+        .collect();
+    let (lp, lq) = (p.ln(), (-p).ln_1p());
+    let terms: Vec<f64> = (k..=n)
+        .map(|i| ln_fact[n] - ln_fact[i] - ln_fact[n - i] + i as f64 * lp + (n - i) as f64 * lq)
+        .collect();
+    let m = terms.iter().copied().fold(f64::MIN, f64::max);
+    (m + terms.iter().map(|t| (t - m).exp()).sum::<f64>().ln()).exp()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn binomial_tail_matches_direct_sums() {
+        // n = 5, p = 0.5: P(X ≥ 3) = (10 + 5 + 1) / 32.
+        assert!((binomial_tail(5, 3, 0.5) - 0.5).abs() < 1e-12);
+        assert!((binomial_tail(10, 1, 0.1) - (1.0 - 0.9f64.powi(10))).abs() < 1e-12);
+        // Tiny tails stay accurate: P(X ≥ 20) for n = 20 is p^20.
+        assert!((binomial_tail(20, 20, 1e-3) / 1e-60 - 1.0).abs() < 1e-9);
+        assert_eq!(binomial_tail(3, 4, 0.5), 0.0);
+    }
+
+    #[test]
+    fn false_match_probability_needs_three_stars() {
+        assert_eq!(false_match_probability(2, 10, 1e-4, 1), 1.0);
+        assert!(false_match_probability(6, 10, 1e-4, 1000) < 1e-9);
+    }
+}

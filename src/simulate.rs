@@ -1,0 +1,304 @@
+//! `gpustar simulate`: synthetic star-tracker frames with a truth file (seed 000's simulation:
+//! random attitudes, pinhole projection, magnitude → flux, Gaussian PSF), plus what real frames
+//! have: sky background with vignetting, Poisson and read noise, false stars, hot pixels.
+//!
+//! Frames are reproducible from `--seed`: frame k uses its own ChaCha8 stream.
+
+use crate::attitude::{pointing, quaternion};
+use crate::camera::Camera;
+use crate::catalog::Catalog;
+use anyhow::{Context, Result, bail};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal, Poisson};
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::Path;
+
+/// What to simulate.
+#[derive(Clone, Debug)]
+pub struct SimSettings {
+    pub width: u32,
+    pub height: u32,
+    pub fov_x_deg: f64,
+    /// Faintest catalog star drawn (Hp).
+    pub mag_limit: f64,
+    pub frames: usize,
+    pub seed: u64,
+    pub epoch: f64,
+    /// Gaussian PSF sigma, pixels.
+    pub psf_sigma_px: f64,
+    /// Signal of a magnitude-0 star, electrons.
+    pub flux_mag0_e: f64,
+    /// Sky background at the centre, electrons per pixel.
+    pub sky_e: f64,
+    /// Fraction by which sky and stars fall off from the centre to the corners.
+    pub vignetting: f64,
+    /// Read noise, electrons rms.
+    pub read_noise_e: f64,
+    /// Electrons at the largest pixel value (255 or 65535): sets the gain, so 8- and 16-bit
+    /// frames saturate at the same signal.
+    pub full_well_e: f64,
+    /// Bits per pixel of the PNG files: 8 or 16.
+    pub bits: u8,
+    /// False stars (spots of random magnitude at random places) per frame.
+    pub false_stars: usize,
+    /// Hot pixels (single bright pixels) per frame.
+    pub hot_pixels: usize,
+}
+
+impl Default for SimSettings {
+    fn default() -> Self {
+        SimSettings {
+            width: 1024,
+            height: 1024,
+            fov_x_deg: 18.0,
+            mag_limit: 6.0,
+            frames: 10,
+            seed: 1,
+            epoch: 2000.0,
+            psf_sigma_px: 1.0,
+            flux_mag0_e: 2.0e6,
+            sky_e: 400.0,
+            vignetting: 0.3,
+            read_noise_e: 15.0,
+            full_well_e: 5100.0,
+            bits: 8,
+            false_stars: 3,
+            hot_pixels: 5,
+        }
+    }
+}
+
+/// A star in a truth record.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TruthStar {
+    pub hip: u32,
+    pub x: f64,
+    pub y: f64,
+    pub mag: f64,
+}
+
+/// One line of `truth.jsonl` (the field names of ../shared/data/real/*/truth.jsonl).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Truth {
+    pub file: String,
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+    pub roll_tetra3_deg: f64,
+    pub rotation_matrix: [[f64; 3]; 3],
+    pub quaternion: [f64; 4],
+    pub epoch: f64,
+    #[serde(default)]
+    pub mirrored: bool,
+    pub width: u32,
+    pub height: u32,
+    pub fov_x_deg: f64,
+    pub fov_y_deg: f64,
+    /// Catalog stars whose centre falls on the frame, brightest first.
+    #[serde(default)]
+    pub stars: Vec<TruthStar>,
+    /// Positions of the false stars (simulated frames only).
+    #[serde(default)]
+    pub false_stars: Vec<[f64; 2]>,
+}
+
+/// A uniformly random rotation (Shoemake's method).
+pub fn random_rotation(rng: &mut impl Rng) -> Matrix3<f64> {
+    let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
+    let tau = std::f64::consts::TAU;
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    let q = nalgebra::Quaternion::new(
+        b * (tau * u3).cos(),
+        a * (tau * u2).sin(),
+        a * (tau * u2).cos(),
+        b * (tau * u3).sin(),
+    );
+    *UnitQuaternion::from_quaternion(q)
+        .to_rotation_matrix()
+        .matrix()
+}
+
+/// Fraction of a unit-flux Gaussian (sigma s, centre c) falling in pixel [p − ½, p + ½].
+fn pixel_fraction(p: f64, c: f64, s: f64) -> f64 {
+    let k = 1.0 / (s * std::f64::consts::SQRT_2);
+    0.5 * (libm::erf((p + 0.5 - c) * k) - libm::erf((p - 0.5 - c) * k))
+}
+
+/// Add a Gaussian spot of total `electrons` centred at (x, y), integrated over pixels.
+pub fn add_spot(signal: &mut [f64], w: u32, h: u32, x: f64, y: f64, electrons: f64, sigma: f64) {
+    let r = (4.0 * sigma).ceil() as i64 + 1;
+    let (cx, cy) = (x.round() as i64, y.round() as i64);
+    let fy: Vec<(i64, f64)> = (cy - r..=cy + r)
+        .filter(|&py| py >= 0 && py < h as i64)
+        .map(|py| (py, pixel_fraction(py as f64, y, sigma)))
+        .collect();
+    for px in (cx - r..=cx + r).filter(|&px| px >= 0 && px < w as i64) {
+        let fx = pixel_fraction(px as f64, x, sigma) * electrons;
+        for &(py, f) in &fy {
+            signal[(py as usize) * w as usize + px as usize] += fx * f;
+        }
+    }
+}
+
+/// Render one frame: the pixels (as u16 in ADU) and its truth.
+pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u16>, Truth)> {
+    let camera = Camera::from_fov(s.width, s.height, s.fov_x_deg)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
+    rng.set_stream(index as u64);
+    let r = random_rotation(&mut rng);
+    let (w, h) = (s.width, s.height);
+    let vig = |x: f64, y: f64| {
+        let (dx, dy) = (x - camera.cx, y - camera.cy);
+        let rmax2 = camera.cx * camera.cx + camera.cy * camera.cy;
+        1.0 - s.vignetting * (dx * dx + dy * dy) / rmax2.max(1.0)
+    };
+    let margin = 4.0 * s.psf_sigma_px;
+    let mut signal = vec![0f64; (w * h) as usize];
+    let mut stars = Vec::new();
+    let boresight = r.transpose() * Vector3::z();
+    let cos_reach = (camera.diagonal_rad() / 2.0 + 0.02).cos();
+    for star in catalog.stars.iter().filter(|st| st.mag <= s.mag_limit) {
+        let v = star.vector_at(s.epoch);
+        if v.dot(&boresight) < cos_reach {
+            continue;
+        }
+        let Some((x, y)) = camera.vector_to_pixel(&(r * v)) else {
+            continue;
+        };
+        if x < -margin || y < -margin || x > w as f64 - 1.0 + margin || y > h as f64 - 1.0 + margin
+        {
+            continue;
+        }
+        let e = s.flux_mag0_e * 10f64.powf(-0.4 * star.mag) * vig(x, y);
+        add_spot(&mut signal, w, h, x, y, e, s.psf_sigma_px);
+        if camera.contains(x, y) {
+            stars.push(TruthStar {
+                hip: star.hip,
+                x,
+                y,
+                mag: star.mag,
+            });
+        }
+    }
+    stars.sort_by(|a, b| a.mag.total_cmp(&b.mag).then(a.hip.cmp(&b.hip)));
+    let mut false_stars = Vec::new();
+    for _ in 0..s.false_stars {
+        let x = rng.random_range(0.0..w as f64 - 1.0);
+        let y = rng.random_range(0.0..h as f64 - 1.0);
+        let mag = rng.random_range(s.mag_limit - 3.0..s.mag_limit);
+        add_spot(
+            &mut signal,
+            w,
+            h,
+            x,
+            y,
+            s.flux_mag0_e * 10f64.powf(-0.4 * mag),
+            s.psf_sigma_px,
+        );
+        false_stars.push([x, y]);
+    }
+    let full = if s.bits == 8 { 255.0 } else { 65535.0 };
+    let read = Normal::new(0.0, s.read_noise_e).context("read noise")?;
+    let mut pixels = vec![0u16; (w * h) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let mean = signal[i] + s.sky_e * vig(x as f64, y as f64);
+            let e = if mean > 0.0 {
+                Poisson::new(mean)
+                    .map(|p| p.sample(&mut rng))
+                    .unwrap_or(mean)
+            } else {
+                0.0
+            };
+            let adu = (e + read.sample(&mut rng)) * full / s.full_well_e;
+            pixels[i] = adu.round().clamp(0.0, full) as u16;
+        }
+    }
+    for _ in 0..s.hot_pixels {
+        let i = rng.random_range(0..pixels.len());
+        pixels[i] = (full * rng.random_range(0.5..1.0)) as u16;
+    }
+    let p = pointing(&r, &camera);
+    let truth = Truth {
+        file: frame_name(index),
+        ra_deg: p.ra_deg,
+        dec_deg: p.dec_deg,
+        roll_tetra3_deg: p.roll_deg,
+        rotation_matrix: std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)])),
+        quaternion: quaternion(&r),
+        epoch: s.epoch,
+        mirrored: false,
+        width: w,
+        height: h,
+        fov_x_deg: camera.fov_x_deg(),
+        fov_y_deg: camera.fov_y_deg(),
+        stars,
+        false_stars,
+    };
+    Ok((pixels, truth))
+}
+
+/// File name of frame k.
+pub fn frame_name(index: usize) -> String {
+    format!("sim_{index:05}.png")
+}
+
+/// Write `s.frames` frames, `truth.jsonl` and `camera.toml` into `out`.
+pub fn write_set(
+    catalog: &Catalog,
+    s: &SimSettings,
+    out: &Path,
+    mut progress: impl FnMut(usize),
+) -> Result<()> {
+    if s.bits != 8 && s.bits != 16 {
+        bail!("--bits must be 8 or 16, got {}", s.bits);
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let mut truth_file = std::io::BufWriter::new(
+        std::fs::File::create(out.join("truth.jsonl")).context("cannot create truth.jsonl")?,
+    );
+    for k in 0..s.frames {
+        let (pixels, truth) = render(catalog, s, k)?;
+        let path = out.join(&truth.file);
+        if s.bits == 8 {
+            let buf: Vec<u8> = pixels.iter().map(|&p| p as u8).collect();
+            image::GrayImage::from_raw(s.width, s.height, buf)
+                .unwrap()
+                .save(&path)
+        } else {
+            image::ImageBuffer::<image::Luma<u16>, _>::from_raw(s.width, s.height, pixels)
+                .unwrap()
+                .save(&path)
+        }
+        .with_context(|| format!("cannot write {}", path.display()))?;
+        writeln!(truth_file, "{}", serde_json::to_string(&truth)?)?;
+        progress(k + 1);
+    }
+    truth_file.flush()?;
+    std::fs::write(
+        out.join("camera.toml"),
+        format!(
+            "# written by gpustar simulate\nwidth = {}\nheight = {}\nfov_x_deg = {}\n",
+            s.width, s.height, s.fov_x_deg
+        ),
+    )
+    .context("cannot write camera.toml")?;
+    Ok(())
+}
+
+/// Read a truth file (JSON Lines).
+pub fn read_truth(path: &Path) -> Result<Vec<Truth>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read truth file {}", path.display()))?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(n, l)| {
+            serde_json::from_str(l)
+                .with_context(|| format!("{}: line {}: not a truth record", path.display(), n + 1))
+        })
+        .collect()
+}

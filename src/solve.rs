@@ -1,0 +1,253 @@
+//! The lost-in-space pipeline for one frame: detect → vote → select → verify → attitude →
+//! refine → accept, producing one result record.
+
+use crate::attitude::{pointing, wahba};
+use crate::camera::Camera;
+use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection, vector_to_radec};
+use crate::detect::{self, DetectSettings, Detection};
+use crate::frame::Frame;
+use crate::identify::{self, IdentifySettings};
+use crate::record::{MatchRecord, Record, Status, Timing};
+use crate::refine::{self, RefineSettings};
+use crate::table::{self, PairTable, TableOrigin};
+use anyhow::Result;
+use nalgebra::Vector3;
+use std::time::Instant;
+
+/// Everything that shapes a run besides the camera.
+#[derive(Clone, Copy, Debug)]
+pub struct Settings {
+    /// Observation epoch (Julian year) for proper motion.
+    pub epoch: f64,
+    /// Faintest catalog magnitude used; None = from the field of view (see [`auto_mag_limit`]).
+    pub mag_limit: Option<f64>,
+    pub double_stars: DoubleStars,
+    /// Stars closer than this many pixels count as one (double-star rule).
+    pub double_star_px: f64,
+    pub detect: DetectSettings,
+    pub identify: IdentifySettings,
+    pub refine: RefineSettings,
+    /// Use the on-disk cache of distance tables.
+    pub table_cache: bool,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            epoch: 2000.0,
+            mag_limit: None,
+            double_stars: DoubleStars::Merge,
+            double_star_px: 2.0,
+            detect: DetectSettings::default(),
+            identify: IdentifySettings::default(),
+            refine: RefineSettings::default(),
+            table_cache: true,
+        }
+    }
+}
+
+/// Average number of catalog stars in the field that [`auto_mag_limit`] aims at.
+pub const AUTO_STARS_IN_VIEW: f64 = 40.0;
+
+/// The faintest magnitude at which the catalog holds on average [`AUTO_STARS_IN_VIEW`] stars
+/// in the camera's field (at least 5.0, at most the catalog's faintest).
+pub fn auto_mag_limit(catalog: &Catalog, camera: &Camera) -> f64 {
+    let fov_sr = (camera.fov_x_deg() * camera.fov_y_deg())
+        .to_radians()
+        .to_radians();
+    let fraction = fov_sr / (4.0 * std::f64::consts::PI);
+    let mut mags: Vec<f64> = catalog.stars.iter().map(|s| s.mag).collect();
+    mags.sort_by(f64::total_cmp);
+    let n = ((AUTO_STARS_IN_VIEW / fraction).round() as usize).clamp(1, mags.len());
+    ((mags[n - 1] * 10.0).round() / 10.0).max(5.0)
+}
+
+/// A camera with its catalog selection and distance table, ready to solve frames.
+pub struct Solver {
+    pub camera: Camera,
+    pub settings: Settings,
+    pub refs: RefCatalog,
+    pub table: PairTable,
+    pub table_origin: TableOrigin,
+}
+
+/// What the identification of one frame found (before it becomes a record).
+#[derive(Clone, Debug)]
+pub struct Solution {
+    pub detections: Vec<Detection>,
+    pub outcome: Outcome,
+}
+
+#[derive(Clone, Debug)]
+pub enum Outcome {
+    Solved(refine::Refined),
+    Unsolved(&'static str),
+}
+
+impl Solver {
+    pub fn new(catalog: &Catalog, camera: Camera, settings: Settings) -> Result<Solver> {
+        let mag_limit = settings
+            .mag_limit
+            .unwrap_or_else(|| auto_mag_limit(catalog, &camera));
+        let selection = Selection {
+            epoch: settings.epoch,
+            mag_limit,
+            double_stars: settings.double_stars,
+            double_sep_rad: settings.double_star_px * camera.ifov_rad(),
+        };
+        let refs = RefCatalog::select(catalog, selection)?;
+        let (table, table_origin) = table::load_or_build(
+            &refs,
+            catalog.content_hash,
+            camera.diagonal_rad(),
+            settings.table_cache,
+        );
+        Ok(Solver {
+            camera,
+            settings,
+            refs,
+            table,
+            table_origin,
+        })
+    }
+
+    /// Identify the stars of a detection list (CPU vote).
+    pub fn identify(&self, detections: Vec<Detection>) -> Solution {
+        let s = &self.settings;
+        if detections.len() < 3 {
+            return Solution {
+                detections,
+                outcome: Outcome::Unsolved("too_few_stars"),
+            };
+        }
+        let vectors: Vec<Vector3<f64>> = detections
+            .iter()
+            .map(|d| self.camera.pixel_to_vector(d.x, d.y))
+            .collect();
+        let n_vote = vectors.len().min(s.identify.vote_stars);
+        let ranges = identify::pair_ranges(&vectors[..n_vote], &self.camera, &s.identify);
+        let voted = identify::vote_cpu(
+            &self.table,
+            &ranges,
+            n_vote,
+            self.refs.len(),
+            s.identify.candidates,
+        );
+        let outcome = self.finish(&detections, &vectors, &voted);
+        Solution {
+            detections,
+            outcome,
+        }
+    }
+
+    /// Verification, attitude, refinement and acceptance after the vote.
+    pub fn finish(
+        &self,
+        detections: &[Detection],
+        vectors: &[Vector3<f64>],
+        voted: &identify::VoteResult,
+    ) -> Outcome {
+        let s = &self.settings;
+        let n_vote = voted.candidates.len() / voted.k.max(1);
+        let ids = identify::verify(
+            voted,
+            &vectors[..n_vote],
+            &self.refs,
+            &self.camera,
+            &s.identify,
+        );
+        if ids.len() < 2 {
+            return Outcome::Unsolved("no_consistent_match");
+        }
+        let cam: Vec<_> = ids.iter().map(|m| vectors[m.star]).collect();
+        let icrs: Vec<_> = ids
+            .iter()
+            .map(|m| self.refs.stars[m.ref_id as usize].v)
+            .collect();
+        let Some(r0) = wahba(&cam, &icrs) else {
+            return Outcome::Unsolved("no_consistent_match");
+        };
+        let Some(refined) = refine::refine(
+            r0,
+            detections,
+            vectors,
+            &self.refs,
+            &self.camera,
+            voted.hypotheses,
+            &s.refine,
+        ) else {
+            return Outcome::Unsolved("no_consistent_match");
+        };
+        if refined.false_match_prob > s.refine.max_false_prob {
+            return Outcome::Unsolved("low_confidence");
+        }
+        Outcome::Solved(refined)
+    }
+
+    /// Solve a decoded frame on the CPU.
+    pub fn solve_frame(&self, frame: &Frame) -> (Solution, f64, f64) {
+        let t0 = Instant::now();
+        let dets = detect::detect(frame, &self.settings.detect);
+        let t1 = Instant::now();
+        let sol = self.identify(dets);
+        let t2 = Instant::now();
+        (
+            sol,
+            (t1 - t0).as_secs_f64() * 1e3,
+            (t2 - t1).as_secs_f64() * 1e3,
+        )
+    }
+
+    /// The result record of a solution.
+    pub fn record(&self, name: &str, sol: &Solution, timing_ms: Timing, backend: &str) -> Record {
+        let mut rec = Record::empty(name, backend);
+        rec.stars_detected = Some(sol.detections.len());
+        rec.timing_ms = timing_ms;
+        match &sol.outcome {
+            Outcome::Unsolved(reason) => {
+                rec.status = Status::Unsolved;
+                rec.reason = Some(reason.to_string());
+            }
+            Outcome::Solved(r) => {
+                let p = pointing(&r.r, &self.camera);
+                rec.status = Status::Solved;
+                rec.ra_deg = Some(p.ra_deg);
+                rec.dec_deg = Some(p.dec_deg);
+                rec.roll_deg = Some(p.roll_deg);
+                rec.quaternion = Some(p.quaternion);
+                rec.rotation_matrix = Some(std::array::from_fn(|i| {
+                    std::array::from_fn(|j| r.r[(i, j)])
+                }));
+                rec.fov_x_deg = Some(self.camera.fov_x_deg());
+                rec.fov_y_deg = Some(self.camera.fov_y_deg());
+                rec.stars_matched = Some(r.matches.len());
+                rec.rmse_arcsec = Some(r.rmse_arcsec);
+                rec.p90_arcsec = Some(r.p90_arcsec);
+                rec.max_arcsec = Some(r.max_arcsec);
+                rec.false_match_prob = Some(r.false_match_prob);
+                let mut matches: Vec<MatchRecord> = r
+                    .matches
+                    .iter()
+                    .map(|m| {
+                        let d = &sol.detections[m.det];
+                        let star = &self.refs.stars[m.ref_id as usize];
+                        let (ra, dec) = vector_to_radec(&star.v);
+                        MatchRecord {
+                            x: d.x,
+                            y: d.y,
+                            hip: star.hip,
+                            ra_deg: ra,
+                            dec_deg: dec,
+                            mag: star.mag,
+                            flux: d.flux,
+                            residual_arcsec: m.residual_arcsec,
+                        }
+                    })
+                    .collect();
+                matches.sort_by(|a, b| b.flux.total_cmp(&a.flux).then(a.hip.cmp(&b.hip)));
+                rec.matches = Some(matches);
+            }
+        }
+        rec
+    }
+}

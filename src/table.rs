@@ -1,0 +1,316 @@
+//! The distance table (seed 000, "T(d, ID1, ID2)"): every pair of reference stars closer than
+//! the camera's diagonal, sorted by a u32 chord key computed in f64, with a k-vector of bin
+//! starts so that a range query starts in constant time.
+//!
+//! Keys: `key = floor(chord · 2³¹)` where `chord = |a − b| = 2 sin(θ/2)` of the unit vectors, so a
+//! key step is 4.7e-10 rad (0.0001″). Keys depend on nothing but the two directions; the GPU
+//! compares keys, never angles (see STYLE.md: f32 trig is off by arcseconds).
+
+use crate::catalog::RefCatalog;
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Scale of the chord keys: key = floor(chord · KEY_SCALE).
+pub const KEY_SCALE: f64 = 2147483648.0; // 2^31
+
+/// The u32 key of a chord length (clamped to the u32 range).
+pub fn chord_key(chord: f64) -> u32 {
+    (chord * KEY_SCALE).floor().clamp(0.0, u32::MAX as f64) as u32
+}
+
+/// The chord of an angle (radians).
+pub fn chord_of_angle(theta: f64) -> f64 {
+    2.0 * (theta.clamp(0.0, std::f64::consts::PI) / 2.0).sin()
+}
+
+/// The angle of a chord (radians).
+pub fn angle_of_chord(chord: f64) -> f64 {
+    2.0 * (chord / 2.0).clamp(0.0, 1.0).asin()
+}
+
+/// Sorted pair table with its k-vector.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairTable {
+    /// Chord keys, ascending.
+    pub keys: Vec<u32>,
+    /// The two reference-star ids of each row, packed `a | b << 16` (a < b).
+    pub pairs: Vec<u32>,
+    /// `kvector[b]` = first row whose `key >> shift >= b`; one extra entry = number of rows.
+    pub kvector: Vec<u32>,
+    /// Bin width of the k-vector as a shift of the key.
+    pub shift: u32,
+    /// Largest separation included (radians) and its key.
+    pub max_sep_rad: f64,
+    pub max_key: u32,
+}
+
+/// A half-open row range `[start, end)` of the table.
+pub type RowRange = std::ops::Range<usize>;
+
+impl PairTable {
+    /// Build the table from reference stars: all pairs with angle < `max_sep_rad`.
+    pub fn build(cat: &RefCatalog, max_sep_rad: f64) -> PairTable {
+        let stars = &cat.stars;
+        let max_chord = chord_of_angle(max_sep_rad);
+        let max_key = chord_key(max_chord);
+        // Sweep in z: a pair whose chord is below max_chord has |Δz| below it too.
+        let mut order: Vec<u32> = (0..stars.len() as u32).collect();
+        order.sort_by(|&a, &b| stars[a as usize].v.z.total_cmp(&stars[b as usize].v.z));
+        let mut rows: Vec<(u32, u32)> = Vec::new();
+        for (k, &a) in order.iter().enumerate() {
+            let va = stars[a as usize].v;
+            for &b in &order[k + 1..] {
+                let vb = stars[b as usize].v;
+                if vb.z - va.z > max_chord {
+                    break;
+                }
+                let chord = (va - vb).norm();
+                if chord < max_chord {
+                    let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+                    rows.push((chord_key(chord), lo | hi << 16));
+                }
+            }
+        }
+        // Sorting by (key, pair) makes the table independent of the sweep order.
+        rows.sort_unstable();
+        let keys: Vec<u32> = rows.iter().map(|r| r.0).collect();
+        let pairs: Vec<u32> = rows.iter().map(|r| r.1).collect();
+        let shift = kvector_shift(max_key, keys.len());
+        let kvector = build_kvector(&keys, shift, max_key);
+        PairTable {
+            keys,
+            pairs,
+            kvector,
+            shift,
+            max_sep_rad,
+            max_key,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// Bytes held by keys, pairs and the k-vector.
+    pub fn bytes(&self) -> usize {
+        4 * (self.keys.len() + self.pairs.len() + self.kvector.len())
+    }
+
+    /// Rows with `lo <= key <= hi`: the k-vector gives the bin start, a short forward scan the
+    /// first row (a bin holds a few rows on average).
+    pub fn range(&self, lo: u32, hi: u32) -> RowRange {
+        let start = self.lower_bound(lo);
+        let end = match hi.checked_add(1) {
+            Some(h) => self.lower_bound(h),
+            None => self.keys.len(),
+        };
+        start..end.max(start)
+    }
+
+    /// First row with key >= `key`.
+    pub fn lower_bound(&self, key: u32) -> usize {
+        let bin = (key >> self.shift) as usize;
+        if bin >= self.kvector.len() - 1 {
+            return self.keys.len();
+        }
+        let mut i = self.kvector[bin] as usize;
+        let end = self.kvector[bin + 1] as usize;
+        while i < end && self.keys[i] < key {
+            i += 1;
+        }
+        i
+    }
+
+    /// The two reference-star ids of row `r`.
+    pub fn pair(&self, r: usize) -> (u32, u32) {
+        let p = self.pairs[r];
+        (p & 0xFFFF, p >> 16)
+    }
+}
+
+/// Choose the bin width so that there are about as many bins as rows (≥ 1 bin).
+fn kvector_shift(max_key: u32, rows: usize) -> u32 {
+    let mut shift = 0;
+    while shift < 31 && ((max_key >> shift) as usize) > rows.max(1) {
+        shift += 1;
+    }
+    shift
+}
+
+fn build_kvector(keys: &[u32], shift: u32, max_key: u32) -> Vec<u32> {
+    let bins = (max_key >> shift) as usize + 1;
+    let mut kv = vec![0u32; bins + 1];
+    let mut row = 0usize;
+    for (b, slot) in kv.iter_mut().enumerate() {
+        while row < keys.len() && ((keys[row] >> shift) as usize) < b {
+            row += 1;
+        }
+        *slot = row as u32;
+    }
+    kv
+}
+
+/// What a table depends on, hashed into its cache file name.
+pub fn cache_key(cat: &RefCatalog, catalog_hash: u64, max_sep_rad: f64) -> u64 {
+    let s = cat.selection;
+    let text = format!(
+        "gpustar-table-v{}|{:016x}|{}|{}|{:?}|{}|{}|{}",
+        FORMAT_VERSION,
+        catalog_hash,
+        s.epoch,
+        s.mag_limit,
+        s.double_stars,
+        s.double_sep_rad,
+        max_sep_rad,
+        cat.stars.len()
+    );
+    crate::catalog::fnv1a(text.as_bytes())
+}
+
+const FORMAT_VERSION: u32 = 1;
+const MAGIC: &[u8; 8] = b"GPSTBL01";
+
+/// Where cached tables live: `$GPUSTAR_CACHE_DIR`, else `$XDG_CACHE_HOME/gpustar`, else
+/// `~/.cache/gpustar`.
+pub fn cache_dir() -> Option<PathBuf> {
+    if let Some(d) = std::env::var_os("GPUSTAR_CACHE_DIR") {
+        return Some(PathBuf::from(d));
+    }
+    if let Some(d) = std::env::var_os("XDG_CACHE_HOME") {
+        return Some(PathBuf::from(d).join("gpustar"));
+    }
+    std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("gpustar"))
+}
+
+/// How the table of a run was obtained.
+#[derive(Clone, Debug)]
+pub struct TableOrigin {
+    /// Built now (false: read from the cache).
+    pub built: bool,
+    /// Time to build or read, seconds.
+    pub seconds: f64,
+    /// The cache file, if a cache was used.
+    pub cache_file: Option<PathBuf>,
+    /// Why the cache could not be used, if so.
+    pub cache_note: Option<String>,
+}
+
+/// Load the table from the cache, or build it (and try to store it).
+pub fn load_or_build(
+    cat: &RefCatalog,
+    catalog_hash: u64,
+    max_sep_rad: f64,
+    use_cache: bool,
+) -> (PairTable, TableOrigin) {
+    let t0 = Instant::now();
+    let key = cache_key(cat, catalog_hash, max_sep_rad);
+    let file = cache_dir()
+        .filter(|_| use_cache)
+        .map(|d| d.join(format!("table-{key:016x}.bin")));
+    let mut note = None;
+    if let Some(f) = &file {
+        if f.exists() {
+            match read_table(f, key) {
+                Ok(mut t) => {
+                    t.max_sep_rad = max_sep_rad;
+                    return (
+                        t,
+                        TableOrigin {
+                            built: false,
+                            seconds: t0.elapsed().as_secs_f64(),
+                            cache_file: file.clone(),
+                            cache_note: None,
+                        },
+                    );
+                }
+                Err(e) => note = Some(format!("ignored cache {}: {e:#}", f.display())),
+            }
+        }
+    }
+    let table = PairTable::build(cat, max_sep_rad);
+    let seconds = t0.elapsed().as_secs_f64();
+    if let Some(f) = &file {
+        if let Err(e) = write_table(f, key, &table) {
+            note = Some(format!("could not write cache {}: {e:#}", f.display()));
+        }
+    }
+    (
+        table,
+        TableOrigin {
+            built: true,
+            seconds,
+            cache_file: file,
+            cache_note: note,
+        },
+    )
+}
+
+fn write_table(path: &Path, key: u64, t: &PairTable) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+    }
+    let mut buf = Vec::with_capacity(64 + t.bytes());
+    buf.extend_from_slice(MAGIC);
+    buf.extend_from_slice(&key.to_le_bytes());
+    for v in [
+        t.keys.len() as u64,
+        t.kvector.len() as u64,
+        t.shift as u64,
+        t.max_key as u64,
+    ] {
+        buf.extend_from_slice(&v.to_le_bytes());
+    }
+    for arr in [&t.keys, &t.pairs, &t.kvector] {
+        for v in arr.iter() {
+            buf.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    // Write to a temporary name and rename, so a concurrent reader never sees half a file.
+    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+    std::fs::write(&tmp, &buf)?;
+    std::fs::rename(&tmp, path)?;
+    Ok(())
+}
+
+fn read_table(path: &Path, key: u64) -> Result<PairTable> {
+    let buf = std::fs::read(path)?;
+    let u64_at = |o: usize| -> Result<u64> {
+        let b = buf.get(o..o + 8).context("truncated")?;
+        Ok(u64::from_le_bytes(b.try_into().unwrap()))
+    };
+    if buf.get(0..8) != Some(MAGIC.as_slice()) {
+        bail!("not a gpustar table");
+    }
+    if u64_at(8)? != key {
+        bail!("key mismatch");
+    }
+    let rows = u64_at(16)? as usize;
+    let kvlen = u64_at(24)? as usize;
+    let shift = u64_at(32)? as u32;
+    let max_key = u64_at(40)? as u32;
+    let body = &buf[48..];
+    if body.len() != 4 * (2 * rows + kvlen) {
+        bail!("truncated");
+    }
+    let words: Vec<u32> = body
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    let t = PairTable {
+        keys: words[..rows].to_vec(),
+        pairs: words[rows..2 * rows].to_vec(),
+        kvector: words[2 * rows..].to_vec(),
+        shift,
+        max_sep_rad: 0.0,
+        max_key,
+    };
+    if !t.keys.windows(2).all(|w| w[0] <= w[1]) {
+        bail!("keys not sorted");
+    }
+    Ok(t)
+}

@@ -1,0 +1,54 @@
+//! Attitude from known vectors (Wahba by SVD) and the record's pointing quantities.
+
+use gpustar::attitude::*;
+use gpustar::camera::Camera;
+use nalgebra::{Matrix3, Rotation3, Vector3};
+
+#[test]
+fn wahba_recovers_a_known_rotation_from_noisy_vectors() {
+    let truth = Rotation3::from_euler_angles(0.3, -1.1, 2.0).into_inner();
+    let icrs: Vec<Vector3<f64>> = [
+        (0.1, 0.2, 1.0),
+        (-0.2, 0.1, 1.0),
+        (0.05, -0.15, 1.0),
+        (0.12, 0.01, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vector3::new(x, y, z).normalize())
+    .collect();
+    let cam: Vec<Vector3<f64>> = icrs.iter().map(|v| truth * v).collect();
+    let r = wahba(&cam, &icrs).unwrap();
+    assert!(attitude_error(&r, &truth) < 1e-12);
+    assert!((r.determinant() - 1.0).abs() < 1e-12);
+    // 1e-6 rad of noise moves the answer by about that much, not more.
+    let noisy: Vec<Vector3<f64>> = cam
+        .iter()
+        .enumerate()
+        .map(|(k, v)| (v + Vector3::new(1e-6 * (k as f64 - 1.5), -1e-6, 0.0)).normalize())
+        .collect();
+    let r = wahba(&noisy, &icrs).unwrap();
+    assert!(attitude_error(&r, &truth) < 2e-5);
+    assert!(wahba(&cam[..1], &icrs[..1]).is_none());
+}
+
+#[test]
+fn quaternion_round_trip_has_positive_scalar() {
+    let r = Rotation3::from_euler_angles(2.9, 0.4, -2.5).into_inner();
+    let q = quaternion(&r);
+    assert!(q[0] >= 0.0);
+    assert!(attitude_error(&matrix_of_quaternion(q), &r) < 1e-12);
+}
+
+#[test]
+fn pointing_of_an_identity_like_attitude() {
+    // Camera rows = ICRS axes arranged so the boresight is RA 0, Dec 0 and image up is north:
+    // X (right) = west = −y_icrs (east is left when looking out), Y (down) = south = −z_icrs,
+    // Z = +x_icrs.
+    let r: Matrix3<f64> = Matrix3::new(0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0);
+    assert!((r.determinant() - 1.0).abs() < 1e-12);
+    let cam = Camera::from_fov(101, 101, 10.0).unwrap();
+    let p = pointing(&r, &cam);
+    assert!(p.ra_deg.abs() < 1e-9 || (p.ra_deg - 360.0).abs() < 1e-9);
+    assert!(p.dec_deg.abs() < 1e-9);
+    assert!(p.roll_deg.abs() < 1e-6 || (p.roll_deg - 360.0).abs() < 1e-6);
+}
