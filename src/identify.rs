@@ -17,8 +17,9 @@ pub struct IdentifySettings {
     pub pair_tol_px: f64,
     /// Pair distance tolerance from focal-length and distortion errors, relative to the distance.
     pub scale_tol: f64,
-    /// Candidates per star that go from the vote to verification.
-    pub candidates: usize,
+    /// About how many (star, candidate) pairs go from the vote to verification: few stars
+    /// get more candidates each, since their true star is less often near the top.
+    pub candidate_nodes: usize,
 }
 
 impl Default for IdentifySettings {
@@ -27,12 +28,17 @@ impl Default for IdentifySettings {
             vote_stars: 30,
             pair_tol_px: 0.5,
             scale_tol: 0.0002,
-            candidates: 16,
+            candidate_nodes: 512,
         }
     }
 }
 
 impl IdentifySettings {
+    /// Candidates kept per star when `n` stars vote: `candidate_nodes / n`, within 16..=64.
+    pub fn candidates_per_star(&self, n: usize) -> usize {
+        (self.candidate_nodes / n.max(1)).clamp(16, 64)
+    }
+
     /// Tolerance e on the angular distance d of a pair (radians).
     pub fn tolerance(&self, camera: &Camera, d: f64) -> f64 {
         self.pair_tol_px * camera.ifov_rad() + self.scale_tol * d
@@ -118,13 +124,21 @@ fn chord2_bounds(
 }
 
 /// Verification. Votes alone are noisy: a catalog star in a dense field collects many chance
-/// votes, and the true star is often second or tenth. So each star's candidates are first
-/// scored by geometry: candidate a of star i counts the other stars j that have a candidate b
-/// whose catalog distance to a lies within the pair's tolerance; each star takes its
-/// best-scored candidate (ties: more votes). Then seed 000's verification runs on those picks:
-/// each consistent pair gives both stars a vote, and stars with fewer than half the best count
-/// (and fewer than two) are dropped, as are stars that share a catalog star with a
-/// better-supported one.
+/// votes, so the true star is often not the argmax but second or tenth. And a chance candidate
+/// is rarely alone: the table row that voted catalog star a to image star i also voted its
+/// partner b to image star j, so (i, a) and (j, b) agree on their distance by construction.
+/// What chance does not give is a triangle: three candidates of three stars whose three
+/// distances all agree. So:
+///
+/// 1. nodes are the candidates (star, catalog star); an edge joins two nodes of different stars
+///    and different catalog stars whose catalog distance lies within the pair's tolerance;
+/// 2. each node is scored by the triangles it is in;
+/// 3. from each of the best-scored nodes, a set is grown greedily in score order, adding a node
+///    when its star and catalog star are new and it has an edge to every node in the set;
+///    the largest set wins (ties: the one grown first).
+///
+/// This is seed 000's verification (pairs of identified stars vote when their distances agree,
+/// and stars far below the best count are dropped) made strict: every pair in the result agrees.
 pub fn verify(
     voted: &VoteResult,
     vectors: &[Vector3<f64>],
@@ -135,65 +149,77 @@ pub fn verify(
     let n = vectors.len();
     let k = voted.k;
     let bounds = chord2_bounds(vectors, camera, s);
-    let ids: Vec<Vec<u32>> = (0..n)
-        .map(|i| {
-            voted.candidates[i * k..(i + 1) * k]
-                .iter()
-                .filter_map(|&c| cpu::select::unpack_candidate(c).map(|(_, id)| id))
-                .collect()
-        })
-        .collect();
-    let consistent = |i: usize, a: u32, j: usize, b: u32| {
-        if a == b {
-            return false;
-        }
-        let c2 = (refs.stars[a as usize].v - refs.stars[b as usize].v).norm_squared();
-        let (lo, hi) = bounds[i * n + j];
-        c2 >= lo && c2 <= hi
-    };
-    // Geometric score of each candidate; pick the best per star.
-    let picks: Vec<Option<u32>> = (0..n)
-        .map(|i| {
-            let mut best: Option<(usize, u32)> = None;
-            for &a in &ids[i] {
-                let score = (0..n)
-                    .filter(|&j| j != i && ids[j].iter().any(|&b| consistent(i, a, j, b)))
-                    .count();
-                if best.is_none_or(|(bs, _)| score > bs) {
-                    best = Some((score, a));
-                }
-            }
-            best.filter(|&(score, _)| score > 0).map(|(_, a)| a)
-        })
-        .collect();
-    let mut support = vec![0u32; n];
+    // Nodes in (star, rank) order: rank order is vote order.
+    let mut nodes: Vec<Identification> = Vec::new();
     for i in 0..n {
-        for j in i + 1..n {
-            if let (Some(a), Some(b)) = (picks[i], picks[j]) {
-                if consistent(i, a, j, b) {
-                    support[i] += 1;
-                    support[j] += 1;
-                }
+        for &c in &voted.candidates[i * k..(i + 1) * k] {
+            if let Some((_, id)) = cpu::select::unpack_candidate(c) {
+                nodes.push(Identification {
+                    star: i,
+                    ref_id: id,
+                });
             }
         }
     }
-    let best = support.iter().copied().max().unwrap_or(0);
-    let cut = best.div_ceil(2).max(2);
-    let mut kept: Vec<Identification> = (0..n)
-        .filter(|&i| support[i] >= cut)
-        .map(|i| Identification {
-            star: i,
-            ref_id: picks[i].unwrap(),
-        })
-        .collect();
-    // One image star per catalog star: keep the best-supported claim (ties: brighter star).
-    kept.sort_by(|a, b| {
-        support[b.star]
-            .cmp(&support[a.star])
-            .then(a.star.cmp(&b.star))
-    });
-    let mut taken = std::collections::HashSet::new();
-    kept.retain(|m| taken.insert(m.ref_id));
-    kept.sort_by_key(|m| m.star);
-    kept
+    let m = nodes.len();
+    let words = m.div_ceil(64);
+    let mut adj = vec![0u64; m * words];
+    for u in 0..m {
+        for v in u + 1..m {
+            let (a, b) = (nodes[u], nodes[v]);
+            if a.star == b.star || a.ref_id == b.ref_id {
+                continue;
+            }
+            let c2 =
+                (refs.stars[a.ref_id as usize].v - refs.stars[b.ref_id as usize].v).norm_squared();
+            let (lo, hi) = bounds[a.star * n + b.star];
+            if c2 >= lo && c2 <= hi {
+                adj[u * words + v / 64] |= 1 << (v % 64);
+                adj[v * words + u / 64] |= 1 << (u % 64);
+            }
+        }
+    }
+    let row = |u: usize| &adj[u * words..(u + 1) * words];
+    let linked = |u: usize, v: usize| adj[u * words + v / 64] >> (v % 64) & 1 == 1;
+    // Triangles through each node: for each edge, the common neighbours of its ends.
+    let mut triangles = vec![0u32; m];
+    for u in 0..m {
+        for v in u + 1..m {
+            if linked(u, v) {
+                let common: u32 = row(u)
+                    .iter()
+                    .zip(row(v))
+                    .map(|(x, y)| (x & y).count_ones())
+                    .sum();
+                triangles[u] += common;
+                triangles[v] += common;
+            }
+        }
+    }
+    let mut order: Vec<usize> = (0..m).filter(|&u| triangles[u] > 0).collect();
+    order.sort_by(|&u, &v| triangles[v].cmp(&triangles[u]).then(u.cmp(&v)));
+    let mut best: Vec<usize> = Vec::new();
+    for &seed in order.iter().take(SEEDS) {
+        let mut set = vec![seed];
+        for &u in &order {
+            let fresh = set
+                .iter()
+                .all(|&w| nodes[w].star != nodes[u].star && nodes[w].ref_id != nodes[u].ref_id);
+            if fresh && set.iter().all(|&w| linked(u, w)) {
+                set.push(u);
+            }
+        }
+        if set.len() > best.len() {
+            best = set;
+        }
+    }
+    if best.len() < 3 {
+        return Vec::new();
+    }
+    let mut ids: Vec<Identification> = best.iter().map(|&u| nodes[u]).collect();
+    ids.sort_by_key(|m| m.star);
+    ids
 }
+
+/// How many of the best-scored nodes a consistent set is grown from.
+const SEEDS: usize = 8;

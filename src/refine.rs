@@ -37,6 +37,8 @@ pub struct Match {
     pub ref_id: u32,
     /// Angle between the detection's direction and the star's (arcsec).
     pub residual_arcsec: f64,
+    /// Distance between the detection and the projected star (pixels).
+    pub residual_px: f64,
 }
 
 /// A refined solution.
@@ -95,6 +97,10 @@ fn mutual_nearest(dets: &[Detection], proj: &[(u32, f64, f64)], radius: f64) -> 
     out
 }
 
+/// Smallest radius the false-match probability assumes (pixels): the confidence never rests on
+/// a match being closer than typical centroid errors.
+pub const CONFIDENCE_RADIUS_FLOOR_PX: f64 = 0.5;
+
 /// Refine a first attitude; None when nothing matches.
 pub fn refine(
     r0: Matrix3<f64>,
@@ -129,22 +135,34 @@ pub fn refine(
     }
     let matches: Vec<Match> = pairs
         .iter()
-        .map(|&(det, ref_id)| Match {
-            det,
-            ref_id,
-            residual_arcsec: angle(&det_vectors[det], &(r * refs.stars[ref_id as usize].v))
-                .to_degrees()
-                * 3600.0,
+        .map(|&(det, ref_id)| {
+            let v = r * refs.stars[ref_id as usize].v;
+            let residual_px = camera.vector_to_pixel(&v).map_or(f64::INFINITY, |(x, y)| {
+                (x - dets[det].x).hypot(y - dets[det].y)
+            });
+            Match {
+                det,
+                ref_id,
+                residual_arcsec: angle(&det_vectors[det], &v).to_degrees() * 3600.0,
+                residual_px,
+            }
         })
         .collect();
     let mut res: Vec<f64> = matches.iter().map(|m| m.residual_arcsec).collect();
     res.sort_by(f64::total_cmp);
     let rmse = (res.iter().map(|x| x * x).sum::<f64>() / res.len() as f64).sqrt();
     let p90 = res[((res.len() as f64 * 0.9).ceil() as usize).clamp(1, res.len()) - 1];
+    // The evidence of a match is how close it is: chance places a star within r of one of the
+    // detections with probability N·πr²/area. r is three times the scatter of the residuals
+    // (with 3 degrees of freedom taken by the fit), at least CONFIDENCE_RADIUS_FLOOR_PX, at
+    // most the match radius; matches farther out count as unmatched.
+    let dof = (2 * matches.len()).saturating_sub(3).max(1) as f64;
+    let scatter = (matches.iter().map(|m| m.residual_px.powi(2)).sum::<f64>() / dof).sqrt();
+    let radius = (3.0 * scatter).clamp(CONFIDENCE_RADIUS_FLOOR_PX, s.match_radius_px);
+    let close = matches.iter().filter(|m| m.residual_px <= radius).count();
     let area = camera.width as f64 * camera.height as f64;
-    let p_single =
-        (dets.len() as f64 * std::f64::consts::PI * s.match_radius_px.powi(2) / area).min(1.0);
-    let false_match_prob = false_match_probability(matches.len(), in_view, p_single, hypotheses);
+    let p_single = (dets.len() as f64 * std::f64::consts::PI * radius * radius / area).min(1.0);
+    let false_match_prob = false_match_probability(close, in_view, p_single, hypotheses);
     Some(Refined {
         r,
         in_view,
@@ -158,7 +176,7 @@ pub fn refine(
 
 /// Probability that a wrong attitude matches `matched` of the `in_view` catalog stars by chance
 /// (tetra3's binomial test): two stars fix a hypothesis, each other star in view lands within
-/// the match radius of some detection with probability `p_single`; the tail is multiplied by the
+/// the radius of some detection with probability `p_single`; the tail is multiplied by the
 /// number of hypotheses voting considered (Bonferroni).
 pub fn false_match_probability(
     matched: usize,

@@ -131,7 +131,7 @@ impl Solver {
             &ranges,
             n_vote,
             self.refs.len(),
-            s.identify.candidates,
+            s.identify.candidates_per_star(n_vote),
         );
         let outcome = self.finish(&detections, &vectors, &voted);
         Solution {
