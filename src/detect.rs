@@ -57,9 +57,9 @@ pub fn params(frame: &Frame, s: &DetectSettings) -> DetectParams {
 /// Run the CPU twins of the detection kernels: the blobs in label order.
 pub fn blobs_cpu(frame: &Frame, p: &DetectParams) -> Vec<Blob> {
     let tiles = cpu::threshold::tile_stats(&frame.pixels, p);
-    let mask = cpu::threshold::threshold(&frame.pixels, &tiles, p);
-    let labels = cpu::components::components(&mask, p.width, p.height);
-    cpu::centroid::centroid(&frame.pixels, &labels, &tiles, p)
+    let runs = cpu::threshold::threshold(&frame.pixels, &tiles, p);
+    let labels = cpu::components::components(&runs, p.width);
+    cpu::centroid::centroid(&frame.pixels, &runs, &labels, &tiles, p)
 }
 
 /// Turn blobs into the star list: drop those smaller than `min_area` (hot pixels), order by

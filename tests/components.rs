@@ -1,22 +1,44 @@
-//! Stage `components` (CPU twin) on hand-made inputs.
+//! Stage `components` (CPU twin) on hand-made masks.
 
 use gpustar::cpu::components::*;
+use gpustar::cpu::threshold::Run;
 
-fn mask(rows: &[&str]) -> (Vec<u8>, u32, u32) {
+/// Runs and size of a mask drawn with '#'.
+fn mask(rows: &[&str]) -> (Vec<Run>, u32, u32) {
     let w = rows[0].len() as u32;
-    let m = rows
-        .iter()
-        .flat_map(|r| r.bytes().map(|b| (b == b'#') as u8))
-        .collect();
-    (m, w, rows.len() as u32)
+    let mut runs = Vec::new();
+    for (y, r) in rows.iter().enumerate() {
+        let b = r.as_bytes();
+        let mut x = 0;
+        while x < b.len() {
+            if b[x] == b'#' {
+                let x0 = x;
+                while x < b.len() && b[x] == b'#' {
+                    x += 1;
+                }
+                runs.push(Run {
+                    y: y as u32,
+                    x0: x0 as u32,
+                    x1: x as u32,
+                });
+            } else {
+                x += 1;
+            }
+        }
+    }
+    (runs, w, rows.len() as u32)
+}
+
+fn labels(rows: &[&str]) -> Vec<u32> {
+    let (runs, w, h) = mask(rows);
+    dense_labels(&runs, &components(&runs, w), w, h)
 }
 
 #[test]
 fn diagonal_touch_joins_and_u_shape_takes_the_smallest_index() {
-    // A U shape whose right arm starts first in raster order only at its top: both arms
-    // must end with the label of the top-left pixel (index 0).
-    let (m, w, h) = mask(&["#..#", "#..#", "####", "....", ".#..", "..#."]);
-    let l = components(&m, w, h);
+    // A U shape whose arms meet only at the bottom: both arms end with the label of the
+    // top-left pixel (index 0).
+    let l = labels(&["#..#", "#..#", "####", "....", ".#..", "..#."]);
     for i in [0, 3, 4, 7, 8, 9, 10, 11] {
         assert_eq!(l[i], 0, "pixel {i}");
     }
@@ -29,15 +51,38 @@ fn diagonal_touch_joins_and_u_shape_takes_the_smallest_index() {
 }
 
 #[test]
-fn separate_blobs_and_borders() {
-    let (m, w, h) = mask(&["#.#", "...", "#.#"]);
-    let l = components(&m, w, h);
+fn runs_joined_late_take_the_first_pixel_of_the_component() {
+    // A W shape: three runs per row that only join in the last row.
+    let n = NO_LABEL;
+    let l = labels(&["#.#.#", "#.#.#", "#####"]);
+    assert_eq!(l, vec![0, n, 0, n, 0, 0, n, 0, n, 0, 0, 0, 0, 0, 0]);
+    // An anti-diagonal: the component's first pixel is index 2.
+    let l = labels(&["..#", ".#.", "#.."]);
     assert_eq!(
         l,
+        vec![
+            NO_LABEL, NO_LABEL, 2, NO_LABEL, 2, NO_LABEL, 2, NO_LABEL, NO_LABEL
+        ]
+    );
+}
+
+#[test]
+fn separate_blobs_borders_gaps_and_single_pixels() {
+    assert_eq!(
+        labels(&["#.#", "...", "#.#"]),
         vec![0, NO_LABEL, 2, NO_LABEL, NO_LABEL, NO_LABEL, 6, NO_LABEL, 8]
     );
-    let (m, w, h) = mask(&["#"]);
-    assert_eq!(components(&m, w, h), vec![0]);
-    let (m, w, h) = mask(&["."]);
-    assert_eq!(components(&m, w, h), vec![NO_LABEL]);
+    // Rows without runs in between: no join across the gap.
+    assert_eq!(
+        labels(&["##", "..", "##"]),
+        vec![0, 0, NO_LABEL, NO_LABEL, 4, 4]
+    );
+    assert_eq!(labels(&["#"]), vec![0]);
+    assert_eq!(labels(&["."]), vec![NO_LABEL]);
+    // Two runs one apart in a row are separate unless the row above joins them.
+    assert_eq!(labels(&["#.#"]), vec![0, NO_LABEL, 2]);
+    assert_eq!(
+        labels(&[".#.", "#.#"]),
+        vec![NO_LABEL, 1, NO_LABEL, 1, NO_LABEL, 1]
+    );
 }

@@ -52,6 +52,55 @@ fn median_and_mad_ignore_a_bright_star() {
     assert_eq!(t[0].background, 102);
     // |v − 102| over 0..4 cycles: MAD 1 → offset ceil(5 · 1.4826) = 8.
     assert_eq!(t[0].offset, 8);
-    let mask = threshold(&px, &t, &p);
-    assert_eq!(mask.iter().map(|&m| m as u32).sum::<u32>(), 2);
+    let runs = threshold(&px, &t, &p);
+    assert_eq!(runs, vec![Run { y: 3, x0: 3, x1: 5 }]);
+    assert_eq!(dense_mask(&runs, 8, 8).iter().sum::<u32>(), 2);
+}
+
+#[test]
+fn row_wise_runs_equal_the_per_pixel_definition() {
+    // Pseudo-random pixels and tile statistics: the runs must mark exactly the pixels with
+    // pixel · (2·tile)² > level_scaled(x, y), the definition the GPU kernel evaluates.
+    let (w, h) = (77u32, 51u32);
+    let p = DetectParams::new(w, h, 8, 3.0, 255);
+    let mut seed = 12345u32;
+    let mut next = || {
+        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+        seed >> 16
+    };
+    let px: Vec<u16> = (0..w * h).map(|_| (next() % 256) as u16).collect();
+    let tiles: Vec<TileStats> = (0..p.tiles_x * p.tiles_y)
+        .map(|_| TileStats {
+            background: next() % 200,
+            offset: next() % 40,
+        })
+        .collect();
+    let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
+    let s2 = 4 * p.tile * p.tile;
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let want = (px[i] as u32 * s2 > level_scaled(&tiles, &p, x, y)) as u32;
+            assert_eq!(mask[i], want, "pixel ({x}, {y})");
+        }
+    }
+}
+
+#[test]
+fn eight_bit_histogram_stats_equal_selection_stats() {
+    // The same pixels read as an 8-bit frame (histogram path) and as a 16-bit one (selection
+    // path) give the same medians and MADs.
+    let (w, h) = (96u32, 64u32);
+    let mut seed = 99u32;
+    let px: Vec<u16> = (0..w * h)
+        .map(|i| {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            let star = if i % 97 == 0 { 200 } else { 0 };
+            ((seed >> 24) as u16 % 23 + (i % w) as u16 / 3 + star).min(255)
+        })
+        .collect();
+    let a = tile_stats(&px, &DetectParams::new(w, h, 16, 5.0, 255));
+    let b = tile_stats(&px, &DetectParams::new(w, h, 16, 5.0, 65535));
+    assert_eq!(a, b);
+    assert!(a.iter().any(|t| t.offset > 8), "varied tiles");
 }

@@ -5,8 +5,7 @@
 //! any order. The list is in ascending label order, which is what the GPU's count → prefix
 //! sum → scatter compaction gives.
 
-use super::components::NO_LABEL;
-use super::threshold::{DetectParams, TileStats, background_at};
+use super::threshold::{DetectParams, Run, TileStats, background_at};
 use bytemuck::{Pod, Zeroable};
 
 /// Moments of one component. Keep in sync with `shaders/shared/detect.wgsl`.
@@ -37,21 +36,19 @@ impl Blob {
     }
 }
 
-/// Moments of every component of `labels`, in ascending label order.
+/// Moments of every component, in ascending label order.
 pub fn centroid(
     pixels: &[u16],
+    runs: &[Run],
     labels: &[u32],
     tiles: &[TileStats],
     p: &DetectParams,
 ) -> Vec<Blob> {
     let mut blobs: Vec<Blob> = Vec::new();
-    // Slot of each component, indexed by its label (a pixel index); roots come first in raster
-    // order, so slots are handed out in label order.
+    // A component's first run comes first in raster order, so slots are handed out in label
+    // order; `slot` maps a label to its slot.
     let mut slot: std::collections::HashMap<u32, usize> = Default::default();
-    for (i, &label) in labels.iter().enumerate() {
-        if label == NO_LABEL {
-            continue;
-        }
+    for (r, &label) in runs.iter().zip(labels) {
         let s = *slot.entry(label).or_insert_with(|| {
             blobs.push(Blob {
                 label,
@@ -59,16 +56,17 @@ pub fn centroid(
             });
             blobs.len() - 1
         });
-        let (x, y) = (i as u32 % p.width, i as u32 / p.width);
-        let v = pixels[i] as u32;
-        let w = v.saturating_sub(background_at(tiles, p, x, y)).max(1) as u64;
         let b = &mut blobs[s];
-        b.area += 1;
-        b.peak = b.peak.max(v);
-        b.saturated += (v >= p.saturation) as u32;
-        b.m0 += w;
-        b.mx += w * x as u64;
-        b.my += w * y as u64;
+        for x in r.x0..r.x1 {
+            let v = pixels[(r.y * p.width + x) as usize] as u32;
+            let w = v.saturating_sub(background_at(tiles, p, x, r.y)).max(1) as u64;
+            b.area += 1;
+            b.peak = b.peak.max(v);
+            b.saturated += (v >= p.saturation) as u32;
+            b.m0 += w;
+            b.mx += w * x as u64;
+            b.my += w * r.y as u64;
+        }
     }
     blobs
 }

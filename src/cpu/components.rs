@@ -2,8 +2,11 @@
 //!
 //! Each pixel of a component is labelled with the smallest pixel index (y·W + x) in it, so the
 //! labels are canonical: the GPU's union-find with `atomicMin` reaches the same labels in any
-//! scheduling. Here: union-find in raster order, always hanging the larger root under the
-//! smaller, then a compression pass.
+//! scheduling. Here the mask comes as runs: a run joins every run of the row above that
+//! touches it (diagonals included), union-find hangs the later run under the earlier, and the
+//! label of a component is the first pixel of its first run in raster order.
+
+use super::threshold::Run;
 
 /// Label of pixels outside the mask.
 pub const NO_LABEL: u32 = u32::MAX;
@@ -17,47 +20,46 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
     i
 }
 
-fn union(parent: &mut [u32], a: u32, b: u32) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    if ra != rb {
-        parent[ra.max(rb) as usize] = ra.min(rb);
+/// The label of each run (runs in raster order, as `threshold` gives them).
+pub fn components(runs: &[Run], width: u32) -> Vec<u32> {
+    let mut parent: Vec<u32> = (0..runs.len() as u32).collect();
+    // Runs of the previous row: [prev_start, cur_start).
+    let (mut prev_start, mut cur_start) = (0usize, 0usize);
+    for i in 0..runs.len() {
+        let r = runs[i];
+        if i > 0 && runs[i - 1].y != r.y {
+            prev_start = if runs[i - 1].y + 1 == r.y {
+                cur_start
+            } else {
+                i
+            };
+            cur_start = i;
+        }
+        for j in prev_start..cur_start {
+            let q = runs[j];
+            // 8-connected: the columns overlap once widened by one on each side.
+            if q.x0 <= r.x1 && r.x0 <= q.x1 {
+                let (a, b) = (find(&mut parent, i as u32), find(&mut parent, j as u32));
+                if a != b {
+                    parent[a.max(b) as usize] = a.min(b);
+                }
+            }
+        }
     }
+    (0..runs.len() as u32)
+        .map(|i| {
+            let root = runs[find(&mut parent, i) as usize];
+            root.y * width + root.x0
+        })
+        .collect()
 }
 
-/// Labels of a `width`×`height` mask (row-major, non-zero = set).
-pub fn components(mask: &[u8], width: u32, height: u32) -> Vec<u32> {
-    let (w, h) = (width as usize, height as usize);
-    assert_eq!(mask.len(), w * h, "mask size");
-    let mut parent = vec![NO_LABEL; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if mask[i] == 0 {
-                continue;
-            }
-            parent[i] = i as u32;
-            // Neighbours already visited: W, NW, N, NE.
-            if x > 0 && mask[i - 1] != 0 {
-                union(&mut parent, i as u32, (i - 1) as u32);
-            }
-            if y > 0 {
-                let up = i - w;
-                if x > 0 && mask[up - 1] != 0 {
-                    union(&mut parent, i as u32, (up - 1) as u32);
-                }
-                if mask[up] != 0 {
-                    union(&mut parent, i as u32, up as u32);
-                }
-                if x + 1 < w && mask[up + 1] != 0 {
-                    union(&mut parent, i as u32, (up + 1) as u32);
-                }
-            }
-        }
+/// Labels as one value per pixel ([`NO_LABEL`] outside the mask), as the GPU stores them.
+pub fn dense_labels(runs: &[Run], labels: &[u32], width: u32, height: u32) -> Vec<u32> {
+    let mut out = vec![NO_LABEL; (width * height) as usize];
+    for (r, &l) in runs.iter().zip(labels) {
+        let row = (r.y * width) as usize;
+        out[row + r.x0 as usize..row + r.x1 as usize].fill(l);
     }
-    for i in 0..w * h {
-        if parent[i] != NO_LABEL {
-            parent[i] = find(&mut parent, i as u32);
-        }
-    }
-    parent
+    out
 }

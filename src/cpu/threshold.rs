@@ -63,23 +63,58 @@ pub fn tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
                 let row = (y * p.width) as usize;
                 vals.extend_from_slice(&pixels[row + x0 as usize..row + x1 as usize]);
             }
-            let median = lower_median(&mut vals);
-            for v in vals.iter_mut() {
-                *v = v.abs_diff(median);
-            }
-            let mad = lower_median(&mut vals).max(1);
+            let (median, mad) = if p.saturation <= 255 {
+                median_mad_8bit(&vals)
+            } else {
+                median_mad(&mut vals)
+            };
             out.push(TileStats {
                 background: median as u32,
-                offset: (p.k_mad * mad as f32).ceil() as u32,
+                offset: (p.k_mad * mad.max(1) as f32).ceil() as u32,
             });
         }
     }
     out
 }
 
-fn lower_median(v: &mut [u16]) -> u16 {
-    let mid = (v.len() - 1) / 2;
-    *v.select_nth_unstable(mid).1
+/// Median and MAD by selection (any bit depth).
+fn median_mad(v: &mut [u16]) -> (u16, u16) {
+    let rank = (v.len() - 1) / 2;
+    let median = *v.select_nth_unstable(rank).1;
+    for x in v.iter_mut() {
+        *x = x.abs_diff(median);
+    }
+    (median, *v.select_nth_unstable(rank).1)
+}
+
+/// Median and MAD of 8-bit values from one 256-bin histogram: the deviations |v − median|
+/// are counted from the same bins, outward from the median.
+fn median_mad_8bit(v: &[u16]) -> (u16, u16) {
+    let rank = (v.len() - 1) / 2;
+    let mut hist = [0u32; 256];
+    for &x in v {
+        hist[(x & 0xFF) as usize] += 1;
+    }
+    let mut seen = 0usize;
+    let mut median = 0usize;
+    for (b, &n) in hist.iter().enumerate() {
+        seen += n as usize;
+        if seen > rank {
+            median = b;
+            break;
+        }
+    }
+    let mut seen = hist[median] as usize;
+    let mut d = 0usize;
+    while seen <= rank {
+        d += 1;
+        seen += median
+            .checked_add(d)
+            .filter(|&b| b < 256)
+            .map_or(0, |b| hist[b] as usize);
+        seen += median.checked_sub(d).map_or(0, |b| hist[b] as usize);
+    }
+    (median as u16, d as u16)
 }
 
 /// Bilinear position of coordinate `x` among the tile centres of one axis: the lower tile and
@@ -133,15 +168,70 @@ pub fn background_at(tiles: &[TileStats], p: &DetectParams, x: u32, y: u32) -> u
     (interpolate(tiles, p, x, y, |t| t.background) + s2 / 2) / s2
 }
 
-/// The mask: 1 where `pixel > background + offset` (both interpolated), else 0.
-pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<u8> {
-    let s2 = 4 * p.tile * p.tile;
-    let mut mask = vec![0u8; pixels.len()];
+/// A run of consecutive mask pixels in one row: columns `x0..x1`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Run {
+    pub y: u32,
+    pub x0: u32,
+    pub x1: u32,
+}
+
+/// The mask, `pixel > background + offset` (both interpolated), as runs in raster order.
+/// The GPU writes the same mask densely; [`dense_mask`] converts for comparison.
+pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
+    let s = 2 * p.tile;
+    let s2 = s * s;
+    // Per column: lower tile column and weight of the upper one (the same for every row).
+    let columns: Vec<(usize, usize, u32)> = (0..p.width)
+        .map(|x| {
+            let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
+            (tx as usize, (tx + 1).min(p.tiles_x - 1) as usize, wx)
+        })
+        .collect();
+    let level = |t: &TileStats| (t.background + t.offset).min(65536);
+    let mut col_level = vec![0u32; p.tiles_x as usize];
+    let mut runs = Vec::new();
     for y in 0..p.height {
-        for x in 0..p.width {
-            let i = (y * p.width + x) as usize;
-            mask[i] = (pixels[i] as u32 * s2 > level_scaled(tiles, p, x, y)) as u8;
+        // Interpolate between tile rows once per row, then between columns per pixel: the
+        // same integers as `level_scaled`, since the products distribute exactly.
+        let (ty, wy) = axis_weight(y, p.tile, p.tiles_y);
+        let ty1 = (ty + 1).min(p.tiles_y - 1);
+        for (tx, c) in col_level.iter_mut().enumerate() {
+            let a = level(&tiles[(ty * p.tiles_x) as usize + tx]);
+            let b = level(&tiles[(ty1 * p.tiles_x) as usize + tx]);
+            *c = (s - wy) * a + wy * b;
+        }
+        let row = &pixels[(y * p.width) as usize..((y + 1) * p.width) as usize];
+        let mut start: Option<u32> = None;
+        for (x, (&v, &(t0, t1, wx))) in row.iter().zip(&columns).enumerate() {
+            let lvl = (s - wx) * col_level[t0] + wx * col_level[t1];
+            let set = v as u32 * s2 > lvl;
+            match (set, start) {
+                (true, None) => start = Some(x as u32),
+                (false, Some(x0)) => {
+                    runs.push(Run {
+                        y,
+                        x0,
+                        x1: x as u32,
+                    });
+                    start = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(x0) = start {
+            runs.push(Run { y, x0, x1: p.width });
         }
     }
-    mask
+    runs
+}
+
+/// The mask as one value per pixel (1 = set), as the GPU stores it.
+pub fn dense_mask(runs: &[Run], width: u32, height: u32) -> Vec<u32> {
+    let mut m = vec![0u32; (width * height) as usize];
+    for r in runs {
+        let row = (r.y * width) as usize;
+        m[row + r.x0 as usize..row + r.x1 as usize].fill(1);
+    }
+    m
 }
