@@ -35,8 +35,7 @@ pub fn components(runs: &[Run], width: u32) -> Vec<u32> {
             };
             cur_start = i;
         }
-        for j in prev_start..cur_start {
-            let q = runs[j];
+        for (j, q) in runs.iter().enumerate().take(cur_start).skip(prev_start) {
             // 8-connected: the columns overlap once widened by one on each side.
             if q.x0 <= r.x1 && r.x0 <= q.x1 {
                 let (a, b) = (find(&mut parent, i as u32), find(&mut parent, j as u32));
