@@ -2,9 +2,13 @@
 
 use crate::camera::Camera;
 use crate::catalog::Catalog;
+use crate::detect::{self, Detection};
 use crate::frame::{Frame, is_image_path};
+use crate::gpu::Gpu;
+use crate::gpu::vote::{GpuTable, VoteJob};
+use crate::identify::{self, VoteResult};
 use crate::record::{Record, Status, Timing};
-use crate::solve::{Settings, Solver};
+use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
 use anyhow::{Context, Result, bail};
 use std::collections::HashMap;
 use std::io::Write;
@@ -20,28 +24,96 @@ pub enum CameraSource {
     Fov(f64),
 }
 
-/// Solvers per frame size, built on first use (a table per camera).
-pub struct Pipeline {
-    pub catalog: Catalog,
-    pub settings: Settings,
-    pub camera: CameraSource,
-    solvers: HashMap<(u32, u32), std::result::Result<Solver, String>>,
+/// Which backend runs the kernels, as asked on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendChoice {
+    /// The GPU if an adapter exists, else the CPU (with a warning).
+    Auto,
+    /// The GPU; an error when there is no adapter.
+    Gpu,
+    /// The CPU twins of the kernels.
+    Cpu,
+}
+
+/// The backend in use.
+pub enum Backend {
+    Cpu,
+    Gpu(Box<Gpu>),
 }
 
 pub const BACKEND_CPU: &str = "cpu";
 
+impl Backend {
+    /// Open the chosen backend; the adapter is picked by `GPUSTAR_ADAPTER` (a substring of its
+    /// name) when set. Returns a warning to print when `auto` fell back to the CPU.
+    pub fn open(choice: BackendChoice) -> Result<(Backend, Option<String>)> {
+        let name = std::env::var("GPUSTAR_ADAPTER").ok();
+        match choice {
+            BackendChoice::Cpu => Ok((Backend::Cpu, None)),
+            BackendChoice::Gpu => Ok((Backend::Gpu(Box::new(Gpu::new(name.as_deref())?)), None)),
+            BackendChoice::Auto => match Gpu::new(name.as_deref()) {
+                Ok(g) => Ok((Backend::Gpu(Box::new(g)), None)),
+                Err(e) => Ok((Backend::Cpu, Some(format!("{e:#}; using the CPU")))),
+            },
+        }
+    }
+
+    /// The records' `backend` field.
+    pub fn name(&self) -> String {
+        match self {
+            Backend::Cpu => BACKEND_CPU.to_string(),
+            Backend::Gpu(g) => g.backend_name(),
+        }
+    }
+}
+
+/// A solver and, on the GPU, its table in GPU memory.
+struct SizeSolver {
+    solver: Solver,
+    gpu_table: Option<GpuTable>,
+}
+
+/// Solvers per frame size, built on first use (a table per camera), and the backend.
+pub struct Pipeline {
+    pub catalog: Catalog,
+    pub settings: Settings,
+    pub camera: CameraSource,
+    pub backend: Backend,
+    solvers: HashMap<(u32, u32), std::result::Result<SizeSolver, String>>,
+    /// Set once the GPU failed: the rest of the run is on the CPU.
+    gpu_failed: bool,
+}
+
+/// A decoded input waiting for its record.
+struct Decoded {
+    index: usize,
+    frame: Frame,
+    decode_ms: f64,
+}
+
 impl Pipeline {
-    pub fn new(catalog: Catalog, settings: Settings, camera: CameraSource) -> Pipeline {
+    pub fn new(
+        catalog: Catalog,
+        settings: Settings,
+        camera: CameraSource,
+        backend: Backend,
+    ) -> Pipeline {
         Pipeline {
             catalog,
             settings,
             camera,
+            backend,
             solvers: HashMap::new(),
+            gpu_failed: false,
         }
     }
 
     /// The solver for frames of this size (or why there is none).
     pub fn solver(&mut self, width: u32, height: u32) -> std::result::Result<&Solver, String> {
+        self.size_solver(width, height).map(|s| &s.solver)
+    }
+
+    fn size_solver(&mut self, width: u32, height: u32) -> std::result::Result<&SizeSolver, String> {
         let entry = self.solvers.entry((width, height)).or_insert_with(|| {
             let camera = match &self.camera {
                 CameraSource::Fixed(c) => {
@@ -58,31 +130,221 @@ impl Pipeline {
                     Camera::from_fov(width, height, *fov).map_err(|e| format!("{e:#}"))?
                 }
             };
-            Solver::new(&self.catalog, camera, self.settings).map_err(|e| format!("{e:#}"))
+            let solver =
+                Solver::new(&self.catalog, camera, self.settings).map_err(|e| format!("{e:#}"))?;
+            let gpu_table = match &self.backend {
+                Backend::Gpu(g) => Some(
+                    g.upload_table(&solver.table, solver.refs.len())
+                        .map_err(|e| format!("{e:#}"))?,
+                ),
+                Backend::Cpu => None,
+            };
+            Ok(SizeSolver { solver, gpu_table })
         });
         entry.as_ref().map_err(|e| e.clone())
     }
 
     /// Read and solve one file: always exactly one record.
     pub fn process(&mut self, path: &Path, name: &str) -> Record {
+        self.process_batch(&[(path.to_path_buf(), name.to_string())])
+            .pop()
+            .expect("one record per input")
+    }
+
+    /// Read and solve a batch of files: exactly one record per file, in input order. Frames
+    /// of one size go through the GPU together (one submission for detection, one for voting).
+    pub fn process_batch(&mut self, inputs: &[(PathBuf, String)]) -> Vec<Record> {
+        let mut records: Vec<Option<Record>> = vec![None; inputs.len()];
+        let mut by_size: Vec<((u32, u32), Vec<Decoded>)> = Vec::new();
+        for (index, (path, name)) in inputs.iter().enumerate() {
+            let t0 = Instant::now();
+            match Frame::read(path) {
+                Ok(frame) => {
+                    let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
+                    let size = (frame.width, frame.height);
+                    let d = Decoded {
+                        index,
+                        frame,
+                        decode_ms,
+                    };
+                    match by_size.iter_mut().find(|(s, _)| *s == size) {
+                        Some((_, v)) => v.push(d),
+                        None => by_size.push((size, vec![d])),
+                    }
+                }
+                Err(e) => {
+                    records[index] =
+                        Some(Record::error(name, format!("{e:#}"), &self.backend.name()))
+                }
+            }
+        }
+        for ((w, h), group) in by_size {
+            match self.solve_group(w, h, &group, inputs) {
+                Ok(recs) => {
+                    for (d, r) in group.iter().zip(recs) {
+                        records[d.index] = Some(r);
+                    }
+                }
+                Err(e) => {
+                    for d in &group {
+                        records[d.index] = Some(Record::error(
+                            &inputs[d.index].1,
+                            e.clone(),
+                            &self.backend.name(),
+                        ));
+                    }
+                }
+            }
+        }
+        records
+            .into_iter()
+            .map(|r| r.expect("every input has a record"))
+            .collect()
+    }
+
+    /// Frames of one size: detection and voting on the backend, the rest on the CPU.
+    fn solve_group(
+        &mut self,
+        w: u32,
+        h: u32,
+        group: &[Decoded],
+        inputs: &[(PathBuf, String)],
+    ) -> std::result::Result<Vec<Record>, String> {
+        let use_gpu = matches!(self.backend, Backend::Gpu(_)) && !self.gpu_failed;
+        let backend_name = if use_gpu {
+            self.backend.name()
+        } else {
+            BACKEND_CPU.to_string()
+        };
+        self.size_solver(w, h)?;
+        let ss = self.solvers[&(w, h)].as_ref().expect("built above");
+        let solver = &ss.solver;
+        let settings = &solver.settings.detect;
+        let n = group.len() as f64;
+        // Detection.
         let t0 = Instant::now();
-        let frame = match Frame::read(path) {
-            Ok(f) => f,
-            Err(e) => return Record::error(name, format!("{e:#}"), BACKEND_CPU),
+        let p = detect::params(&group[0].frame, settings);
+        let mut detect_ms = vec![0.0; group.len()];
+        let mut gpu_error = None;
+        let blobs = match (&self.backend, use_gpu) {
+            (Backend::Gpu(g), true) => {
+                let frames: Vec<&Frame> = group.iter().map(|d| &d.frame).collect();
+                match g.detect(&frames, &p) {
+                    Ok(b) => {
+                        detect_ms.fill(t0.elapsed().as_secs_f64() * 1e3 / n);
+                        Some(b)
+                    }
+                    Err(e) => {
+                        gpu_error = Some(e);
+                        None
+                    }
+                }
+            }
+            _ => None,
         };
-        let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let solver = match self.solver(frame.width, frame.height) {
-            Ok(s) => s,
-            Err(e) => return Record::error(name, e, BACKEND_CPU),
+        let blobs = blobs.unwrap_or_else(|| {
+            group
+                .iter()
+                .zip(detect_ms.iter_mut())
+                .map(|(d, ms)| {
+                    let t = Instant::now();
+                    let b = detect::blobs_cpu(&d.frame, &p);
+                    *ms = t.elapsed().as_secs_f64() * 1e3;
+                    b
+                })
+                .collect()
+        });
+        let detections: Vec<Vec<Detection>> = blobs
+            .iter()
+            .map(|b| detect::star_list(b, settings))
+            .collect();
+        // Identification.
+        let t1 = Instant::now();
+        let prepared: Vec<Option<Prepared>> =
+            detections.iter().map(|d| solver.prepare(d)).collect();
+        let mut identify_ms = vec![0.0; group.len()];
+        let mut voted: Vec<Option<VoteResult>> = vec![None; group.len()];
+        if let (Backend::Gpu(g), true, Some(table), None) =
+            (&self.backend, use_gpu, &ss.gpu_table, &gpu_error)
+        {
+            let jobs: Vec<VoteJob> = prepared
+                .iter()
+                .flatten()
+                .map(|p| VoteJob {
+                    ranges: p.ranges.clone(),
+                    stars: p.n_vote,
+                    k: p.k,
+                })
+                .collect();
+            match g.vote(table, &jobs) {
+                Ok(results) => {
+                    let mut it = results.into_iter();
+                    for (v, p) in voted.iter_mut().zip(&prepared) {
+                        if p.is_some() {
+                            *v = it.next();
+                        }
+                    }
+                }
+                Err(e) => gpu_error = Some(e),
+            }
+        }
+        let mut outcomes = Vec::with_capacity(group.len());
+        for (k, (dets, prep)) in detections.iter().zip(&prepared).enumerate() {
+            let t = Instant::now();
+            let outcome = match prep {
+                None => Outcome::Unsolved("too_few_stars"),
+                Some(p) => {
+                    let v = voted[k].take().unwrap_or_else(|| {
+                        identify::vote_cpu(
+                            &solver.table,
+                            &p.ranges,
+                            p.n_vote,
+                            solver.refs.len(),
+                            p.k,
+                        )
+                    });
+                    solver.finish(dets, &p.vectors, &v)
+                }
+            };
+            identify_ms[k] = t.elapsed().as_secs_f64() * 1e3;
+            outcomes.push(outcome);
+        }
+        if use_gpu && gpu_error.is_none() {
+            // The GPU part of the time is shared by the batch.
+            let shared = (t1.elapsed().as_secs_f64() * 1e3 - identify_ms.iter().sum::<f64>()) / n;
+            identify_ms.iter_mut().for_each(|ms| *ms += shared.max(0.0));
+        }
+        let backend_name = match &gpu_error {
+            Some(e) => {
+                eprintln!(
+                    "gpustar: warning: {e:#}; this batch and the rest of the run use the CPU"
+                );
+                self.gpu_failed = true;
+                BACKEND_CPU.to_string()
+            }
+            None => backend_name,
         };
-        let (sol, detect_ms, identify_ms) = solver.solve_frame(&frame);
-        let timing = Timing {
-            decode: decode_ms,
-            detect: detect_ms,
-            identify: identify_ms,
-            total: t0.elapsed().as_secs_f64() * 1e3,
-        };
-        solver.record(name, &sol, timing, BACKEND_CPU)
+        let ss = self.solvers[&(w, h)].as_ref().expect("built above");
+        Ok(group
+            .iter()
+            .zip(detections)
+            .zip(outcomes)
+            .enumerate()
+            .map(|(k, ((d, detections), outcome))| {
+                let sol = Solution {
+                    detections,
+                    outcome,
+                };
+                let timing = Timing {
+                    decode: d.decode_ms,
+                    detect: detect_ms[k],
+                    identify: identify_ms[k],
+                    total: d.decode_ms + detect_ms[k] + identify_ms[k],
+                };
+                ss.solver
+                    .record(&inputs[d.index].1, &sol, timing, &backend_name)
+            })
+            .collect())
     }
 }
 

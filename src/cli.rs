@@ -1,6 +1,8 @@
 //! The command line (clap derive). `main` calls [`run`].
 
-use crate::batch::{CameraSource, Counts, Format, Pipeline, RecordWriter, list_inputs};
+use crate::batch::{
+    Backend, BackendChoice, CameraSource, Counts, Format, Pipeline, RecordWriter, list_inputs,
+};
 use crate::camera::Camera;
 use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
 use crate::evaluate;
@@ -145,6 +147,13 @@ pub struct SolveOpts {
     /// Record format.
     #[arg(long, value_enum, default_value_t = Format::Jsonl)]
     pub format: Format,
+    /// Where the kernels run: the GPU if there is one (auto), the GPU, or the CPU. The adapter
+    /// is the best one found, or the first whose name contains $GPUSTAR_ADAPTER.
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+    /// Frames per GPU batch (one submission for detection and one for voting per batch).
+    #[arg(long, default_value_t = 32)]
+    pub batch_size: usize,
     /// Detection threshold above the local background, in noise sigmas.
     #[arg(long, default_value_t = 5.0)]
     pub sigma: f32,
@@ -328,26 +337,34 @@ fn run_solve(inputs: Vec<(PathBuf, String)>, o: &SolveOpts) -> Result<ExitCode> 
         )),
         None => Box::new(std::io::BufWriter::new(std::io::stdout())),
     };
+    let (backend, warning) = Backend::open(o.backend)?;
+    if let Some(w) = warning {
+        if !o.quiet {
+            eprintln!("gpustar: warning: {w}");
+        }
+    }
     let mut writer = RecordWriter::new(out, o.format);
-    let mut pipeline = Pipeline::new(catalog, s, camera);
+    let mut pipeline = Pipeline::new(catalog, s, camera, backend);
     let mut counts = Counts::default();
     let t0 = Instant::now();
-    for (path, name) in &inputs {
-        let rec = pipeline.process(path, name);
-        counts.add(&rec);
-        writer.write(&rec)?;
+    for batch in inputs.chunks(o.batch_size.max(1)) {
+        for rec in pipeline.process_batch(batch) {
+            counts.add(&rec);
+            writer.write(&rec)?;
+        }
     }
     writer.flush()?;
     let secs = t0.elapsed().as_secs_f64();
     if !o.quiet {
         eprintln!(
-            "gpustar: {} files: {} solved, {} unsolved, {} errors in {:.2} s ({:.1} images/s)",
+            "gpustar: {} files: {} solved, {} unsolved, {} errors in {:.2} s ({:.1} images/s, {})",
             counts.total(),
             counts.solved,
             counts.unsolved,
             counts.errors,
             secs,
-            counts.total() as f64 / secs.max(1e-9)
+            counts.total() as f64 / secs.max(1e-9),
+            pipeline.backend.name()
         );
     }
     Ok(if counts.errors > 0 {
@@ -358,6 +375,26 @@ fn run_solve(inputs: Vec<(PathBuf, String)>, o: &SolveOpts) -> Result<ExitCode> 
 }
 
 fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<ExitCode> {
+    let adapters = crate::gpu::adapters();
+    println!("GPU adapters: {}", adapters.len());
+    for a in &adapters {
+        println!(
+            "  {} ({}, {}, driver {})",
+            a.name, a.backend, a.device_type, a.driver
+        );
+    }
+    match crate::gpu::Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref()) {
+        Ok(g) => {
+            println!("chosen: {}", g.backend_name());
+            println!(
+                "  limits: Limits::default() with max_storage_buffer_binding_size {} MB, \
+                 max_buffer_size {} MB (the adapter's); no optional features",
+                g.limits.max_storage_buffer_binding_size >> 20,
+                g.limits.max_buffer_size >> 20
+            );
+        }
+        Err(e) => println!("chosen: none ({e:#})"),
+    }
     let catalog = Catalog::load(o.catalog.as_deref())?;
     println!("catalog: {}", catalog.source);
     println!(

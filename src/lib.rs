@@ -18,6 +18,7 @@ pub mod cpu;
 pub mod detect;
 pub mod evaluate;
 pub mod frame;
+pub mod gpu;
 pub mod identify;
 pub mod record;
 pub mod refine;

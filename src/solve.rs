@@ -71,6 +71,18 @@ pub struct Solver {
     pub table_origin: TableOrigin,
 }
 
+/// A frame's input to the vote.
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    /// Camera-frame direction of every detection.
+    pub vectors: Vec<Vector3<f64>>,
+    /// Pair ranges of the `n_vote` brightest.
+    pub ranges: Vec<crate::cpu::vote::PairRange>,
+    pub n_vote: usize,
+    /// Candidates kept per star.
+    pub k: usize,
+}
+
 /// What the identification of one frame found (before it becomes a record).
 #[derive(Clone, Debug)]
 pub struct Solution {
@@ -111,29 +123,36 @@ impl Solver {
         })
     }
 
-    /// Identify the stars of a detection list (CPU vote).
-    pub fn identify(&self, detections: Vec<Detection>) -> Solution {
-        let s = &self.settings;
+    /// What the vote needs from a detection list: the stars' directions and the pair ranges
+    /// of the brightest; None when there are too few stars to identify.
+    pub fn prepare(&self, detections: &[Detection]) -> Option<Prepared> {
+        let s = &self.settings.identify;
         if detections.len() < 3 {
-            return Solution {
-                detections,
-                outcome: Outcome::Unsolved("too_few_stars"),
-            };
+            return None;
         }
         let vectors: Vec<Vector3<f64>> = detections
             .iter()
             .map(|d| self.camera.pixel_to_vector(d.x, d.y))
             .collect();
-        let n_vote = vectors.len().min(s.identify.vote_stars);
-        let ranges = identify::pair_ranges(&vectors[..n_vote], &self.camera, &s.identify);
-        let voted = identify::vote_cpu(
-            &self.table,
-            &ranges,
+        let n_vote = vectors.len().min(s.vote_stars);
+        Some(Prepared {
+            ranges: identify::pair_ranges(&vectors[..n_vote], &self.camera, s),
             n_vote,
-            self.refs.len(),
-            s.identify.candidates_per_star(n_vote),
-        );
-        let outcome = self.finish(&detections, &vectors, &voted);
+            k: s.candidates_per_star(n_vote),
+            vectors,
+        })
+    }
+
+    /// Identify the stars of a detection list, voting on the CPU.
+    pub fn identify(&self, detections: Vec<Detection>) -> Solution {
+        let outcome = match self.prepare(&detections) {
+            None => Outcome::Unsolved("too_few_stars"),
+            Some(p) => {
+                let voted =
+                    identify::vote_cpu(&self.table, &p.ranges, p.n_vote, self.refs.len(), p.k);
+                self.finish(&detections, &p.vectors, &voted)
+            }
+        };
         Solution {
             detections,
             outcome,

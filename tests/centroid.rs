@@ -1,6 +1,8 @@
 //! Stage `centroid` (with `threshold` and `components` in front): sub-pixel accuracy on
 //! simulated spots.
 
+mod common;
+
 use gpustar::detect::{DetectSettings, detect};
 use gpustar::frame::Frame;
 use gpustar::simulate::add_spot;
@@ -61,4 +63,29 @@ fn single_hot_pixel_is_rejected_and_saturation_flagged() {
     assert_eq!(stars.len(), 1, "the hot pixel is not a star");
     assert!(stars[0].saturated);
     assert!((stars[0].x - 32.0).abs() < 0.01 && (stars[0].y - 32.0).abs() < 0.01);
+}
+
+#[test]
+fn gpu_moments_equal_cpu_on_saturated_faint_and_edge_spots() {
+    let Some(g) = common::gpu("gpu_moments_equal_cpu_on_saturated_faint_and_edge_spots") else {
+        return;
+    };
+    let mut bright = spot_frame(32.0, 32.0, 2_000_000.0, 1.0);
+    for p in bright.pixels.iter_mut() {
+        *p = (*p).min(4000);
+    }
+    bright.saturation = 4000;
+    let frames = [
+        bright,
+        spot_frame(20.3, 40.7, 1500.0, 1.0),
+        spot_frame(0.2, 63.0, 30000.0, 1.5),
+        spot_frame(63.4, 0.0, 30000.0, 0.7),
+    ];
+    for f in &frames {
+        // Each frame alone: they differ in saturation level.
+        assert_eq!(
+            common::assert_detect_stages_equal(&g, std::slice::from_ref(f), 16),
+            1
+        );
+    }
 }

@@ -1,6 +1,9 @@
 //! Stage `components` (CPU twin) on hand-made masks.
 
+mod common;
+
 use gpustar::cpu::components::*;
+use gpustar::cpu::threshold::DetectParams;
 use gpustar::cpu::threshold::Run;
 
 /// Runs and size of a mask drawn with '#'.
@@ -85,4 +88,65 @@ fn separate_blobs_borders_gaps_and_single_pixels() {
         labels(&[".#.", "#.#"]),
         vec![NO_LABEL, 1, NO_LABEL, 1, NO_LABEL, 1]
     );
+}
+
+#[test]
+fn gpu_equals_cpu_on_hand_made_masks_touching_borders() {
+    let Some(g) = common::gpu("gpu_equals_cpu_on_hand_made_masks_touching_borders") else {
+        return;
+    };
+    let frames = [
+        common::drawn(&["#..#", "#..#", "####", "....", ".#..", "..#."]),
+        common::drawn(&["#.#.#", "#.#.#", "#####"]),
+        common::drawn(&["..#", ".#.", "#.."]),
+        common::drawn(&["################################################################"]),
+        common::drawn(&["#", "#", "#", "#", "#", "#"]),
+    ];
+    common::assert_detect_stages_equal(&g, &frames, 16);
+    // No star at all.
+    let dark = common::drawn(&[]);
+    let p = DetectParams::new(dark.width, dark.height, 16, 5.0, 255);
+    assert!(g.detect(&[&dark], &p).unwrap()[0].is_empty());
+}
+
+#[test]
+fn gpu_reruns_when_components_and_set_pixels_overflow_its_first_buffers() {
+    let Some(g) =
+        common::gpu("gpu_reruns_when_components_and_set_pixels_overflow_its_first_buffers")
+    else {
+        return;
+    };
+    let (w, h) = (512u32, 512u32);
+    // Isolated bright pixels on every other column of every other row: 65,536 components,
+    // more than the 4,096 the blob buffer holds at first.
+    let dots = gpustar::frame::Frame {
+        width: w,
+        height: h,
+        pixels: (0..w * h)
+            .map(|i| {
+                if (i % w) % 2 == 0 && (i / w) % 2 == 0 {
+                    200
+                } else {
+                    10
+                }
+            })
+            .collect(),
+        saturation: 255,
+    };
+    // A checkerboard: 131,072 set pixels, more than the 65,536 the set list holds at first,
+    // all one component through their diagonals.
+    let checks = gpustar::frame::Frame {
+        pixels: (0..w * h)
+            .map(|i| {
+                if ((i % w) + (i / w)) % 2 == 0 {
+                    200
+                } else {
+                    10
+                }
+            })
+            .collect(),
+        ..dots.clone()
+    };
+    let blobs = common::assert_detect_stages_equal(&g, &[dots, checks], 32);
+    assert_eq!(blobs, 65_536 + 1);
 }

@@ -36,6 +36,8 @@ fn simulate_and_solve(extra: &[&str], frames: usize) -> Value {
     let results = tmp.path().join("results.jsonl");
     run_ok(&[
         "batch",
+        "--backend",
+        "cpu",
         dir.to_str().unwrap(),
         "--camera",
         dir.join("camera.toml").to_str().unwrap(),
@@ -104,6 +106,8 @@ fn every_image_gets_one_record_in_sorted_order_and_bad_files_are_errors() {
             "18",
             "--mag-limit",
             "6",
+            "--backend",
+            "cpu",
         ])
         .output()
         .unwrap();

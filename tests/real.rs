@@ -23,7 +23,14 @@ fn esa_tetra3_frames_are_solved_against_truth() {
             "--camera",
             cam.to_str().unwrap(),
         ])
-        .args(["--epoch", "2019.58", "-o", results.to_str().unwrap()])
+        .args([
+            "--epoch",
+            "2019.58",
+            "-o",
+            results.to_str().unwrap(),
+            "--backend",
+            "cpu",
+        ])
         .output()
         .unwrap();
     assert!(

@@ -1,5 +1,7 @@
 //! Stage `threshold` (CPU twin) on hand-made inputs.
 
+mod common;
+
 use gpustar::cpu::threshold::*;
 
 #[test]
@@ -103,4 +105,38 @@ fn eight_bit_histogram_stats_equal_selection_stats() {
     let b = tile_stats(&px, &DetectParams::new(w, h, 16, 5.0, 65535));
     assert_eq!(a, b);
     assert!(a.iter().any(|t| t.offset > 8), "varied tiles");
+}
+
+#[test]
+fn gpu_equals_cpu_on_simulated_8_and_16_bit_frames() {
+    let Some(g) = common::gpu("gpu_equals_cpu_on_simulated_8_and_16_bit_frames") else {
+        return;
+    };
+    let n8 =
+        common::assert_detect_stages_equal(&g, &common::sim_frames(4, (640, 480), 18.0, 8, 11), 32);
+    let n16 = common::assert_detect_stages_equal(
+        &g,
+        &common::sim_frames(3, (500, 333), 10.0, 16, 12),
+        32,
+    );
+    assert!(n8 > 50 && n16 > 20, "{n8} and {n16} blobs compared");
+}
+
+#[test]
+fn gpu_equals_cpu_on_odd_sizes_and_one_pixel_frames() {
+    let Some(g) = common::gpu("gpu_equals_cpu_on_odd_sizes_and_one_pixel_frames") else {
+        return;
+    };
+    // Sizes not multiples of the tile, of 32 (mask words) or of 2 (packed pixels).
+    common::assert_detect_stages_equal(&g, &common::sim_frames(2, (333, 77), 12.0, 8, 5), 16);
+    common::assert_detect_stages_equal(&g, &common::sim_frames(1, (97, 131), 12.0, 16, 6), 64);
+    for (w, h, v) in [(1, 1, 7u16), (1, 5, 0), (3, 1, 65535)] {
+        let f = gpustar::frame::Frame {
+            width: w,
+            height: h,
+            pixels: vec![v; (w * h) as usize],
+            saturation: 65535,
+        };
+        common::assert_detect_stages_equal(&g, &[f], 4);
+    }
 }

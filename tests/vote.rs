@@ -1,8 +1,11 @@
 //! Stages `vote` and `select`, and verification, on a tiny hand-made catalog.
 
+mod common;
+
 use gpustar::camera::Camera;
 use gpustar::catalog::{Catalog, DoubleStars, RefCatalog, Selection, vector_to_radec};
 use gpustar::cpu::select::unpack_candidate;
+use gpustar::gpu::vote::VoteJob;
 use gpustar::identify::{IdentifySettings, pair_ranges, verify, vote_cpu};
 use gpustar::table::PairTable;
 use nalgebra::{Rotation3, Vector3};
@@ -124,4 +127,26 @@ fn a_star_off_the_catalog_is_left_unidentified() {
         ids.iter()
             .all(|m| m.star < 6 && m.ref_id as usize == m.star)
     );
+}
+
+#[test]
+fn gpu_votes_equal_cpu_on_simulated_frames() {
+    let Some(g) = common::gpu("gpu_votes_equal_cpu_on_simulated_frames") else {
+        return;
+    };
+    let size = (1024, 1024);
+    let solver = common::solver(18.0, size);
+    let jobs: Vec<VoteJob> = common::sim_frames(6, size, 18.0, 8, 21)
+        .iter()
+        .filter_map(|f| {
+            let d = gpustar::detect::detect(f, &solver.settings.detect);
+            solver.prepare(&d).map(|p| VoteJob {
+                ranges: p.ranges,
+                stars: p.n_vote,
+                k: p.k,
+            })
+        })
+        .collect();
+    assert_eq!(jobs.len(), 6);
+    common::assert_votes_equal(&g, &solver, &jobs);
 }

@@ -28,3 +28,157 @@ pub fn gpustar() -> std::process::Command {
     );
     c
 }
+
+/// The GPU (lavapipe in CI), or None with a printed reason. In CI (`CI=true`) a missing
+/// adapter fails the test instead: GPU = CPU must be checked there.
+pub fn gpu(test: &str) -> Option<gpustar::gpu::Gpu> {
+    match gpustar::gpu::Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref()) {
+        Ok(g) => Some(g),
+        Err(e) => {
+            if std::env::var("CI").is_ok_and(|v| v == "true") {
+                panic!("{test}: no GPU adapter in CI: {e:#}");
+            }
+            eprintln!("SKIPPED {test}: {e:#}");
+            None
+        }
+    }
+}
+
+/// Frames from the simulator (in memory), 8- or 16-bit.
+pub fn sim_frames(
+    n: usize,
+    size: (u32, u32),
+    fov: f64,
+    bits: u8,
+    seed: u64,
+) -> Vec<gpustar::frame::Frame> {
+    let cat = gpustar::catalog::Catalog::builtin();
+    let s = gpustar::simulate::SimSettings {
+        width: size.0,
+        height: size.1,
+        fov_x_deg: fov,
+        bits,
+        seed,
+        ..Default::default()
+    };
+    (0..n)
+        .map(|k| {
+            let (pixels, _) = gpustar::simulate::render(&cat, &s, k).unwrap();
+            gpustar::frame::Frame {
+                width: size.0,
+                height: size.1,
+                pixels,
+                saturation: if bits == 8 { 255 } else { 65535 },
+            }
+        })
+        .collect()
+}
+
+/// The CPU twins' outputs of every detection stage, dense as the GPU writes them.
+pub struct CpuDetect {
+    pub tiles: Vec<gpustar::cpu::threshold::TileStats>,
+    pub mask: Vec<u32>,
+    pub labels: Vec<u32>,
+    pub blobs: Vec<gpustar::cpu::centroid::Blob>,
+}
+
+pub fn cpu_detect(
+    f: &gpustar::frame::Frame,
+    p: &gpustar::cpu::threshold::DetectParams,
+) -> CpuDetect {
+    use gpustar::cpu::*;
+    let tiles = threshold::tile_stats(&f.pixels, p);
+    let runs = threshold::threshold(&f.pixels, &tiles, p);
+    let labels = components::components(&runs, p.width);
+    CpuDetect {
+        blobs: centroid::centroid(&f.pixels, &runs, &labels, &tiles, p),
+        mask: threshold::dense_mask(&runs, p.width, p.height),
+        labels: components::dense_labels(&runs, &labels, p.width, p.height),
+        tiles,
+    }
+}
+
+/// Run the detection kernels on the GPU and check every stage against its CPU twin: tile
+/// statistics, mask, labels and blobs must be equal exactly. Returns the blobs compared.
+pub fn assert_detect_stages_equal(
+    g: &gpustar::gpu::Gpu,
+    frames: &[gpustar::frame::Frame],
+    tile: u32,
+) -> usize {
+    let f0 = &frames[0];
+    let p = gpustar::cpu::threshold::DetectParams::new(
+        f0.width,
+        f0.height,
+        tile,
+        5.0,
+        f0.saturation as u32,
+    );
+    let refs: Vec<&gpustar::frame::Frame> = frames.iter().collect();
+    let (blobs, ins) = g.detect_inspect(&refs, &p).unwrap();
+    let mut n = 0;
+    for (k, f) in frames.iter().enumerate() {
+        let c = cpu_detect(f, &p);
+        assert!(c.tiles == ins.tiles[k], "frame {k}: tile_stats differ");
+        assert!(c.mask == ins.mask[k], "frame {k}: threshold masks differ");
+        assert!(
+            c.labels == ins.labels[k],
+            "frame {k}: component labels differ"
+        );
+        assert!(c.blobs == blobs[k], "frame {k}: centroid moments differ");
+        n += c.blobs.len();
+    }
+    n
+}
+
+/// A 64×48 frame with '#' drawn as bright pixels (200) on a dark sky (10) from the top left.
+pub fn drawn(rows: &[&str]) -> gpustar::frame::Frame {
+    let (w, h) = (64u32, 48u32);
+    let mut pixels = vec![10u16; (w * h) as usize];
+    for (y, r) in rows.iter().enumerate() {
+        for (x, c) in r.bytes().enumerate() {
+            if c == b'#' {
+                pixels[y * w as usize + x] = 200;
+            }
+        }
+    }
+    gpustar::frame::Frame {
+        width: w,
+        height: h,
+        pixels,
+        saturation: 255,
+    }
+}
+
+/// A solver for a pinhole camera with catalog stars to magnitude 6 (no table cache).
+pub fn solver(fov: f64, size: (u32, u32)) -> gpustar::solve::Solver {
+    let s = gpustar::solve::Settings {
+        mag_limit: Some(6.0),
+        table_cache: false,
+        ..gpustar::solve::Settings::default()
+    };
+    let camera = gpustar::camera::Camera::from_fov(size.0, size.1, fov).unwrap();
+    gpustar::solve::Solver::new(&gpustar::catalog::Catalog::builtin(), camera, s).unwrap()
+}
+
+/// Vote and select on the GPU and check the counters and candidate lists against the CPU.
+pub fn assert_votes_equal(
+    g: &gpustar::gpu::Gpu,
+    solver: &gpustar::solve::Solver,
+    jobs: &[gpustar::gpu::vote::VoteJob],
+) {
+    let table = g.upload_table(&solver.table, solver.refs.len()).unwrap();
+    let (results, votes) = g.vote_inspect(&table, jobs).unwrap();
+    for (f, job) in jobs.iter().enumerate() {
+        let n_ref = solver.refs.len();
+        let (cpu_votes, hyp) =
+            gpustar::cpu::vote::vote(&solver.table, &job.ranges, job.stars, n_ref);
+        assert!(cpu_votes == votes[f], "job {f}: vote counters differ");
+        let cpu = gpustar::identify::vote_cpu(&solver.table, &job.ranges, job.stars, n_ref, job.k);
+        assert_eq!(results[f].hypotheses, hyp, "job {f}: hypotheses");
+        assert_eq!(results[f].k, cpu.k);
+        assert!(
+            results[f].candidates == cpu.candidates,
+            "job {f}: candidates differ"
+        );
+    }
+}

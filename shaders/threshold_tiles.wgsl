@@ -1,0 +1,122 @@
+// Stage threshold, kernel 1 of 2 (CPU twin: src/cpu/threshold.rs tile_stats): the median and
+// MAD of each tile. 8-bit frames: one 256-bin histogram of the values gives both (the MAD by
+// walking outward from the median, as the CPU twin does). Deeper frames: a two-level radix
+// select (high byte, then low byte) for each. Histograms live in workgroup memory.
+// One workgroup of 64 per tile: (tiles_x, tiles_y, images).
+
+@group(0) @binding(0) var<uniform> u: DetectUniform;
+@group(0) @binding(1) var<storage, read> pixels: array<u32>;
+@group(0) @binding(2) var<storage, read_write> tiles: array<TileStats>;
+
+var<workgroup> hist: array<atomic<u32>, 256>;
+// (bin, elements in lower bins) of the rank being selected.
+var<workgroup> pick: vec2<u32>;
+
+fn pixel(img: u32, i: u32) -> u32 {
+    let w = pixels[img * u.b.words_per_image + i / 2u];
+    return (w >> ((i & 1u) * 16u)) & 0xFFFFu;
+}
+
+// Element k of the tile, or its distance from `centre` when `dev` is set.
+fn tile_value(img: u32, x0: u32, y0: u32, tw: u32, k: u32, centre: u32, dev: bool) -> u32 {
+    let v = pixel(img, (y0 + k / tw) * u.p.width + x0 + k % tw);
+    if (dev) {
+        return select(centre - v, v - centre, v >= centre);
+    }
+    return v;
+}
+
+const WG: u32 = 64u;
+
+fn clear_hist(lid: u32) {
+    for (var b = lid; b < 256u; b += WG) {
+        atomicStore(&hist[b], 0u);
+    }
+    workgroupBarrier();
+}
+
+// Thread 0: the bin holding `rank`, into `pick`.
+fn find_bin(rank: u32) {
+    var below = 0u;
+    for (var b = 0u; b < 256u; b++) {
+        let n = atomicLoad(&hist[b]);
+        if (below + n > rank) {
+            pick = vec2<u32>(b, below);
+            return;
+        }
+        below += n;
+    }
+}
+
+// The value of rank `rank` among the n tile values (or their distances from `centre`).
+fn radix_select(img: u32, x0: u32, y0: u32, tw: u32, n: u32, rank: u32, centre: u32, dev: bool, lid: u32) -> u32 {
+    clear_hist(lid);
+    for (var k = lid; k < n; k += WG) {
+        atomicAdd(&hist[tile_value(img, x0, y0, tw, k, centre, dev) >> 8u], 1u);
+    }
+    workgroupBarrier();
+    if (lid == 0u) {
+        find_bin(rank);
+    }
+    let first = workgroupUniformLoad(&pick);
+    clear_hist(lid);
+    for (var k = lid; k < n; k += WG) {
+        let v = tile_value(img, x0, y0, tw, k, centre, dev);
+        if ((v >> 8u) == first.x) {
+            atomicAdd(&hist[v & 0xFFu], 1u);
+        }
+    }
+    workgroupBarrier();
+    if (lid == 0u) {
+        find_bin(rank - first.y);
+    }
+    let second = workgroupUniformLoad(&pick);
+    return (first.x << 8u) | second.x;
+}
+
+// Thread 0, 8-bit: median and MAD from the value histogram, into `pick`.
+fn median_mad_8bit(rank: u32) {
+    find_bin(rank);
+    let median = pick.x;
+    var seen = atomicLoad(&hist[median]);
+    var d = 0u;
+    while (seen <= rank) {
+        d++;
+        if (median + d < 256u) {
+            seen += atomicLoad(&hist[median + d]);
+        }
+        if (d <= median) {
+            seen += atomicLoad(&hist[median - d]);
+        }
+    }
+    pick = vec2<u32>(median, d);
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let p = u.p;
+    let x0 = wg.x * p.tile;
+    let y0 = wg.y * p.tile;
+    let tw = min(x0 + p.tile, p.width) - x0;
+    let n = tw * (min(y0 + p.tile, p.height) - y0);
+    let rank = (n - 1u) / 2u;
+    var stats: vec2<u32>;
+    if (p.saturation <= 255u) {
+        clear_hist(lid);
+        for (var k = lid; k < n; k += WG) {
+            atomicAdd(&hist[tile_value(wg.z, x0, y0, tw, k, 0u, false) & 0xFFu], 1u);
+        }
+        workgroupBarrier();
+        if (lid == 0u) {
+            median_mad_8bit(rank);
+        }
+        stats = workgroupUniformLoad(&pick);
+    } else {
+        let median = radix_select(wg.z, x0, y0, tw, n, rank, 0u, false, lid);
+        stats = vec2<u32>(median, radix_select(wg.z, x0, y0, tw, n, rank, median, true, lid));
+    }
+    if (lid == 0u) {
+        let t = wg.z * u.b.tiles_per_image + wg.y * p.tiles_x + wg.x;
+        tiles[t] = TileStats(stats.x, u32(ceil(p.k_mad * f32(max(stats.y, 1u)))));
+    }
+}

@@ -1,0 +1,123 @@
+//! Every kernel parses and validates with naga under default capabilities (no optional
+//! features), and every host↔WGSL struct has the same field offsets and size on both sides.
+
+use gpustar::cpu::centroid::Blob;
+use gpustar::cpu::threshold::{DetectParams, TileStats};
+use gpustar::cpu::vote::PairRange;
+use gpustar::gpu::detect::{BatchParams, DetectUniform};
+use gpustar::gpu::vote::VoteUniform;
+use gpustar::gpu::{KERNELS, kernel_source};
+use std::mem::{offset_of, size_of};
+
+fn module(kernel: &str) -> naga::Module {
+    naga::front::wgsl::parse_str(&kernel_source(kernel).unwrap()).unwrap_or_else(|e| {
+        panic!(
+            "{kernel}: {}",
+            e.emit_to_string(&kernel_source(kernel).unwrap())
+        )
+    })
+}
+
+/// (member name, offset) and size of a WGSL struct.
+fn layout(m: &naga::Module, name: &str) -> (Vec<(String, u32)>, u32) {
+    for (_, ty) in m.types.iter() {
+        if ty.name.as_deref() == Some(name) {
+            if let naga::TypeInner::Struct { members, span } = &ty.inner {
+                let fields = members
+                    .iter()
+                    .map(|f| (f.name.clone().unwrap_or_default(), f.offset))
+                    .collect();
+                return (fields, *span);
+            }
+        }
+    }
+    panic!("no struct {name}");
+}
+
+#[test]
+fn every_kernel_validates_without_optional_capabilities() {
+    for (name, _, _) in KERNELS {
+        let m = module(name);
+        naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            naga::valid::Capabilities::default(),
+        )
+        .validate(&m)
+        .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        assert!(
+            m.entry_points.iter().any(|e| e.name == "main"),
+            "{name}: entry point main"
+        );
+    }
+}
+
+macro_rules! assert_layout {
+    ($module:expr, $wgsl:literal, $rust:ty, [$($field:ident),*]) => {{
+        let (fields, span) = layout(&$module, $wgsl);
+        let rust: Vec<(String, u32)> =
+            vec![$((stringify!($field).to_string(), offset_of!($rust, $field) as u32)),*];
+        assert_eq!(fields, rust, "{} vs {}", $wgsl, stringify!($rust));
+        assert_eq!(span as usize, size_of::<$rust>(), "size of {}", $wgsl);
+    }};
+}
+
+#[test]
+fn host_and_wgsl_structs_have_the_same_layout() {
+    let detect = module("centroid");
+    assert_layout!(
+        detect,
+        "DetectParams",
+        DetectParams,
+        [
+            width, height, tile, tiles_x, tiles_y, saturation, k_mad, _pad
+        ]
+    );
+    assert_layout!(
+        detect,
+        "BatchParams",
+        BatchParams,
+        [
+            images,
+            pixels_per_image,
+            words_per_image,
+            blocks_per_image,
+            tiles_per_image,
+            max_blobs,
+            mask_words,
+            max_set
+        ]
+    );
+    assert_layout!(detect, "DetectUniform", DetectUniform, [p, b]);
+    assert_layout!(detect, "TileStats", TileStats, [background, offset]);
+    // The GPU's blob keeps each u64 moment as a (lo, hi) pair of u32: the same bytes on a
+    // little-endian host.
+    let (fields, span) = layout(&detect, "BlobAtomic");
+    let names: Vec<&str> = fields.iter().map(|f| f.0.as_str()).collect();
+    assert_eq!(names, ["label", "area", "peak", "saturated", "moments"]);
+    assert_eq!(fields[0].1 as usize, offset_of!(Blob, label));
+    assert_eq!(fields[1].1 as usize, offset_of!(Blob, area));
+    assert_eq!(fields[2].1 as usize, offset_of!(Blob, peak));
+    assert_eq!(fields[3].1 as usize, offset_of!(Blob, saturated));
+    assert_eq!(fields[4].1 as usize, offset_of!(Blob, m0));
+    assert_eq!(offset_of!(Blob, mx), offset_of!(Blob, m0) + 8);
+    assert_eq!(offset_of!(Blob, my), offset_of!(Blob, m0) + 16);
+    assert_eq!(span as usize, size_of::<Blob>());
+
+    let vote = module("vote");
+    assert_layout!(
+        vote,
+        "VoteUniform",
+        VoteUniform,
+        [
+            images,
+            stars,
+            refs,
+            pairs_per_image,
+            k,
+            shift,
+            rows,
+            kvector_len
+        ]
+    );
+    assert_layout!(vote, "PairRange", PairRange, [i, j, lo, hi]);
+}
