@@ -22,6 +22,48 @@ fn level(img: u32, tx: u32, ty: u32) -> u32 {
     return min(t.background + t.offset, 65536u);
 }
 
+// The position of a coordinate among the tile centres, kept as the doubled offset o from the
+// first centre and its floor division by 2·tile, so that stepping to the next pixel needs no
+// division; `axis_value` then gives exactly axis_weight (shared/detect.wgsl).
+struct Axis {
+    o: i32,
+    t: u32,
+    f: u32,
+}
+
+fn axis_start(x: u32, tile: u32) -> Axis {
+    let o = 2 * i32(x) - (i32(tile) - 1);
+    if (o <= 0) {
+        return Axis(o, 0u, 0u);
+    }
+    return Axis(o, u32(o) / (2u * tile), u32(o) % (2u * tile));
+}
+
+fn axis_next(a: Axis, tile: u32) -> Axis {
+    let o = a.o + 2;
+    if (o <= 0) {
+        return Axis(o, 0u, 0u);
+    }
+    if (a.o <= 0) {
+        return Axis(o, 0u, u32(o));
+    }
+    let f = a.f + 2u;
+    if (f >= 2u * tile) {
+        return Axis(o, a.t + 1u, f - 2u * tile);
+    }
+    return Axis(o, a.t, f);
+}
+
+fn axis_value(a: Axis, tiles: u32) -> vec2<u32> {
+    if (a.o <= 0) {
+        return vec2<u32>(0u, 0u);
+    }
+    if (a.t + 1u >= tiles) {
+        return vec2<u32>(tiles - 1u, 0u);
+    }
+    return vec2<u32>(a.t, a.f);
+}
+
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let p = u.p;
@@ -31,17 +73,28 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         var bits = 0u;
         let first = w * 32u;
         let last = min(first + 32u, u.b.pixels_per_image);
+        var x = first % p.width;
+        var y = first / p.width;
+        var ax = axis_start(x, p.tile);
+        var ay = axis_value(axis_start(y, p.tile), p.tiles_y);
+        var ty1 = min(ay.x + 1u, p.tiles_y - 1u);
         for (var i = first; i < last; i++) {
-            let x = i % p.width;
-            let y = i / p.width;
-            let ax = axis_weight(x, p.tile, p.tiles_x);
-            let ay = axis_weight(y, p.tile, p.tiles_y);
-            let tx1 = min(ax.x + 1u, p.tiles_x - 1u);
-            let ty1 = min(ay.x + 1u, p.tiles_y - 1u);
-            let lvl = bilinear(level(img, ax.x, ay.x), level(img, tx1, ay.x), level(img, ax.x, ty1),
-                               level(img, tx1, ty1), ax.y, ay.y, s);
+            let a = axis_value(ax, p.tiles_x);
+            let tx1 = min(a.x + 1u, p.tiles_x - 1u);
+            let lvl = bilinear(level(img, a.x, ay.x), level(img, tx1, ay.x), level(img, a.x, ty1),
+                               level(img, tx1, ty1), a.y, ay.y, s);
             if (pixel(img, i) * s * s > lvl) {
                 bits |= 1u << (i - first);
+            }
+            x++;
+            if (x == p.width) {
+                x = 0u;
+                y++;
+                ax = axis_start(0u, p.tile);
+                ay = axis_value(axis_start(y, p.tile), p.tiles_y);
+                ty1 = min(ay.x + 1u, p.tiles_y - 1u);
+            } else {
+                ax = axis_next(ax, p.tile);
             }
         }
         mask[img * u.b.mask_words + w] = bits;

@@ -17,13 +17,34 @@ fn pixel(img: u32, i: u32) -> u32 {
     return (w >> ((i & 1u) * 16u)) & 0xFFFFu;
 }
 
-// Element k of the tile, or its distance from `centre` when `dev` is set.
-fn tile_value(img: u32, x0: u32, y0: u32, tw: u32, k: u32, centre: u32, dev: bool) -> u32 {
-    let v = pixel(img, (y0 + k / tw) * u.p.width + x0 + k % tw);
+// The pixel at column c, row r of the tile, or its distance from `centre` when `dev` is set.
+fn tile_value(img: u32, x0: u32, y0: u32, c: u32, r: u32, centre: u32, dev: bool) -> u32 {
+    let v = pixel(img, (y0 + r) * u.p.width + x0 + c);
     if (dev) {
         return select(centre - v, v - centre, v >= centre);
     }
     return v;
+}
+
+// A thread's walk over the tile: elements lid, lid + WG, ... as (column, row), stepped without
+// division.
+struct Walk {
+    c: u32,
+    r: u32,
+}
+
+fn walk_start(lid: u32, tw: u32) -> Walk {
+    return Walk(lid % tw, lid / tw);
+}
+
+fn walk_next(w: Walk, tw: u32) -> Walk {
+    var c = w.c + WG % tw;
+    var r = w.r + WG / tw;
+    if (c >= tw) {
+        c -= tw;
+        r += 1u;
+    }
+    return Walk(c, r);
 }
 
 const WG: u32 = 64u;
@@ -51,8 +72,10 @@ fn find_bin(rank: u32) {
 // The value of rank `rank` among the n tile values (or their distances from `centre`).
 fn radix_select(img: u32, x0: u32, y0: u32, tw: u32, n: u32, rank: u32, centre: u32, dev: bool, lid: u32) -> u32 {
     clear_hist(lid);
+    var at = walk_start(lid, tw);
     for (var k = lid; k < n; k += WG) {
-        atomicAdd(&hist[tile_value(img, x0, y0, tw, k, centre, dev) >> 8u], 1u);
+        atomicAdd(&hist[tile_value(img, x0, y0, at.c, at.r, centre, dev) >> 8u], 1u);
+        at = walk_next(at, tw);
     }
     workgroupBarrier();
     if (lid == 0u) {
@@ -60,11 +83,13 @@ fn radix_select(img: u32, x0: u32, y0: u32, tw: u32, n: u32, rank: u32, centre: 
     }
     let first = workgroupUniformLoad(&pick);
     clear_hist(lid);
+    at = walk_start(lid, tw);
     for (var k = lid; k < n; k += WG) {
-        let v = tile_value(img, x0, y0, tw, k, centre, dev);
+        let v = tile_value(img, x0, y0, at.c, at.r, centre, dev);
         if ((v >> 8u) == first.x) {
             atomicAdd(&hist[v & 0xFFu], 1u);
         }
+        at = walk_next(at, tw);
     }
     workgroupBarrier();
     if (lid == 0u) {
@@ -103,8 +128,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var stats: vec2<u32>;
     if (p.saturation <= 255u) {
         clear_hist(lid);
+        var at = walk_start(lid, tw);
         for (var k = lid; k < n; k += WG) {
-            atomicAdd(&hist[tile_value(wg.z, x0, y0, tw, k, 0u, false) & 0xFFu], 1u);
+            atomicAdd(&hist[tile_value(wg.z, x0, y0, at.c, at.r, 0u, false) & 0xFFu], 1u);
+            at = walk_next(at, tw);
         }
         workgroupBarrier();
         if (lid == 0u) {

@@ -42,6 +42,17 @@ fn initial_max_set(pixels: u32) -> u32 {
     (pixels / 16).max(65536).min(pixels)
 }
 
+/// The detection kernels in dispatch order.
+pub const DETECT_KERNELS: [&str; 7] = [
+    "threshold_tiles",
+    "threshold",
+    "components_merge",
+    "components_compress",
+    "centroid_count",
+    "centroid_scan",
+    "centroid",
+];
+
 /// Intermediate results of every stage, for the GPU = CPU tests.
 #[derive(Clone, Debug, Default)]
 pub struct DetectInspect {
@@ -68,7 +79,13 @@ struct Room {
 impl Gpu {
     /// The blobs of each frame (label order), as `cpu::centroid` gives them.
     pub fn detect(&self, frames: &[&Frame], p: &DetectParams) -> Result<Vec<Vec<Blob>>> {
-        Ok(self.detect_with(frames, p, false)?.0)
+        Ok(self.detect_with(frames, p, false, DETECT_KERNELS.len())?.0)
+    }
+
+    /// For benchmarks: run only the first `kernels` of [`DETECT_KERNELS`] (the results are
+    /// then meaningless; the time is what counts).
+    pub fn detect_prefix(&self, frames: &[&Frame], p: &DetectParams, kernels: usize) -> Result<()> {
+        self.detect_with(frames, p, false, kernels).map(|_| ())
     }
 
     /// As [`Gpu::detect`], with every stage's output read back.
@@ -77,7 +94,7 @@ impl Gpu {
         frames: &[&Frame],
         p: &DetectParams,
     ) -> Result<(Vec<Vec<Blob>>, DetectInspect)> {
-        self.detect_with(frames, p, true)
+        self.detect_with(frames, p, true, DETECT_KERNELS.len())
     }
 
     /// Frames per submission so that every buffer fits a binding.
@@ -91,6 +108,7 @@ impl Gpu {
         frames: &[&Frame],
         p: &DetectParams,
         inspect: bool,
+        kernels: usize,
     ) -> Result<(Vec<Vec<Blob>>, DetectInspect)> {
         for f in frames {
             if (f.width, f.height) != (p.width, p.height) {
@@ -105,7 +123,7 @@ impl Gpu {
                 set: initial_max_set(p.width * p.height),
             };
             loop {
-                let (b, need, ins) = self.detect_chunk(chunk, p, room, inspect)?;
+                let (b, need, ins) = self.detect_chunk(chunk, p, room, inspect, kernels)?;
                 if need.blobs <= room.blobs && need.set <= room.set {
                     blobs.extend(b);
                     all.tiles.extend(ins.tiles);
@@ -130,7 +148,9 @@ impl Gpu {
         p: &DetectParams,
         room: Room,
         inspect: bool,
+        kernels: usize,
     ) -> Result<(Vec<Vec<Blob>>, Room, DetectInspect)> {
+        let run = |k: usize| k < kernels;
         let max_blobs = room.blobs;
         let n = frames.len() as u32;
         let pixels_per_image = p.width * p.height;
@@ -220,8 +240,12 @@ impl Gpu {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&pl.threshold_tiles);
             pass.set_bind_group(0, &bg_tiles, &[]);
-            pass.dispatch_workgroups(p.tiles_x, p.tiles_y, n);
-            dispatch_strided(&mut pass, &pl.threshold, &bg_threshold, mask_words, n);
+            if run(0) {
+                pass.dispatch_workgroups(p.tiles_x, p.tiles_y, n);
+            }
+            if run(1) {
+                dispatch_strided(&mut pass, &pl.threshold, &bg_threshold, mask_words, n);
+            }
         }
         if let (Some(st), Some(sm)) = (&stage_tiles, &stage_mask) {
             enc.copy_buffer_to_buffer(&tiles, 0, st, 0, tile_bytes);
@@ -231,25 +255,35 @@ impl Gpu {
         let list_items = room.set.min(LIST_GROUPS * 256);
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            dispatch_strided(&mut pass, &pl.components_merge, &bg_merge, list_items, n);
-            dispatch_strided(
-                &mut pass,
-                &pl.components_compress,
-                &bg_compress,
-                list_items,
-                n,
-            );
+            if run(2) {
+                dispatch_strided(&mut pass, &pl.components_merge, &bg_merge, list_items, n);
+            }
+            if run(3) {
+                dispatch_strided(
+                    &mut pass,
+                    &pl.components_compress,
+                    &bg_compress,
+                    list_items,
+                    n,
+                );
+            }
         }
         if let Some(sl) = &stage_labels {
             enc.copy_buffer_to_buffer(&labels, 0, sl, 0, label_bytes);
         }
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            dispatch_strided(&mut pass, &pl.centroid_count, &bg_count, list_items, n);
-            pass.set_pipeline(&pl.centroid_scan);
-            pass.set_bind_group(0, &bg_scan, &[]);
-            pass.dispatch_workgroups(n, 1, 1);
-            dispatch_strided(&mut pass, &pl.centroid, &bg_centroid, list_items, n);
+            if run(4) {
+                dispatch_strided(&mut pass, &pl.centroid_count, &bg_count, list_items, n);
+            }
+            if run(5) {
+                pass.set_pipeline(&pl.centroid_scan);
+                pass.set_bind_group(0, &bg_scan, &[]);
+                pass.dispatch_workgroups(n, 1, 1);
+            }
+            if run(6) {
+                dispatch_strided(&mut pass, &pl.centroid, &bg_centroid, list_items, n);
+            }
         }
         enc.copy_buffer_to_buffer(&counts, 0, &stage_counts, 0, 4 * n as u64);
         enc.copy_buffer_to_buffer(&set_count, 0, &stage_set_count, 0, 4 * n as u64);

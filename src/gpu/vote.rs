@@ -73,7 +73,12 @@ impl Gpu {
 
     /// Vote and select for each job, as `identify::vote_cpu` does.
     pub fn vote(&self, table: &GpuTable, jobs: &[VoteJob]) -> Result<Vec<VoteResult>> {
-        Ok(self.vote_with(table, jobs, false)?.0)
+        Ok(self.vote_with(table, jobs, false, 2)?.0)
+    }
+
+    /// For benchmarks: run the vote kernel only (`kernels` = 1) or vote and select (2).
+    pub fn vote_prefix(&self, table: &GpuTable, jobs: &[VoteJob], kernels: usize) -> Result<()> {
+        self.vote_with(table, jobs, false, kernels).map(|_| ())
     }
 
     /// As [`Gpu::vote`], with the vote counters read back (`votes[star · refs + id]` per job).
@@ -82,7 +87,7 @@ impl Gpu {
         table: &GpuTable,
         jobs: &[VoteJob],
     ) -> Result<(Vec<VoteResult>, Vec<Vec<u32>>)> {
-        self.vote_with(table, jobs, true)
+        self.vote_with(table, jobs, true, 2)
     }
 
     fn vote_with(
@@ -90,6 +95,7 @@ impl Gpu {
         table: &GpuTable,
         jobs: &[VoteJob],
         inspect: bool,
+        kernels: usize,
     ) -> Result<(Vec<VoteResult>, Vec<Vec<u32>>)> {
         let stars = jobs.iter().map(|j| j.stars).max().unwrap_or(0).max(1);
         // Frames per submission so that the vote counters fit a binding.
@@ -98,7 +104,7 @@ impl Gpu {
         let mut results = Vec::with_capacity(jobs.len());
         let mut votes = Vec::new();
         for part in jobs.chunks(chunk) {
-            let (r, v) = self.vote_chunk(table, part, stars, inspect)?;
+            let (r, v) = self.vote_chunk(table, part, stars, inspect, kernels)?;
             results.extend(r);
             votes.extend(v);
         }
@@ -111,6 +117,7 @@ impl Gpu {
         jobs: &[VoteJob],
         stars: usize,
         inspect: bool,
+        kernels: usize,
     ) -> Result<(Vec<VoteResult>, Vec<Vec<u32>>)> {
         let n = jobs.len();
         let k = jobs.iter().map(|j| j.k).max().unwrap_or(1).clamp(1, MAX_K);
@@ -171,10 +178,14 @@ impl Gpu {
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
             let total = (n * pairs_per_image) as u32;
-            super::dispatch_strided(&mut pass, &pl.vote, &bg_vote, total, 1);
-            pass.set_pipeline(&pl.select);
-            pass.set_bind_group(0, &bg_select, &[]);
-            pass.dispatch_workgroups(stars as u32, n as u32, 1);
+            if kernels >= 1 {
+                super::dispatch_strided(&mut pass, &pl.vote, &bg_vote, total, 1);
+            }
+            if kernels >= 2 {
+                pass.set_pipeline(&pl.select);
+                pass.set_bind_group(0, &bg_select, &[]);
+                pass.dispatch_workgroups(stars as u32, n as u32, 1);
+            }
         }
         if let Some(sv) = &stage_votes {
             enc.copy_buffer_to_buffer(&votes, 0, sv, 0, vote_bytes);
