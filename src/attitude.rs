@@ -77,8 +77,17 @@ pub fn pointing(r: &Matrix3<f64>, camera: &Camera) -> Pointing {
     }
 }
 
-/// Angle of the rotation between two attitudes (radians).
+/// Angle of the rotation between two attitudes (radians): atan2 of the skew part (sin θ) and
+/// the trace (cos θ) of A·Bᵀ, accurate at small angles even for matrices rounded to 9 digits,
+/// where acos of the trace alone loses arcseconds.
 pub fn attitude_error(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
     let d = a * b.transpose();
-    ((d.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos()
+    let sin = Vector3::new(
+        d[(2, 1)] - d[(1, 2)],
+        d[(0, 2)] - d[(2, 0)],
+        d[(1, 0)] - d[(0, 1)],
+    )
+    .norm()
+        / 2.0;
+    sin.atan2((d.trace() - 1.0) / 2.0)
 }

@@ -52,3 +52,23 @@ fn pointing_of_an_identity_like_attitude() {
     assert!(p.dec_deg.abs() < 1e-9);
     assert!(p.roll_deg.abs() < 1e-6 || (p.roll_deg - 360.0).abs() < 1e-6);
 }
+
+#[test]
+fn attitude_error_is_accurate_for_tiny_angles_and_rounded_matrices() {
+    let a = Rotation3::from_euler_angles(0.3, -1.1, 2.0).into_inner();
+    let tiny = Rotation3::from_axis_angle(&Vector3::y_axis(), 1e-6).into_inner();
+    let b = tiny * a;
+    assert!((attitude_error(&b, &a) - 1e-6).abs() < 1e-12);
+    // Rounded to 9 decimals, as truth files are: still within 0.01 arcsec.
+    let rounded = b.map(|x| (x * 1e9).round() / 1e9);
+    let err = attitude_error(&rounded, &a);
+    assert!((err - 1e-6).abs() < 5e-8, "{err}");
+    assert!(
+        (attitude_error(
+            &a,
+            &(Rotation3::from_axis_angle(&Vector3::x_axis(), 2.5).into_inner() * a)
+        ) - 2.5)
+            .abs()
+            < 1e-12
+    );
+}

@@ -1,0 +1,29 @@
+#!/usr/bin/env python3
+"""Compare two result files record by record, as the GPU = CPU check does: the same status,
+the same HIP ids at the same centroids, and the attitude difference (arcsec).
+   scripts/compare_records.py A.jsonl B.jsonl"""
+import json, math, sys
+
+def records(path):
+    return [json.loads(l) for l in open(path) if l.strip()]
+
+a, b = records(sys.argv[1]), records(sys.argv[2])
+assert len(a) == len(b), f"{len(a)} vs {len(b)} records"
+worst, differ = 0.0, 0
+for x, y in zip(a, b):
+    same = x["file"] == y["file"] and x["status"] == y["status"]
+    mx = [(m["hip"], m["x"], m["y"]) for m in x["matches"] or []]
+    my = [(m["hip"], m["x"], m["y"]) for m in y["matches"] or []]
+    same = same and mx == my
+    if x["rotation_matrix"] and y["rotation_matrix"]:
+        r, s = x["rotation_matrix"], y["rotation_matrix"]
+        # |R - S|_F = 2 sqrt(2) sin(angle / 2): accurate for tiny angles, unlike acos(trace).
+        frob = math.sqrt(sum((r[i][k] - s[i][k]) ** 2 for i in range(3) for k in range(3)))
+        angle = 2 * math.asin(min(1.0, frob / (2 * math.sqrt(2))))
+        worst = max(worst, math.degrees(angle) * 3600)
+    if not same:
+        differ += 1
+        print("differs:", x["file"])
+print(f"{len(a)} records, {differ} differ in status or identified stars; "
+      f"largest attitude difference {worst:.6f} arcsec; backends: {a[0]['backend']!r} vs {b[0]['backend']!r}")
+sys.exit(1 if differ else 0)
