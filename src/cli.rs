@@ -1,11 +1,12 @@
 //! The command line (clap derive). `main` calls [`run`].
 
-use crate::batch::{
-    Backend, BackendChoice, CameraSource, Counts, Format, Pipeline, RecordWriter, list_inputs,
-};
+use crate::batch::{Backend, BackendChoice, CameraSource, Solvers};
 use crate::camera::Camera;
 use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
 use crate::evaluate;
+use crate::inputs::{self, Input, Shard};
+use crate::output::{self, Format, RecordWriter};
+use crate::run::{self as stream, RunOptions};
 use crate::simulate::{self, SimSettings};
 use crate::solve::{Settings, auto_mag_limit};
 use crate::table;
@@ -24,7 +25,9 @@ Examples:
   gpustar solve frame.png --fov-deg 11.4 --epoch 2019.58
 
 Exit status: 0 when every input got a record and none is an error record; 1 when some input
-got an error record; 2 when the run could not start (bad options, unreadable camera or catalog).";
+got an error record; 2 when the run could not start (bad options, unreadable camera or catalog,
+GPU asked for but absent) or merge found inputs missing or repeated; 130 when interrupted
+(Ctrl-C: the records written so far are complete; --resume continues).";
 
 /// Identify the stars in sky images and find the camera's attitude (lost in space).
 #[derive(Parser, Debug)]
@@ -32,16 +35,21 @@ got an error record; 2 when the run could not start (bad options, unreadable cam
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+    /// Log more to stderr (-v: info, -vv: debug).
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
 }
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Solve every image in DIR (sorted by name); one record per file.
+    /// Solve every image in DIR (sorted by name); one record per file, in that order.
     Batch {
         /// Directory of images (PNG, JPEG, TIFF).
         dir: PathBuf,
         #[command(flatten)]
         opts: SolveOpts,
+        #[command(flatten)]
+        run: BatchOpts,
     },
     /// Solve one image; one record.
     Solve {
@@ -80,9 +88,42 @@ pub enum Command {
         #[arg(long)]
         per_frame: bool,
     },
+    /// Combine the outputs of `batch --shard K/N` runs into one, in input order, checking that
+    /// every input of DIR appears exactly once.
+    Merge {
+        /// The shard outputs (JSON Lines).
+        parts: Vec<PathBuf>,
+        /// The directory the shards ran over: its inputs must each appear exactly once.
+        #[arg(long)]
+        dir: Option<PathBuf>,
+        /// The shards ran with --recursive.
+        #[arg(long)]
+        recursive: bool,
+        /// Write the merged records here (default: stdout).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
     /// Catalog maintenance.
     #[command(subcommand)]
     Catalog(CatalogCommand),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct BatchOpts {
+    /// Also solve images in subdirectories (links to directories are not followed).
+    #[arg(short, long)]
+    pub recursive: bool,
+    /// Skip inputs that already have a complete record in --output and append the rest (an
+    /// incomplete last line, left by a crash, is cut off first).
+    #[arg(long, requires = "output")]
+    pub resume: bool,
+    /// Only the inputs whose stable hash of the relative path falls in shard K of N (0-based),
+    /// e.g. 3/16: run N processes (a job array) and `gpustar merge` their outputs.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<Shard>,
+    /// Worker threads for decoding (and solving on the CPU) [default: all cores].
+    #[arg(short = 'j', long)]
+    pub threads: Option<usize>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -172,7 +213,7 @@ pub struct SolveOpts {
     /// Report `solved` only when the probability of a chance match is below this.
     #[arg(long, default_value_t = 1e-6)]
     pub max_false_prob: f64,
-    /// Do not print the summary to stderr.
+    /// No progress bar, warnings or summary on stderr.
     #[arg(short, long)]
     pub quiet: bool,
 }
@@ -242,14 +283,74 @@ fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
 
 /// Run the command line; errors are printed once by `main`.
 pub fn run(cli: Cli) -> Result<ExitCode> {
+    init_logging(cli.verbose);
     match cli.command {
-        Command::Batch { dir, opts } => {
-            let inputs = list_inputs(&dir)?;
-            run_solve(inputs, &opts)
+        Command::Batch { dir, opts, run } => {
+            let mut inputs = inputs::list(&dir, run.recursive)?;
+            if let Some(shard) = run.shard {
+                inputs.retain(|i| shard.takes(&i.name));
+            }
+            run_solve(inputs, &opts, &run)
         }
         Command::Solve { image, opts } => {
             let name = image.display().to_string();
-            run_solve(vec![(image, name)], &opts)
+            let run = BatchOpts {
+                recursive: false,
+                resume: false,
+                shard: None,
+                threads: Some(1),
+            };
+            run_solve(vec![Input { path: image, name }], &opts, &run)
+        }
+        Command::Merge {
+            parts,
+            dir,
+            recursive,
+            output,
+        } => {
+            let records: Vec<_> = parts
+                .iter()
+                .map(|p| output::read_records(p))
+                .collect::<Result<_>>()?;
+            let expected: Option<Vec<String>> = match &dir {
+                Some(d) => Some(
+                    inputs::list(d, recursive)?
+                        .into_iter()
+                        .map(|i| i.name)
+                        .collect(),
+                ),
+                None => None,
+            };
+            let merged = match output::merge(&records, expected.as_deref()) {
+                Ok(m) => m,
+                Err(e) => {
+                    eprintln!("gpustar: error: {e:#}");
+                    return Ok(ExitCode::from(2));
+                }
+            };
+            let out: Box<dyn Write + Send> = match &output {
+                Some(p) => Box::new(
+                    std::fs::File::create(p)
+                        .with_context(|| format!("cannot create {}", p.display()))?,
+                ),
+                None => Box::new(std::io::stdout()),
+            };
+            let mut w = RecordWriter::new(out, Format::Jsonl, false);
+            for r in &merged {
+                w.write(r);
+            }
+            w.flush()?;
+            eprintln!(
+                "gpustar: merged {} records from {} files{}",
+                merged.len(),
+                parts.len(),
+                if dir.is_some() {
+                    "; every input exactly once"
+                } else {
+                    ""
+                }
+            );
+            Ok(ExitCode::SUCCESS)
         }
         Command::Info {
             camera,
@@ -321,7 +422,7 @@ fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
     }
 }
 
-fn run_solve(inputs: Vec<(PathBuf, String)>, o: &SolveOpts) -> Result<ExitCode> {
+fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCode> {
     let (camera, camera_mag) = camera_source(&o.camera)?;
     let catalog = Catalog::load(o.catalog.catalog.as_deref())?;
     let mut s = settings(&o.catalog, camera_mag);
@@ -331,47 +432,144 @@ fn run_solve(inputs: Vec<(PathBuf, String)>, o: &SolveOpts) -> Result<ExitCode> 
     s.identify.scale_tol = o.scale_tol;
     s.refine.match_radius_px = o.match_radius_px;
     s.refine.max_false_prob = o.max_false_prob;
-    let out: Box<dyn Write> = match &o.output {
-        Some(p) => Box::new(std::io::BufWriter::new(
+    // The output, and what an earlier run already wrote to it.
+    let mut inputs = inputs;
+    let mut header = true;
+    let out: Box<dyn Write + Send> = match &o.output {
+        Some(p) if b.resume => {
+            let prev = output::resume_from(p, o.format)?;
+            if prev.truncated > 0 && !o.quiet {
+                eprintln!(
+                    "gpustar: cut an incomplete last record ({} bytes) off {}",
+                    prev.truncated,
+                    p.display()
+                );
+            }
+            let before = inputs.len();
+            inputs.retain(|i| !prev.done.contains(&i.name));
+            if !o.quiet {
+                eprintln!(
+                    "gpustar: resuming: {} of {} inputs already have a record",
+                    before - inputs.len(),
+                    before
+                );
+            }
+            header = !prev.has_header;
+            Box::new(
+                std::fs::OpenOptions::new()
+                    .append(true)
+                    .create(true)
+                    .open(p)
+                    .with_context(|| format!("cannot append to {}", p.display()))?,
+            )
+        }
+        Some(p) => Box::new(
             std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
-        )),
-        None => Box::new(std::io::BufWriter::new(std::io::stdout())),
+        ),
+        None => Box::new(std::io::stdout()),
     };
-    let (backend, warning) = Backend::open(o.backend)?;
+    let (mut backend, warning) = Backend::open(o.backend)?;
     if let Some(w) = warning {
-        if !o.quiet {
-            eprintln!("gpustar: warning: {w}");
-        }
+        tracing::warn!("{w}");
     }
-    let mut writer = RecordWriter::new(out, o.format);
-    let mut pipeline = Pipeline::new(catalog, s, camera, backend);
-    let mut counts = Counts::default();
-    let t0 = Instant::now();
-    for batch in inputs.chunks(o.batch_size.max(1)) {
-        for rec in pipeline.process_batch(batch) {
-            counts.add(&rec);
-            writer.write(&rec)?;
-        }
-    }
-    writer.flush()?;
-    let secs = t0.elapsed().as_secs_f64();
+    let solvers = Solvers::new(catalog, s, camera);
+    let mut writer = RecordWriter::new(out, o.format, header);
+    let stop = interrupt_flag();
+    let bar = progress_bar(inputs.len() as u64, o.quiet);
+    let threads = b
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let opts = RunOptions {
+        threads,
+        batch_size: o.batch_size,
+        flush_every: std::time::Duration::from_secs(1),
+    };
+    let summary = stream::run(
+        inputs,
+        &solvers,
+        &mut backend,
+        &mut writer,
+        opts,
+        stop,
+        |r, c| {
+            bar.inc(1);
+            bar.set_message(format!(
+                "{} solved, {} unsolved, {} errors",
+                c.solved, c.unsolved, c.errors
+            ));
+            tracing::debug!("{}: {:?}", r.file, r.status);
+        },
+    )?;
+    bar.finish_and_clear();
+    let c = summary.counts;
     if !o.quiet {
         eprintln!(
-            "gpustar: {} files: {} solved, {} unsolved, {} errors in {:.2} s ({:.1} images/s, {})",
-            counts.total(),
-            counts.solved,
-            counts.unsolved,
-            counts.errors,
-            secs,
-            counts.total() as f64 / secs.max(1e-9),
-            pipeline.backend.name()
+            "gpustar: {} files: {} solved, {} unsolved, {} errors in {:.2} s ({:.1} images/s, {}){}",
+            c.total(),
+            c.solved,
+            c.unsolved,
+            c.errors,
+            summary.seconds,
+            c.total() as f64 / summary.seconds.max(1e-9),
+            backend.name(),
+            if summary.interrupted {
+                "; interrupted: rerun with --resume to finish"
+            } else {
+                ""
+            }
         );
     }
-    Ok(if counts.errors > 0 {
+    Ok(if summary.interrupted {
+        ExitCode::from(130)
+    } else if c.errors > 0 {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// Set by Ctrl-C (SIGINT) or SIGTERM: the run stops handing out inputs, finishes those in
+/// flight and writes their records.
+fn interrupt_flag() -> &'static std::sync::atomic::AtomicBool {
+    static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let _ = ctrlc::set_handler(|| STOP.store(true, std::sync::atomic::Ordering::SeqCst));
+    });
+    &STOP
+}
+
+/// A progress bar on stderr: rate, ETA and counts; hidden with -q or when stderr is not a
+/// terminal.
+fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if quiet || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:30}] {pos}/{len} {per_sec} ETA {eta} {msg}",
+        )
+        .expect("a valid template")
+        .progress_chars("=> "),
+    );
+    bar
+}
+
+/// Logs to stderr: warnings by default, more with -v.
+fn init_logging(verbose: u8) {
+    let level = match verbose {
+        0 => tracing::Level::WARN,
+        1 => tracing::Level::INFO,
+        _ => tracing::Level::DEBUG,
+    };
+    let _ = tracing_subscriber::fmt()
+        .with_max_level(level)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .without_time()
+        .try_init();
 }
 
 fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<ExitCode> {

@@ -5,7 +5,7 @@
 mod common;
 
 use common::{gpu, gpustar, shared_dir};
-use gpustar::batch::{Backend, CameraSource, Pipeline};
+use gpustar::batch::{Backend, CameraSource, GpuRunner, Pipeline};
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::record::{Record, Timing};
@@ -41,7 +41,11 @@ fn simulate(dir: &Path, n: usize, fov: &str, size: &str) {
 }
 
 fn inputs(dir: &Path) -> Vec<(PathBuf, String)> {
-    gpustar::batch::list_inputs(dir).unwrap()
+    gpustar::inputs::list(dir, false)
+        .unwrap()
+        .into_iter()
+        .map(|i| (i.path, i.name))
+        .collect()
 }
 
 fn pipeline(backend: Backend, fov: f64, epoch: f64) -> Pipeline {
@@ -67,7 +71,8 @@ fn gpu_records_equal_cpu_records_on_simulated_frames() {
     simulate(tmp.path(), 12, "18", "1024x1024");
     let files = inputs(tmp.path());
     let name = g.backend_name();
-    let gpu_records = pipeline(Backend::Gpu(Box::new(g)), 18.0, 2000.0).process_batch(&files);
+    let gpu_records =
+        pipeline(Backend::Gpu(Box::new(GpuRunner::new(g))), 18.0, 2000.0).process_batch(&files);
     let cpu_records = pipeline(Backend::Cpu, 18.0, 2000.0).process_batch(&files);
     assert_eq!(gpu_records.len(), 12);
     for (a, b) in gpu_records.into_iter().zip(cpu_records) {
@@ -101,7 +106,7 @@ fn gpu_records_equal_cpu_records_on_real_frames() {
             backend,
         )
     };
-    let gpu_records = make(Backend::Gpu(Box::new(g))).process_batch(&files);
+    let gpu_records = make(Backend::Gpu(Box::new(GpuRunner::new(g)))).process_batch(&files);
     let cpu_records = make(Backend::Cpu).process_batch(&files);
     let solved = gpu_records
         .iter()
@@ -122,9 +127,9 @@ fn twenty_runs_of_a_batch_are_identical_and_cost_two_submissions_each() {
     let tmp = tempfile::tempdir().unwrap();
     simulate(tmp.path(), 32, "18", "512x512");
     let files = inputs(tmp.path());
-    let mut p = pipeline(Backend::Gpu(Box::new(g)), 18.0, 2000.0);
+    let mut p = pipeline(Backend::Gpu(Box::new(GpuRunner::new(g))), 18.0, 2000.0);
     let counters = |p: &Pipeline| match &p.backend {
-        Backend::Gpu(g) => g.counters(),
+        Backend::Gpu(g) => g.gpu.counters(),
         Backend::Cpu => unreachable!(),
     };
     // The first run also builds the table and uploads it.

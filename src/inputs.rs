@@ -1,0 +1,105 @@
+//! The inputs of a run: the image files of a directory in a sorted, stable order, and the
+//! shard of them a process takes.
+
+use crate::frame::is_image_path;
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
+
+/// An input file and its name in the records (its path relative to the directory, with '/').
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Input {
+    pub path: PathBuf,
+    pub name: String,
+}
+
+/// The name of a path relative to the directory: components joined by '/'. Names that are
+/// not UTF-8 are shown with U+FFFD for the bytes that are not.
+fn relative_name(rel: &Path) -> String {
+    rel.components()
+        .map(|c| c.as_os_str().to_string_lossy())
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
+/// Every file under `dir` (in subdirectories too with `recursive`) whose extension is an image
+/// type gpustar reads, sorted by path. Symbolic links to files are inputs (a broken or looping
+/// one gets an error record when it is read); links to directories are not followed.
+/// Unreadable directories are skipped with a warning.
+pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
+    if !dir.is_dir() {
+        bail!("{} is not a directory", dir.display());
+    }
+    let mut out = Vec::new();
+    let walk = walkdir::WalkDir::new(dir)
+        .min_depth(1)
+        .max_depth(if recursive { usize::MAX } else { 1 })
+        .follow_links(false)
+        .sort_by_file_name();
+    for entry in walk {
+        let entry = match entry {
+            Ok(e) => e,
+            Err(e) => {
+                tracing::warn!(
+                    "skipping {}: {e}",
+                    e.path()
+                        .map(|p| p.display().to_string())
+                        .unwrap_or_default()
+                );
+                continue;
+            }
+        };
+        let ft = entry.file_type();
+        let is_file = ft.is_file() || (ft.is_symlink() && !entry.path().is_dir());
+        if is_file && is_image_path(entry.path()) {
+            let rel = entry
+                .path()
+                .strip_prefix(dir)
+                .context("walked outside the directory")?;
+            out.push(Input {
+                path: entry.path().to_path_buf(),
+                name: relative_name(rel),
+            });
+        }
+    }
+    // walkdir sorts each directory by file name; sort the whole list by record name so the
+    // order is the same whatever the file system.
+    out.sort_by(|a, b| a.name.cmp(&b.name));
+    Ok(out)
+}
+
+/// Shard K of N (0-based): the inputs whose stable hash of the name is K modulo N.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub k: u64,
+    pub n: u64,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Shard, String> {
+        let (k, n) = s
+            .split_once('/')
+            .ok_or_else(|| format!("expected K/N (e.g. 0/4), got {s:?}"))?;
+        let k: u64 = k
+            .trim()
+            .parse()
+            .map_err(|_| format!("bad shard index {k:?}"))?;
+        let n: u64 = n
+            .trim()
+            .parse()
+            .map_err(|_| format!("bad shard count {n:?}"))?;
+        if n == 0 || k >= n {
+            return Err(format!("shard {k}/{n}: need 0 <= K < N"));
+        }
+        Ok(Shard { k, n })
+    }
+}
+
+impl Shard {
+    /// Does this shard take the input of this name? FNV-1a of the name's UTF-8 bytes: the same
+    /// on every machine and every run.
+    pub fn takes(&self, name: &str) -> bool {
+        crate::catalog::fnv1a(name.as_bytes()) % self.n == self.k
+    }
+}

@@ -1,0 +1,205 @@
+//! Streaming a run: inputs → parallel decode (and, on the CPU backend, solve) → the GPU in
+//! batches → one writer that emits records in input order.
+//!
+//! Memory stays bounded whatever the number of inputs: at most `window` inputs are between
+//! being handed out and being written (the writer returns a ticket for each record it writes,
+//! and the feeder needs one to hand out the next input).
+
+use crate::batch::{Backend, Counts, Decoded, Solvers, decode};
+use crate::inputs::Input;
+use crate::output::RecordWriter;
+use crate::record::Record;
+use anyhow::Result;
+use crossbeam_channel::{Receiver, Sender, bounded};
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// How a run goes.
+#[derive(Clone, Copy, Debug)]
+pub struct RunOptions {
+    /// Worker threads (decode, and solve on the CPU backend).
+    pub threads: usize,
+    /// Frames per GPU batch.
+    pub batch_size: usize,
+    /// Write out at least this often.
+    pub flush_every: Duration,
+}
+
+/// What happened in a run.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunSummary {
+    pub counts: Counts,
+    pub seconds: f64,
+    /// Stopped early by an interrupt (Ctrl-C): inputs after the last record have none.
+    pub interrupted: bool,
+}
+
+/// Process `inputs` and write one record per input, in order, until done or `stop` is set.
+/// `on_record` sees every record as it is written (progress).
+pub fn run(
+    inputs: Vec<Input>,
+    solvers: &Solvers,
+    backend: &mut Backend,
+    writer: &mut RecordWriter,
+    opts: RunOptions,
+    stop: &AtomicBool,
+    mut on_record: impl FnMut(&Record, &Counts),
+) -> Result<RunSummary> {
+    let t0 = Instant::now();
+    let threads = opts.threads.max(1);
+    let batch = opts.batch_size.max(1);
+    let window = (4 * batch).max(8 * threads);
+    let (work_tx, work_rx) = bounded::<(usize, Input)>(window);
+    let (done_tx, done_rx) = bounded::<(usize, Record)>(window);
+    let (ticket_tx, ticket_rx) = bounded::<()>(window);
+    for _ in 0..window {
+        ticket_tx.send(()).expect("room for every ticket");
+    }
+    let mut summary = RunSummary::default();
+    std::thread::scope(|scope| -> Result<()> {
+        // The feeder: one input per ticket, until the inputs end or a stop is asked.
+        scope.spawn(move || {
+            for item in inputs.into_iter().enumerate() {
+                if ticket_rx.recv().is_err() || stop.load(Ordering::SeqCst) {
+                    break;
+                }
+                if work_tx.send(item).is_err() {
+                    break;
+                }
+            }
+        });
+        match backend {
+            Backend::Cpu => {
+                for _ in 0..threads {
+                    let (rx, tx) = (work_rx.clone(), done_tx.clone());
+                    scope.spawn(move || {
+                        for (i, input) in rx {
+                            let r = guarded(&input.name, || {
+                                solvers.solve_cpu(decode(&input.path, &input.name))
+                            });
+                            if tx.send((i, r)).is_err() {
+                                break;
+                            }
+                        }
+                    });
+                }
+            }
+            Backend::Gpu(runner) => {
+                let (frame_tx, frame_rx) = bounded::<(usize, Decoded)>(window);
+                for _ in 0..threads {
+                    let (rx, tx) = (work_rx.clone(), frame_tx.clone());
+                    scope.spawn(move || {
+                        for (i, input) in rx {
+                            let d = std::panic::catch_unwind(|| decode(&input.path, &input.name))
+                                .unwrap_or_else(|p| Decoded {
+                                    name: input.name.clone(),
+                                    frame: Err(panic_message(&p)),
+                                    decode_ms: 0.0,
+                                });
+                            if tx.send((i, d)).is_err() {
+                                break;
+                            }
+                        }
+                    });
+                }
+                drop(frame_tx);
+                let tx = done_tx.clone();
+                scope.spawn(move || gpu_loop(runner, solvers, frame_rx, tx, batch));
+            }
+        }
+        drop(work_rx);
+        drop(done_tx);
+        summary = write_in_order(done_rx, ticket_tx, writer, opts.flush_every, &mut on_record)?;
+        Ok(())
+    })?;
+    summary.seconds = t0.elapsed().as_secs_f64();
+    summary.interrupted = stop.load(Ordering::SeqCst);
+    Ok(summary)
+}
+
+/// The GPU thread: gather decoded frames into batches (as many as are ready, up to `batch`)
+/// and solve them.
+fn gpu_loop(
+    runner: &mut crate::batch::GpuRunner,
+    solvers: &Solvers,
+    frames: Receiver<(usize, Decoded)>,
+    done: Sender<(usize, Record)>,
+    batch: usize,
+) {
+    while let Ok(first) = frames.recv() {
+        let mut items = vec![first];
+        // Wait briefly for the decoders so batches are full while they keep up.
+        let deadline = Instant::now() + Duration::from_millis(50);
+        while items.len() < batch {
+            match frames.recv_deadline(deadline) {
+                Ok(item) => items.push(item),
+                Err(_) => break,
+            }
+        }
+        let (indices, decoded): (Vec<usize>, Vec<Decoded>) = items.into_iter().unzip();
+        let names: Vec<String> = decoded.iter().map(|d| d.name.clone()).collect();
+        let records = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            runner.solve(solvers, decoded)
+        }))
+        .unwrap_or_else(|p| {
+            let msg = panic_message(&p);
+            names
+                .iter()
+                .map(|n| Record::error(n, msg.clone(), &runner.name()))
+                .collect()
+        });
+        for (i, r) in indices.into_iter().zip(records) {
+            if done.send((i, r)).is_err() {
+                return;
+            }
+        }
+    }
+}
+
+/// Run `f` for one input; a panic (a bug, in gpustar or a decoder) becomes that input's
+/// error record instead of ending the run.
+fn guarded(name: &str, f: impl FnOnce() -> Record) -> Record {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
+        .unwrap_or_else(|p| Record::error(name, panic_message(&p), crate::batch::BACKEND_CPU))
+}
+
+fn panic_message(p: &Box<dyn std::any::Any + Send>) -> String {
+    let what = p
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown".into());
+    format!("internal error while processing this file ({what}); please report it with the file")
+}
+
+/// The writer: records come in any order; they leave in input order.
+fn write_in_order(
+    done: Receiver<(usize, Record)>,
+    tickets: Sender<()>,
+    writer: &mut RecordWriter,
+    flush_every: Duration,
+    on_record: &mut impl FnMut(&Record, &Counts),
+) -> Result<RunSummary> {
+    let mut summary = RunSummary::default();
+    let mut waiting: BTreeMap<usize, Record> = BTreeMap::new();
+    let mut next = 0usize;
+    let mut last_flush = Instant::now();
+    for (i, r) in done {
+        waiting.insert(i, r);
+        while let Some(r) = waiting.remove(&next) {
+            summary.counts.add(&r);
+            writer.write(&r);
+            on_record(&r, &summary.counts);
+            next += 1;
+            // The feeder may hand out one more input.
+            let _ = tickets.try_send(());
+        }
+        if last_flush.elapsed() >= flush_every {
+            writer.flush()?;
+            last_flush = Instant::now();
+        }
+    }
+    writer.flush()?;
+    Ok(summary)
+}
