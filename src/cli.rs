@@ -482,7 +482,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     let opts = RunOptions {
         threads,
         batch_size: o.batch_size,
-        flush_every: std::time::Duration::from_secs(1),
+        flush_every: std::time::Duration::from_millis(250),
     };
     let summary = stream::run(
         inputs,

@@ -22,9 +22,13 @@ pub struct RunOptions {
     pub threads: usize,
     /// Frames per GPU batch.
     pub batch_size: usize,
-    /// Write out at least this often.
+    /// Hand records to the file at least this often, and every `FLUSH_RECORDS` records.
     pub flush_every: Duration,
 }
+
+/// Records written between flushes at most: a crash loses at most this many (plus those the
+/// last `flush_every` produced), and `--resume` redoes them.
+pub const FLUSH_RECORDS: usize = 64;
 
 /// What happened in a run.
 #[derive(Clone, Copy, Debug, Default)]
@@ -185,6 +189,7 @@ fn write_in_order(
     let mut waiting: BTreeMap<usize, Record> = BTreeMap::new();
     let mut next = 0usize;
     let mut last_flush = Instant::now();
+    let mut unflushed = 0usize;
     for (i, r) in done {
         waiting.insert(i, r);
         while let Some(r) = waiting.remove(&next) {
@@ -192,12 +197,14 @@ fn write_in_order(
             writer.write(&r);
             on_record(&r, &summary.counts);
             next += 1;
+            unflushed += 1;
             // The feeder may hand out one more input.
             let _ = tickets.try_send(());
         }
-        if last_flush.elapsed() >= flush_every {
+        if unflushed >= FLUSH_RECORDS || last_flush.elapsed() >= flush_every {
             writer.flush()?;
             last_flush = Instant::now();
+            unflushed = 0;
         }
     }
     writer.flush()?;
