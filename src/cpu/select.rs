@@ -17,24 +17,46 @@ pub fn unpack_candidate(packed: u32) -> Option<(u32, u32)> {
 }
 
 /// The `k` best candidates of each image star, `out[star · k + rank]` (0 = empty slot).
+///
+/// As the GPU does it: find T, the (saturated) votes of the m-th best candidate
+/// (m = min(k, candidates with votes)), by counting votes; keep every candidate above T and the
+/// lowest ids among those at T; sort the m keys.
 pub fn select(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u32> {
     let mut out = vec![0u32; n_stars * k];
+    let mut counts: Vec<u32> = Vec::new();
+    let mut keys: Vec<u32> = Vec::with_capacity(k);
     for s in 0..n_stars {
-        let mut keys: Vec<u32> = votes[s * n_ref..(s + 1) * n_ref]
-            .iter()
-            .enumerate()
-            .filter(|&(_, &v)| v > 0)
-            .map(|(id, &v)| pack_candidate(v, id as u32))
-            .collect();
-        let top = k.min(keys.len());
-        if top == 0 {
+        let row = &votes[s * n_ref..(s + 1) * n_ref];
+        let top = row.iter().map(|&v| v.min(0xFFFF)).max().unwrap_or(0) as usize;
+        counts.clear();
+        counts.resize(top + 1, 0);
+        for &v in row {
+            counts[v.min(0xFFFF) as usize] += 1;
+        }
+        let nonzero = row.len() - counts[0] as usize;
+        let m = k.min(nonzero);
+        if m == 0 {
             continue;
         }
-        if top < keys.len() {
-            keys.select_nth_unstable_by(top - 1, |a, b| b.cmp(a));
+        // T: walk down from the top until m candidates are covered.
+        let (mut threshold, mut above) = (top, 0usize);
+        while above + counts[threshold] as usize <= m - 1 {
+            above += counts[threshold] as usize;
+            threshold -= 1;
         }
-        keys[..top].sort_unstable_by(|a, b| b.cmp(a));
-        out[s * k..s * k + top].copy_from_slice(&keys[..top]);
+        keys.clear();
+        let mut ties = m - above;
+        for (id, &v) in row.iter().enumerate() {
+            let v = v.min(0xFFFF) as usize;
+            if v > threshold || (v == threshold && ties > 0) {
+                if v == threshold {
+                    ties -= 1;
+                }
+                keys.push(pack_candidate(v as u32, id as u32));
+            }
+        }
+        keys.sort_unstable_by(|a, b| b.cmp(a));
+        out[s * k..s * k + m].copy_from_slice(&keys);
     }
     out
 }

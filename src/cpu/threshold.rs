@@ -56,16 +56,23 @@ pub fn tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
     let mut vals: Vec<u16> = Vec::with_capacity((p.tile * p.tile) as usize);
     for ty in 0..p.tiles_y {
         for tx in 0..p.tiles_x {
-            vals.clear();
             let (x0, y0) = (tx * p.tile, ty * p.tile);
             let (x1, y1) = ((x0 + p.tile).min(p.width), (y0 + p.tile).min(p.height));
-            for y in y0..y1 {
+            let rows = (y0..y1).map(|y| {
                 let row = (y * p.width) as usize;
-                vals.extend_from_slice(&pixels[row + x0 as usize..row + x1 as usize]);
-            }
+                &pixels[row + x0 as usize..row + x1 as usize]
+            });
             let (median, mad) = if p.saturation <= 255 {
-                median_mad_8bit(&vals)
+                let mut hist = [0u32; 256];
+                for row in rows {
+                    for &v in row {
+                        hist[(v & 0xFF) as usize] += 1;
+                    }
+                }
+                median_mad_8bit(&hist, ((x1 - x0) * (y1 - y0)) as usize)
             } else {
+                vals.clear();
+                rows.for_each(|r| vals.extend_from_slice(r));
                 median_mad(&mut vals)
             };
             out.push(TileStats {
@@ -87,14 +94,10 @@ fn median_mad(v: &mut [u16]) -> (u16, u16) {
     (median, *v.select_nth_unstable(rank).1)
 }
 
-/// Median and MAD of 8-bit values from one 256-bin histogram: the deviations |v − median|
-/// are counted from the same bins, outward from the median.
-fn median_mad_8bit(v: &[u16]) -> (u16, u16) {
-    let rank = (v.len() - 1) / 2;
-    let mut hist = [0u32; 256];
-    for &x in v {
-        hist[(x & 0xFF) as usize] += 1;
-    }
+/// Median and MAD of `n` 8-bit values from their 256-bin histogram: the deviations
+/// |v − median| are counted from the same bins, outward from the median.
+fn median_mad_8bit(hist: &[u32; 256], n: usize) -> (u16, u16) {
+    let rank = (n - 1) / 2;
     let mut seen = 0usize;
     let mut median = 0usize;
     for (b, &n) in hist.iter().enumerate() {
@@ -178,22 +181,31 @@ pub struct Run {
 
 /// The mask, `pixel > background + offset` (both interpolated), as runs in raster order.
 /// The GPU writes the same mask densely; [`dense_mask`] converts for comparison.
+///
+/// Per row, the level is interpolated between tile rows once per tile column, then between
+/// columns per pixel: the same integers as `level_scaled`, since the products distribute
+/// exactly. Between two tile centres the level is at least `s · min` of the two column levels
+/// (a convex combination), so pixels at or below that bound are passed over without computing
+/// their level: most of a star field is.
 pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
     let s = 2 * p.tile;
     let s2 = s * s;
-    // Per column: lower tile column and weight of the upper one (the same for every row).
-    let columns: Vec<(usize, usize, u32)> = (0..p.width)
-        .map(|x| {
-            let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
-            (tx as usize, (tx + 1).min(p.tiles_x - 1) as usize, wx)
-        })
-        .collect();
+    // Column segments with the same pair of tile columns: (x0, x1, lower, upper tile column).
+    let mut segments: Vec<(usize, usize, usize, usize)> = Vec::new();
+    let mut weights = Vec::with_capacity(p.width as usize);
+    for x in 0..p.width {
+        let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
+        let t1 = (tx + 1).min(p.tiles_x - 1) as usize;
+        weights.push(wx);
+        match segments.last_mut() {
+            Some(seg) if seg.2 == tx as usize && seg.3 == t1 => seg.1 = x as usize + 1,
+            _ => segments.push((x as usize, x as usize + 1, tx as usize, t1)),
+        }
+    }
     let level = |t: &TileStats| (t.background + t.offset).min(65536);
     let mut col_level = vec![0u32; p.tiles_x as usize];
     let mut runs = Vec::new();
     for y in 0..p.height {
-        // Interpolate between tile rows once per row, then between columns per pixel: the
-        // same integers as `level_scaled`, since the products distribute exactly.
         let (ty, wy) = axis_weight(y, p.tile, p.tiles_y);
         let ty1 = (ty + 1).min(p.tiles_y - 1);
         for (tx, c) in col_level.iter_mut().enumerate() {
@@ -203,20 +215,34 @@ pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<R
         }
         let row = &pixels[(y * p.width) as usize..((y + 1) * p.width) as usize];
         let mut start: Option<u32> = None;
-        for (x, (&v, &(t0, t1, wx))) in row.iter().zip(&columns).enumerate() {
-            let lvl = (s - wx) * col_level[t0] + wx * col_level[t1];
-            let set = v as u32 * s2 > lvl;
-            match (set, start) {
-                (true, None) => start = Some(x as u32),
-                (false, Some(x0)) => {
-                    runs.push(Run {
-                        y,
-                        x0,
-                        x1: x as u32,
-                    });
-                    start = None;
+        for &(x0, x1, t0, t1) in &segments {
+            let (c0, c1) = (col_level[t0], col_level[t1]);
+            // Pixels at or below `floor` are below every level of the segment.
+            let floor = (s * c0.min(c1) / s2).min(65535) as u16;
+            let mut x = x0;
+            while x < x1 {
+                if start.is_none() {
+                    // Skip ahead to the next pixel that could be set.
+                    match row[x..x1].iter().position(|&v| v > floor) {
+                        Some(k) => x += k,
+                        None => break,
+                    }
                 }
-                _ => {}
+                let wx = weights[x];
+                let set = row[x] as u32 * s2 > (s - wx) * c0 + wx * c1;
+                match (set, start) {
+                    (true, None) => start = Some(x as u32),
+                    (false, Some(r0)) => {
+                        runs.push(Run {
+                            y,
+                            x0: r0,
+                            x1: x as u32,
+                        });
+                        start = None;
+                    }
+                    _ => {}
+                }
+                x += 1;
             }
         }
         if let Some(x0) = start {
