@@ -40,7 +40,7 @@ pub fn select(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u32>
         }
         // T: walk down from the top until m candidates are covered.
         let (mut threshold, mut above) = (top, 0usize);
-        while above + counts[threshold] as usize <= m - 1 {
+        while above + (counts[threshold] as usize) < m {
             above += counts[threshold] as usize;
             threshold -= 1;
         }
