@@ -164,18 +164,34 @@ pub fn verify(
     let m = nodes.len();
     let words = m.div_ceil(64);
     let mut adj = vec![0u64; m * words];
-    for u in 0..m {
-        for v in u + 1..m {
-            let (a, b) = (nodes[u], nodes[v]);
-            if a.star == b.star || a.ref_id == b.ref_id {
-                continue;
-            }
-            let c2 =
-                (refs.stars[a.ref_id as usize].v - refs.stars[b.ref_id as usize].v).norm_squared();
-            let (lo, hi) = bounds[a.star * n + b.star];
-            if c2 >= lo && c2 <= hi {
-                adj[u * words + v / 64] |= 1 << (v % 64);
-                adj[v * words + u / 64] |= 1 << (u % 64);
+    // Nodes come grouped by star; each star's candidates' vectors side by side.
+    let mut first = vec![0usize; n + 1];
+    for (u, node) in nodes.iter().enumerate() {
+        first[node.star + 1] = u + 1;
+    }
+    for i in 0..n {
+        first[i + 1] = first[i + 1].max(first[i]);
+    }
+    let pos: Vec<[f64; 3]> = nodes
+        .iter()
+        .map(|node| {
+            let v = refs.stars[node.ref_id as usize].v;
+            [v.x, v.y, v.z]
+        })
+        .collect();
+    for i in 0..n {
+        for j in i + 1..n {
+            let (lo, hi) = bounds[i * n + j];
+            for u in first[i]..first[i + 1] {
+                let a = pos[u];
+                for v in first[j]..first[j + 1] {
+                    let b = pos[v];
+                    let c2 = (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
+                    if c2 >= lo && c2 <= hi && nodes[u].ref_id != nodes[v].ref_id {
+                        adj[u * words + v / 64] |= 1 << (v % 64);
+                        adj[v * words + u / 64] |= 1 << (u % 64);
+                    }
+                }
             }
         }
     }
