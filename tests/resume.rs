@@ -239,3 +239,48 @@ fn shards_merge_to_every_input_exactly_once() {
     assert_eq!(m.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&m.stderr).contains("duplicated"));
 }
+
+#[test]
+fn ctrl_c_stops_cleanly_with_complete_records_and_exit_130() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("frames");
+    simulate(&dir, 400);
+    let out = tmp.path().join("out.jsonl");
+    let mut child = gpustar().args(batch_args(&dir, &out)).spawn().unwrap();
+    // Wait until some records are out, then interrupt as Ctrl-C does.
+    let t0 = Instant::now();
+    while std::fs::metadata(&out).map(|m| m.len()).unwrap_or(0) == 0 {
+        assert!(t0.elapsed() < Duration::from_secs(60), "no record appeared");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before the interrupt"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = child.wait().unwrap();
+    let partial = records(&out).len();
+    if status.code() == Some(0) {
+        // The run was already on its last records when the signal came.
+        assert_eq!(partial, 400);
+        return;
+    }
+    assert_eq!(
+        status.code(),
+        Some(130),
+        "an interrupted run exits with 130"
+    );
+    assert!(
+        partial > 0 && partial < 400,
+        "{partial} records before the stop"
+    );
+    // Resuming finishes the rest.
+    let mut args = batch_args(&dir, &out);
+    args.push("--resume".into());
+    assert!(gpustar().args(&args).status().unwrap().success());
+    assert_eq!(records(&out).len(), 400);
+}
