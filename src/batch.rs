@@ -37,14 +37,18 @@ pub enum BackendChoice {
     Cpu,
 }
 
+/// The smallest frame side gpustar solves: a few tiles of background and room for stars.
+pub const MIN_SIDE: u32 = 16;
+
 /// The `backend` field of records made on the CPU.
 pub const BACKEND_CPU: &str = "cpu";
 
 /// A frame size's solver, or why it could not be built.
 pub type SharedSolver = Arc<std::result::Result<Solver, String>>;
 
-/// Frames of one size, with their positions in the batch.
-type SizeGroup = ((u32, u32), Vec<(usize, Decoded)>);
+/// Frames of one size and bit depth (they share the detection parameters), with their
+/// positions in the batch.
+type SizeGroup = ((u32, u32, u16), Vec<(usize, Decoded)>);
 
 /// Solvers per frame size, built on first use (one distance table per camera) and shared by
 /// every worker thread.
@@ -104,6 +108,12 @@ impl Solvers {
                 c.clone()
             }
             CameraSource::Fov(fov) => {
+                if width < MIN_SIDE || height < MIN_SIDE {
+                    return Err(format!(
+                        "image is {width}x{height}: too small to hold a star field (gpustar \
+                         needs at least {MIN_SIDE} pixels a side)"
+                    ));
+                }
                 Camera::from_fov(width, height, *fov).map_err(|e| format!("{e:#}"))?
             }
         };
@@ -158,7 +168,7 @@ impl GpuRunner {
             match &d.frame {
                 Err(e) => records[i] = Some(Record::error(&d.name, e.clone(), &self.name())),
                 Ok(f) => {
-                    let size = (f.width, f.height);
+                    let size = (f.width, f.height, f.saturation);
                     match by_size.iter_mut().find(|(s, _)| *s == size) {
                         Some((_, v)) => v.push((i, d)),
                         None => by_size.push((size, vec![(i, d)])),
@@ -166,7 +176,7 @@ impl GpuRunner {
                 }
             }
         }
-        for ((w, h), group) in by_size {
+        for ((w, h, _), group) in by_size {
             let indices: Vec<usize> = group.iter().map(|(i, _)| *i).collect();
             let solver = solvers.get(w, h);
             let recs: Vec<Record> = match solver.as_ref() {

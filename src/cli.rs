@@ -529,12 +529,18 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
 }
 
 /// Set by Ctrl-C (SIGINT) or SIGTERM: the run stops handing out inputs, finishes those in
-/// flight and writes their records.
+/// flight and writes their records. A second signal exits at once.
 fn interrupt_flag() -> &'static std::sync::atomic::AtomicBool {
     static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
-        let _ = ctrlc::set_handler(|| STOP.store(true, std::sync::atomic::Ordering::SeqCst));
+        let _ = ctrlc::set_handler(|| {
+            // A second signal ends the process at once (a worker may be stuck in a read).
+            if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
+                eprintln!("gpustar: interrupted again: exiting without waiting");
+                std::process::exit(130);
+            }
+        });
     });
     &STOP
 }

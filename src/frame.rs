@@ -1,7 +1,8 @@
 //! Decoding image files into a grey frame of u16 pixels (8-bit images keep values 0–255).
 
-use anyhow::{Context, Result, bail};
-use image::{DynamicImage, ImageReader, Limits};
+use anyhow::{Context, Result, anyhow, bail};
+use image::{DynamicImage, ImageDecoder, ImageError, ImageFormat, ImageReader, Limits};
+use std::io::{BufRead, Cursor, Seek};
 use std::path::Path;
 
 /// A decoded grey frame.
@@ -33,19 +34,51 @@ const MAX_ALLOC: u64 = 2 << 30;
 
 impl Frame {
     /// Decode an image file. Colour images become luma; alpha is ignored.
+    ///
+    /// Every failure is an error that names the file and the problem: a link that leads
+    /// nowhere, something that is not a regular file (a FIFO would block the read forever),
+    /// an empty or truncated file (JPEG decoders fill in missing data, so a JPEG must reach its
+    /// end-of-image marker), an image larger than gpustar reads, or not enough memory.
     pub fn read(path: &Path) -> Result<Frame> {
-        let mut reader = ImageReader::open(path)
-            .with_context(|| format!("cannot open {}", path.display()))?
+        let shown = path.display().to_string();
+        // Follows links: a dangling or looping one fails here, with where it leads.
+        let meta = std::fs::metadata(path).map_err(|e| match std::fs::read_link(path) {
+            Ok(to) => anyhow!(
+                "cannot open {shown}: symbolic link to {} that cannot be followed: {e}",
+                to.display()
+            ),
+            Err(_) => anyhow!("cannot open {shown}: {e}"),
+        })?;
+        if !meta.is_file() {
+            bail!(
+                "cannot read {shown}: not a regular file but {}",
+                file_kind(&meta.file_type())
+            );
+        }
+        if meta.len() == 0 {
+            bail!("cannot decode {shown}: the file is empty (0 bytes)");
+        }
+        // The format from the extension, unless the first bytes say otherwise.
+        let reader = ImageReader::open(path)
+            .with_context(|| format!("cannot open {shown}"))?
             .with_guessed_format()
-            .with_context(|| format!("cannot read {}", path.display()))?;
-        let mut limits = Limits::default();
-        limits.max_image_width = Some(MAX_SIDE);
-        limits.max_image_height = Some(MAX_SIDE);
-        limits.max_alloc = Some(MAX_ALLOC);
-        reader.limits(limits);
-        let img = reader
-            .decode()
-            .with_context(|| format!("cannot decode {}", path.display()))?;
+            .with_context(|| format!("cannot read {shown}"))?;
+        let img = if reader.format() == Some(ImageFormat::Jpeg) {
+            // The JPEG decoder reads the whole file anyway.
+            let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
+            if !jpeg_reaches_end(&bytes) {
+                bail!(
+                    "cannot decode {shown}: the JPEG data stop before their end-of-image marker \
+                     (truncated file?)"
+                );
+            }
+            decode(
+                ImageReader::with_format(Cursor::new(bytes), ImageFormat::Jpeg),
+                &shown,
+            )?
+        } else {
+            decode(reader, &shown)?
+        };
         Frame::from_image(img)
     }
 
@@ -55,15 +88,14 @@ impl Frame {
         if width == 0 || height == 0 {
             bail!("the image is empty ({width}x{height})");
         }
+        // Plain loops over the raw buffers: the compiler vectorises the widening.
+        let widen = |v: Vec<u8>| -> Vec<u16> { v.into_iter().map(u16::from).collect() };
         let (pixels, saturation) = match img {
-            DynamicImage::ImageLuma8(b) => (b.pixels().map(|p| p.0[0] as u16).collect(), 255),
-            DynamicImage::ImageLumaA8(b) => (b.pixels().map(|p| p.0[0] as u16).collect(), 255),
+            DynamicImage::ImageLuma8(b) => (widen(b.into_raw()), 255),
             DynamicImage::ImageLuma16(b) => (b.into_raw(), u16::MAX),
-            DynamicImage::ImageLumaA16(b) => (b.pixels().map(|p| p.0[0]).collect(), u16::MAX),
-            DynamicImage::ImageRgb8(_) | DynamicImage::ImageRgba8(_) => (
-                img.to_luma8().pixels().map(|p| p.0[0] as u16).collect(),
-                255,
-            ),
+            DynamicImage::ImageLumaA8(_)
+            | DynamicImage::ImageRgb8(_)
+            | DynamicImage::ImageRgba8(_) => (widen(img.to_luma8().into_raw()), 255),
             other => (other.to_luma16().into_raw(), u16::MAX),
         };
         Ok(Frame {
@@ -73,4 +105,112 @@ impl Frame {
             saturation,
         })
     }
+}
+
+/// Decode with limits: the header is read first, and an image larger than gpustar reads, or
+/// one whose pixels do not fit in memory, is refused before its buffer is allocated.
+fn decode<R: BufRead + Seek>(mut reader: ImageReader<R>, shown: &str) -> Result<DynamicImage> {
+    // No side limit here: the header is read, so the refusal below can give the size.
+    let mut limits = Limits::default();
+    limits.max_alloc = Some(MAX_ALLOC);
+    reader.limits(limits);
+    let mut decoder = reader.into_decoder().map_err(|e| decode_error(shown, e))?;
+    let (w, h) = decoder.dimensions();
+    let bytes = decoder.total_bytes();
+    if w > MAX_SIDE || h > MAX_SIDE || bytes > MAX_ALLOC {
+        bail!(
+            "cannot decode {shown}: the image is {w}x{h} ({} MiB of pixels), larger than gpustar \
+             reads (at most {MAX_SIDE} pixels a side and {} MiB)",
+            bytes >> 20,
+            MAX_ALLOC >> 20
+        );
+    }
+    // The decoder allocates its buffer with no way to fail but aborting the process: ask
+    // first whether the memory is there, with room for the frame of u16 pixels, so that a
+    // shortage is this file's error and the run goes on.
+    let need = bytes.saturating_add(2 * u64::from(w) * u64::from(h));
+    let available = usize::try_from(need)
+        .ok()
+        .is_some_and(|n| Vec::<u8>::new().try_reserve_exact(n).is_ok());
+    if !available {
+        bail!(
+            "cannot decode {shown}: not enough memory for a {w}x{h} image ({} MiB)",
+            need >> 20
+        );
+    }
+    // As `ImageReader::decode` does: the pixels come out of the budget of the decoder's own
+    // buffers.
+    let mut limits = Limits::default();
+    limits.max_alloc = Some(MAX_ALLOC);
+    limits
+        .reserve(bytes)
+        .and_then(|()| decoder.set_limits(limits))
+        .map_err(|e| decode_error(shown, e))?;
+    DynamicImage::from_decoder(decoder).map_err(|e| decode_error(shown, e))
+}
+
+/// The message of a decoder error: said once (the image crate's messages repeat their
+/// source), with a hint for a file that ends early.
+fn decode_error(shown: &str, e: ImageError) -> anyhow::Error {
+    match &e {
+        ImageError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            anyhow!("cannot decode {shown}: the file ends before the image does (truncated file?)")
+        }
+        ImageError::Limits(_) => anyhow!(
+            "cannot decode {shown}: {e} (gpustar reads at most {MAX_SIDE} pixels a side and \
+             {} MiB)",
+            MAX_ALLOC >> 20
+        ),
+        _ => anyhow!("cannot decode {shown}: {e}"),
+    }
+}
+
+/// What a path that is not a regular file is, for messages.
+fn file_kind(t: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+    }
+    if t.is_dir() {
+        "a directory"
+    } else {
+        "something else"
+    }
+}
+
+/// Does this JPEG stream reach its end-of-image marker (FF D9)? Marker segments are skipped
+/// up to the first scan, so the EOI of a thumbnail inside EXIF does not count; after that,
+/// FF D9 can only be the EOI, since entropy-coded data escape each FF byte (FF 00) and restart
+/// markers are FF D0–D7. Anything unexpected in the headers is left to the decoder to judge.
+fn jpeg_reaches_end(b: &[u8]) -> bool {
+    let mut i = 2; // after SOI
+    while i + 4 <= b.len() {
+        if b[i] != 0xFF {
+            return true;
+        }
+        match b[i + 1] {
+            0xFF => i += 1,               // fill byte
+            0xD9 => return true,          // EOI before any scan: the decoder judges
+            0x01 | 0xD0..=0xD7 => i += 2, // markers without a length
+            marker => {
+                let next = i + 2 + u16::from_be_bytes([b[i + 2], b[i + 3]]) as usize;
+                if marker == 0xDA {
+                    return b
+                        .get(next..)
+                        .is_some_and(|scan| scan.windows(2).any(|w| w == [0xFF, 0xD9]));
+                }
+                i = next;
+            }
+        }
+    }
+    false // the headers themselves are cut short
 }
