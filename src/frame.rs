@@ -63,6 +63,11 @@ impl Frame {
             .with_context(|| format!("cannot open {shown}"))?
             .with_guessed_format()
             .with_context(|| format!("cannot read {shown}"))?;
+        if reader.format() == Some(ImageFormat::Png) {
+            if let Some(frame) = read_grey_png(path, &shown)? {
+                return Ok(frame);
+            }
+        }
         let img = if reader.format() == Some(ImageFormat::Jpeg) {
             // The JPEG decoder reads the whole file anyway.
             let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
@@ -105,6 +110,70 @@ impl Frame {
             saturation,
         })
     }
+}
+
+/// Grey PNGs (the usual star-tracker frame) straight through the png crate, a fifth faster
+/// than through `image`; None for other PNGs (colour, palette, low bit depths), which take the
+/// general path. The same size and memory limits apply.
+fn read_grey_png(path: &Path, shown: &str) -> Result<Option<Frame>> {
+    let file = std::fs::File::open(path).with_context(|| format!("cannot open {shown}"))?;
+    let mut decoder = png::Decoder::new(std::io::BufReader::new(file));
+    decoder.set_limits(png::Limits {
+        bytes: MAX_ALLOC as usize,
+    });
+    decoder.set_transformations(png::Transformations::IDENTITY);
+    let mut reader = match decoder.read_info() {
+        Ok(r) => r,
+        // Let the general path report it in its words.
+        Err(_) => return Ok(None),
+    };
+    let info = reader.info();
+    let (w, h) = (info.width, info.height);
+    let grey = info.color_type == png::ColorType::Grayscale;
+    let depth = info.bit_depth;
+    if !grey
+        || !matches!(depth, png::BitDepth::Eight | png::BitDepth::Sixteen)
+        || info.interlaced
+        || w > MAX_SIDE
+        || h > MAX_SIDE
+        || w == 0
+        || h == 0
+    {
+        return Ok(None);
+    }
+    let size = reader
+        .output_buffer_size()
+        .ok_or_else(|| anyhow!("cannot decode {shown}: the image is {w}x{h}, too large"))?;
+    let mut buf = Vec::new();
+    if buf
+        .try_reserve_exact(size + 2 * (w as usize) * (h as usize))
+        .is_err()
+    {
+        bail!("cannot decode {shown}: not enough memory for a {w}x{h} image");
+    }
+    buf.resize(size, 0);
+    reader.next_frame(&mut buf).map_err(|e| match e {
+        png::DecodingError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            anyhow!("cannot decode {shown}: the file ends before the image does (truncated file?)")
+        }
+        e => anyhow!("cannot decode {shown}: {e}"),
+    })?;
+    let (pixels, saturation) = if depth == png::BitDepth::Eight {
+        (buf.into_iter().map(u16::from).collect(), 255)
+    } else {
+        (
+            buf.chunks_exact(2)
+                .map(|b| u16::from_be_bytes([b[0], b[1]]))
+                .collect(),
+            u16::MAX,
+        )
+    };
+    Ok(Some(Frame {
+        width: w,
+        height: h,
+        pixels,
+        saturation,
+    }))
 }
 
 /// Decode with limits: the header is read first, and an image larger than gpustar reads, or

@@ -172,22 +172,35 @@ pub fn verify(
     for i in 0..n {
         first[i + 1] = first[i + 1].max(first[i]);
     }
-    let pos: Vec<[f64; 3]> = nodes
+    // Coordinates side by side (x..., y..., z...) so the distance loop below vectorises.
+    let (xs, ys, zs): (Vec<f64>, Vec<f64>, Vec<f64>) = nodes
         .iter()
         .map(|node| {
             let v = refs.stars[node.ref_id as usize].v;
-            [v.x, v.y, v.z]
+            (v.x, v.y, v.z)
         })
         .collect();
     for i in 0..n {
         for j in i + 1..n {
             let (lo, hi) = bounds[i * n + j];
+            let (b0, b1) = (first[j], first[j + 1]);
             for u in first[i]..first[i + 1] {
-                let a = pos[u];
-                for v in first[j]..first[j + 1] {
-                    let b = pos[v];
-                    let c2 = (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2);
-                    if c2 >= lo && c2 <= hi && nodes[u].ref_id != nodes[v].ref_id {
+                let (ax, ay, az) = (xs[u], ys[u], zs[u]);
+                // Which of star j's candidates lie at the right distance, as bits (≤ 64).
+                let mut hits = 0u64;
+                for (bit, ((bx, by), bz)) in xs[b0..b1]
+                    .iter()
+                    .zip(&ys[b0..b1])
+                    .zip(&zs[b0..b1])
+                    .enumerate()
+                {
+                    let c2 = (ax - bx).powi(2) + (ay - by).powi(2) + (az - bz).powi(2);
+                    hits |= ((c2 >= lo && c2 <= hi) as u64) << bit;
+                }
+                while hits != 0 {
+                    let v = b0 + hits.trailing_zeros() as usize;
+                    hits &= hits - 1;
+                    if nodes[u].ref_id != nodes[v].ref_id {
                         adj[u * words + v / 64] |= 1 << (v % 64);
                         adj[v * words + u / 64] |= 1 << (u % 64);
                     }
@@ -200,8 +213,16 @@ pub fn verify(
     // Triangles through each node: for each edge, the common neighbours of its ends.
     let mut triangles = vec![0u32; m];
     for u in 0..m {
-        for v in u + 1..m {
-            if linked(u, v) {
+        // The edges (u, v) with v > u, from u's adjacency bits.
+        for (w, &word) in row(u).iter().enumerate().skip(u / 64) {
+            let mut bits = if w == u / 64 {
+                word & !((2u64 << (u % 64)) - 1)
+            } else {
+                word
+            };
+            while bits != 0 {
+                let v = w * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
                 let common: u32 = row(u)
                     .iter()
                     .zip(row(v))

@@ -63,12 +63,23 @@ pub fn tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
                 &pixels[row + x0 as usize..row + x1 as usize]
             });
             let (median, mad) = if p.saturation <= 255 {
-                let mut hist = [0u32; 256];
+                // Four histograms, summed after: neighbouring sky pixels often share a value,
+                // and increments of one counter in a row would wait on each other.
+                let mut h4 = [[0u32; 256]; 4];
                 for row in rows {
-                    for &v in row {
-                        hist[(v & 0xFF) as usize] += 1;
+                    let mut quads = row.chunks_exact(4);
+                    for q in &mut quads {
+                        h4[0][(q[0] & 0xFF) as usize] += 1;
+                        h4[1][(q[1] & 0xFF) as usize] += 1;
+                        h4[2][(q[2] & 0xFF) as usize] += 1;
+                        h4[3][(q[3] & 0xFF) as usize] += 1;
+                    }
+                    for &v in quads.remainder() {
+                        h4[0][(v & 0xFF) as usize] += 1;
                     }
                 }
+                let hist: [u32; 256] =
+                    std::array::from_fn(|b| h4[0][b] + h4[1][b] + h4[2][b] + h4[3][b]);
                 median_mad_8bit(&hist, ((x1 - x0) * (y1 - y0)) as usize)
             } else {
                 vals.clear();
