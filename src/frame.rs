@@ -64,7 +64,7 @@ impl Frame {
             .with_guessed_format()
             .with_context(|| format!("cannot read {shown}"))?;
         if reader.format() == Some(ImageFormat::Png) {
-            if let Some(frame) = read_grey_png(path, &shown)? {
+            if let Some(frame) = read_grey_png(path, &shown, meta.len())? {
                 return Ok(frame);
             }
         }
@@ -115,9 +115,13 @@ impl Frame {
 /// Grey PNGs (the usual star-tracker frame) straight through the png crate, a fifth faster
 /// than through `image`; None for other PNGs (colour, palette, low bit depths), which take the
 /// general path. The same size and memory limits apply.
-fn read_grey_png(path: &Path, shown: &str) -> Result<Option<Frame>> {
-    let file = std::fs::File::open(path).with_context(|| format!("cannot open {shown}"))?;
-    let mut decoder = png::Decoder::new(std::io::BufReader::new(file));
+fn read_grey_png(path: &Path, shown: &str, file_len: u64) -> Result<Option<Frame>> {
+    // Read whole (one system call; a fifth faster than through a BufReader) unless huge.
+    if file_len > 256 << 20 {
+        return Ok(None);
+    }
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
+    let mut decoder = png::Decoder::new(Cursor::new(bytes));
     decoder.set_limits(png::Limits {
         bytes: MAX_ALLOC as usize,
     });
