@@ -216,7 +216,8 @@ pub fn verify(
         // The edges (u, v) with v > u, from u's adjacency bits.
         for (w, &word) in row(u).iter().enumerate().skip(u / 64) {
             let mut bits = if w == u / 64 {
-                word & !((2u64 << (u % 64)) - 1)
+                // Bits above u's own (two shifts: one by 64 would overflow).
+                word & (u64::MAX << (u % 64) << 1)
             } else {
                 word
             };
