@@ -178,6 +178,20 @@ def run(cmd, **kw):
     return p.returncode, p.stdout, p.stderr, time.perf_counter() - t0
 
 
+def cpu_seconds():
+    """(CPU-seconds busy on the whole machine, CPU-seconds of this process and its waited-for
+    children), or None where /proc/stat is missing. The difference between two readings is
+    what other processes took during the run."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [int(v) for v in f.readline().split()[1:]]
+    except OSError:
+        return None
+    busy = sum(fields) - fields[3] - (fields[4] if len(fields) > 4 else 0)  # minus idle, iowait
+    t = os.times()
+    return busy / os.sysconf("SC_CLK_TCK"), t.user + t.system + t.children_user + t.children_system
+
+
 def tail(text, n=15):
     return "\n".join(text.strip().splitlines()[-n:])
 
@@ -314,7 +328,8 @@ def report(args, results, notes):
         cells = " | ".join(f"{m[s][0]:.2f}" if m[s][0] is not None else "–" for s in STAGES)
         total_s = m["total"][1] / 1e3 if m["total"][1] is not None else float("nan")
         lines.append(f"| {r['name']} | {cells} | {total_s:.2f} |")
-    lines += ["", "Notes:"]
+    lines += ["", "gpustar's `timing_ms` is per frame; when `gpustar batch` works on several frames at once "
+              "these overlap, so the sum of totals can exceed the wall-clock seconds above.", "", "Notes:"]
     lines += [f"- {n}" for n in notes]
     for r in results:
         if "error" in r:
@@ -354,7 +369,7 @@ def main():
     snapshot = args.out / "gpustar"
     shutil.copy2(args.gpustar, snapshot)
     args.gpustar_source, args.gpustar = args.gpustar, snapshot
-    load_before = os.getloadavg()[0]
+    cpu_before, wall_before = cpu_seconds(), time.perf_counter()
     frames = args.out / "frames"
     ensure_frames(args, frames)
     truth = {t["file"]: t for t in read_jsonl(frames / "truth.jsonl")}
@@ -375,10 +390,13 @@ def main():
     results.append(run_cedar(args, frames, args.out, truth))
 
     # Context for reading the numbers.
-    load_after = os.getloadavg()[0]
-    if max(load_before, load_after) > 0.5:
-        notes.append(f"**Warning**: the machine was busy (1-minute load average {load_before:.2f} before, "
-                     f"{load_after:.2f} after); the rates are not clean. Rerun when idle.")
+    cpu_after, wall = cpu_seconds(), time.perf_counter() - wall_before
+    if cpu_before and cpu_after:
+        other = max(0.0, (cpu_after[0] - cpu_before[0]) - (cpu_after[1] - cpu_before[1]))
+        busy = other > 0.05 * wall
+        notes.append(f"{'**Warning**: ' if busy else ''}other processes used {other:.1f} CPU-seconds "
+                     f"during the {wall:.0f} s of the run ({100 * other / wall:.0f}% of one core)"
+                     + ("; the rates are not clean, rerun when the machine is idle." if busy else "."))
     notes.append(f"gpustar binary: copy of {args.gpustar_source} (built {built}).")
     notes.append(f"Machine: {os.cpu_count()} logical CPUs, {platform.platform()}. Seconds are wall-clock: "
                  "for gpustar the whole `gpustar batch` command (process start, catalog, cached "
@@ -400,7 +418,7 @@ def main():
         versions = ", ".join(f"{k} {v}" for k, v in c["versions"].items())
         notes.append(f"cedar-solve: {versions} ({c['python']}). Database: the package's own "
                      f"`default_database` ({c['database']}; {p.get('star_catalog')}, FOV "
-                     f"{p.get('min_fov')}-{p.get('max_fov')} deg, mag <= {p.get('star_max_magnitude')}, "
+                     f"{p.get('min_fov')}-{p.get('max_fov')} deg, mag <= {float(p.get('star_max_magnitude') or 'nan'):.2f}, "
                      f"{p.get('num_patterns')} patterns, proper motion to {p.get('epoch_proper_motion')}). "
                      f"Not counted in its seconds: import {c['import_s']:.2f} s, database load "
                      f"{c['database_load_s']:.2f} s (whole child process {r['process_wall_s']:.2f} s).")
