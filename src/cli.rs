@@ -555,9 +555,15 @@ fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(len);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:30}] {pos}/{len} {per_sec} ETA {eta} {msg}",
+            "{elapsed_precise} [{bar:30}] {pos}/{len} {rate} ETA {eta} {msg}",
         )
         .expect("a valid template")
+        .with_key(
+            "rate",
+            |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = write!(w, "{:.0} images/s", s.per_sec());
+            },
+        )
         .progress_chars("=> "),
     );
     bar
