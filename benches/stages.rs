@@ -89,7 +89,7 @@ fn main() {
                 .iter()
                 .filter_map(|f| {
                     let d = detect::detect(f, &settings);
-                    solver.prepare(&d).map(|p| VoteJob {
+                    solver.prepare(&d, 0).map(|p| VoteJob {
                         ranges: p.ranges,
                         stars: p.n_vote,
                         k: p.k,

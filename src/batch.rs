@@ -8,7 +8,6 @@ use crate::detect::{self, Detection};
 use crate::frame::Frame;
 use crate::gpu::Gpu;
 use crate::gpu::vote::{GpuTable, VoteJob};
-use crate::identify::{self, VoteResult};
 use crate::record::{Record, Timing};
 use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
 use anyhow::Result;
@@ -213,26 +212,18 @@ impl GpuRunner {
             .map(|(_, d)| d.frame.as_ref().expect("grouped frames decoded"))
             .collect();
         match self.gpu_group(solver, &frames) {
-            Ok((detections, voted, detect_ms, vote_ms)) => {
+            Ok((solutions, detect_ms, identify_ms)) => {
                 let backend = self.gpu.backend_name();
                 let n = group.len() as f64;
                 group
                     .iter()
-                    .zip(detections)
-                    .zip(voted)
-                    .map(|(((_, d), dets), v)| {
-                        let t = Instant::now();
-                        let outcome = finish(solver, &dets, v);
-                        let identify = vote_ms / n + t.elapsed().as_secs_f64() * 1e3;
+                    .zip(solutions)
+                    .map(|((_, d), sol)| {
                         let timing = Timing {
                             decode: d.decode_ms,
                             detect: detect_ms / n,
-                            identify,
-                            total: d.decode_ms + detect_ms / n + identify,
-                        };
-                        let sol = Solution {
-                            detections: dets,
-                            outcome,
+                            identify: identify_ms / n,
+                            total: d.decode_ms + (detect_ms + identify_ms) / n,
                         };
                         solver.record(&d.name, &sol, timing, &backend)
                     })
@@ -259,19 +250,15 @@ impl GpuRunner {
         }
     }
 
-    /// Detection and voting of one batch on the GPU: per frame its detections and (for frames
-    /// with enough stars) its vote, and the batch's detection and vote times (ms).
-    #[allow(clippy::type_complexity)]
+    /// One batch on the GPU: detection in one submission, then for each scale tried (one,
+    /// unless the scale is searched) a vote of the frames not solved yet in one submission;
+    /// verification and refinement on the CPU. Returns the solutions and the batch's detection
+    /// and identification times (ms).
     fn gpu_group(
         &mut self,
         solver: &Solver,
         frames: &[&Frame],
-    ) -> Result<(
-        Vec<Vec<Detection>>,
-        Vec<Option<(Prepared, VoteResult)>>,
-        f64,
-        f64,
-    )> {
+    ) -> Result<(Vec<Solution>, f64, f64)> {
         let settings = &solver.settings.detect;
         let t0 = Instant::now();
         let p = detect::params(frames[0], settings);
@@ -294,36 +281,39 @@ impl GpuRunner {
             Ok(t) => t,
             Err(e) => anyhow::bail!("{e}"),
         };
-        let prepared: Vec<Option<Prepared>> =
-            detections.iter().map(|d| solver.prepare(d)).collect();
-        let jobs: Vec<VoteJob> = prepared
-            .iter()
-            .flatten()
-            .map(|p| VoteJob {
-                ranges: p.ranges.clone(),
-                stars: p.n_vote,
-                k: p.k,
+        let mut outcomes: Vec<Outcome> = vec![Outcome::Unsolved("too_few_stars"); frames.len()];
+        for h in 0..solver.scales.len() {
+            let prepared: Vec<(usize, Prepared)> = detections
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(_)))
+                .filter_map(|(i, d)| solver.prepare(d, h).map(|p| (i, p)))
+                .collect();
+            if prepared.is_empty() {
+                break;
+            }
+            let jobs: Vec<VoteJob> = prepared
+                .iter()
+                .map(|(_, p)| VoteJob {
+                    ranges: p.ranges.clone(),
+                    stars: p.n_vote,
+                    k: p.k,
+                })
+                .collect();
+            let voted = self.gpu.vote(table, &jobs)?;
+            for ((i, p), v) in prepared.iter().zip(voted) {
+                outcomes[*i] = solver.finish(&detections[*i], p, &v);
+            }
+        }
+        let solutions = detections
+            .into_iter()
+            .zip(outcomes)
+            .map(|(detections, outcome)| Solution {
+                detections,
+                outcome,
             })
             .collect();
-        let mut results = self.gpu.vote(table, &jobs)?.into_iter();
-        let voted = prepared
-            .into_iter()
-            .map(|p| p.map(|p| (p, results.next().expect("one vote per job"))))
-            .collect();
-        Ok((
-            detections,
-            voted,
-            detect_ms,
-            t1.elapsed().as_secs_f64() * 1e3,
-        ))
-    }
-}
-
-/// Verification, attitude and refinement after a vote (or too few stars to vote).
-fn finish(solver: &Solver, dets: &[Detection], voted: Option<(Prepared, VoteResult)>) -> Outcome {
-    match voted {
-        None => Outcome::Unsolved("too_few_stars"),
-        Some((p, v)) => solver.finish(dets, &p.vectors, &v),
+        Ok((solutions, detect_ms, t1.elapsed().as_secs_f64() * 1e3))
     }
 }
 
@@ -341,11 +331,6 @@ fn solve_with(solver: &Solver, d: Decoded) -> Record {
         total: d.decode_ms + detect_ms + identify_ms,
     };
     solver.record(&d.name, &sol, timing, BACKEND_CPU)
-}
-
-/// The vote of the CPU twins, for frames solved outside a GPU batch.
-pub fn vote_cpu(solver: &Solver, p: &Prepared) -> VoteResult {
-    identify::vote_cpu(&solver.table, &p.ranges, p.n_vote, solver.refs.len(), p.k)
 }
 
 /// The backend in use.

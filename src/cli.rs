@@ -6,6 +6,7 @@ use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
 use crate::evaluate;
 use crate::inputs::{self, Input, Shard};
 use crate::output::{self, Format, RecordWriter};
+use crate::refine::CameraFit;
 use crate::run::{self as stream, RunOptions};
 use crate::simulate::{self, SimSettings};
 use crate::solve::{Settings, auto_mag_limit};
@@ -147,9 +148,51 @@ pub struct CameraOpts {
     /// mirrored, mag_limit).
     #[arg(long, conflicts_with = "fov_deg")]
     pub camera: Option<PathBuf>,
-    /// Horizontal field of view in degrees: square pixels, centred, no distortion.
+    /// Horizontal field of view in degrees: square pixels, centred, no distortion. A range
+    /// (e.g. 8..20) searches the scale; the records give the fitted FOV.
+    #[arg(long, value_parser = parse_fov)]
+    pub fov_deg: Option<FovArg>,
+    /// The camera's focal length is only known to within this fraction (e.g. 0.01): search
+    /// the scale within it and fit it.
     #[arg(long)]
-    pub fov_deg: Option<f64>,
+    pub fov_tolerance: Option<f64>,
+    /// What refinement fits besides the attitude: nothing, the scale (field of view), or the
+    /// scale and radial distortion k1 (reported as distortion_k1).
+    #[arg(long, value_enum, default_value_t = CameraFit::None)]
+    pub fit: CameraFit,
+}
+
+/// `--fov-deg`: one value or a range.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FovArg {
+    Exact(f64),
+    Range(f64, f64),
+}
+
+fn parse_fov(s: &str) -> std::result::Result<FovArg, String> {
+    let num = |v: &str| -> std::result::Result<f64, String> {
+        let x: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| format!("bad field of view {v:?}"))?;
+        if x > 0.0 && x < 170.0 {
+            Ok(x)
+        } else {
+            Err(format!(
+                "field of view must be between 0 and 170 degrees, got {x}"
+            ))
+        }
+    };
+    match s.split_once("..") {
+        Some((a, b)) => {
+            let (a, b) = (num(a)?, num(b)?);
+            if a >= b {
+                return Err(format!("expected LOW..HIGH, got {s:?}"));
+            }
+            Ok(FovArg::Range(a, b))
+        }
+        None => Ok(FovArg::Exact(num(s)?)),
+    }
 }
 
 #[derive(Args, Debug, Clone)]
@@ -394,18 +437,31 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     }
 }
 
-/// The camera source and its optional magnitude limit.
-fn camera_source(c: &CameraOpts) -> Result<(CameraSource, Option<f64>)> {
+/// Range of focal-length factors (low, high) to search when the scale is uncertain.
+type ScaleRange = (f64, f64);
+
+/// The camera source, its optional magnitude limit, and the scale range to search.
+fn camera_source(c: &CameraOpts) -> Result<(CameraSource, Option<f64>, Option<ScaleRange>)> {
+    let tolerance = match c.fov_tolerance {
+        Some(t) if !(t > 0.0 && t < 0.5) => bail!("--fov-tolerance must be between 0 and 0.5"),
+        Some(t) => Some((1.0 - t, 1.0 + t)),
+        None => None,
+    };
     match (&c.camera, c.fov_deg) {
         (Some(path), _) => {
             let (cam, mag) = Camera::from_toml_file(path)?;
-            Ok((CameraSource::Fixed(cam), mag))
+            Ok((CameraSource::Fixed(cam), mag, tolerance))
         }
-        (None, Some(fov)) => {
-            if !(fov > 0.0 && fov < 170.0) {
-                bail!("--fov-deg must be between 0 and 170, got {fov}");
-            }
-            Ok((CameraSource::Fov(fov), None))
+        (None, Some(FovArg::Exact(fov))) => Ok((CameraSource::Fov(fov), None, tolerance)),
+        (None, Some(FovArg::Range(lo, hi))) => {
+            // The camera of the middle FOV; focal lengths scale as 1 / tan(FOV / 2).
+            let mid = (lo + hi) / 2.0;
+            let f = |fov: f64| 1.0 / (fov.to_radians() / 2.0).tan();
+            Ok((
+                CameraSource::Fov(mid),
+                None,
+                Some((f(hi) / f(mid), f(lo) / f(mid))),
+            ))
         }
         (None, None) => bail!("give the camera: --camera FILE or --fov-deg DEG"),
     }
@@ -423,7 +479,7 @@ fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
 }
 
 fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCode> {
-    let (camera, camera_mag) = camera_source(&o.camera)?;
+    let (camera, camera_mag, scale_range) = camera_source(&o.camera)?;
     let catalog = Catalog::load(o.catalog.catalog.as_deref())?;
     let mut s = settings(&o.catalog, camera_mag);
     s.detect.k_sigma = o.sigma;
@@ -432,6 +488,8 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     s.identify.scale_tol = o.scale_tol;
     s.refine.match_radius_px = o.match_radius_px;
     s.refine.max_false_prob = o.max_false_prob;
+    s.refine.fit = o.camera.fit;
+    s.scale_range = scale_range;
     // The output, and what an earlier run already wrote to it.
     let mut inputs = inputs;
     let mut header = true;
@@ -618,7 +676,7 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
         println!("(give --camera FILE, or --fov-deg DEG --size WxH, to see the distance table)");
         return Ok(ExitCode::SUCCESS);
     }
-    let (source, camera_mag) = camera_source(c)?;
+    let (source, camera_mag, _) = camera_source(c)?;
     let camera = match source {
         CameraSource::Fixed(cam) => cam,
         CameraSource::Fov(fov) => {

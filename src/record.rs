@@ -49,6 +49,8 @@ pub struct Record {
     pub roll_deg: Option<f64>,
     pub quaternion: Option<[f64; 4]>,
     pub rotation_matrix: Option<[[f64; 3]; 3]>,
+    /// Field of view of the solution: the camera's, or the fitted one when the scale was
+    /// searched or fitted.
     pub fov_x_deg: Option<f64>,
     pub fov_y_deg: Option<f64>,
     pub stars_detected: Option<usize>,
@@ -60,6 +62,9 @@ pub struct Record {
     pub matches: Option<Vec<MatchRecord>>,
     pub timing_ms: Timing,
     pub backend: String,
+    /// Radial distortion k1 fitted by refinement (`--fit distortion`); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion_k1: Option<f64>,
 }
 
 impl Record {
@@ -85,6 +90,7 @@ impl Record {
             matches: None,
             timing_ms: Timing::default(),
             backend: backend.to_string(),
+            distortion_k1: None,
         }
     }
 

@@ -17,14 +17,33 @@ pub struct RefineSettings {
     pub max_false_prob: f64,
     /// Refit rounds.
     pub rounds: usize,
+    /// What of the camera to fit besides the attitude.
+    pub fit: CameraFit,
 }
+
+/// Camera parameters refinement may fit along with the attitude.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CameraFit {
+    /// The camera as given.
+    None,
+    /// The focal length (one factor for fx and fy): the field of view.
+    Scale,
+    /// The focal length and the radial distortion k1.
+    Distortion,
+}
+
+/// Matches needed before the focal length is fitted, and before k1 is.
+pub const MIN_MATCHES_SCALE: usize = 8;
+pub const MIN_MATCHES_DISTORTION: usize = 16;
 
 impl Default for RefineSettings {
     fn default() -> Self {
         RefineSettings {
             match_radius_px: 2.0,
             max_false_prob: 1e-6,
-            rounds: 3,
+            rounds: 4,
+            fit: CameraFit::None,
         }
     }
 }
@@ -45,6 +64,8 @@ pub struct Match {
 #[derive(Clone, Debug)]
 pub struct Refined {
     pub r: Matrix3<f64>,
+    /// The camera the solution holds for (fitted when refinement fits it).
+    pub camera: Camera,
     pub matches: Vec<Match>,
     /// Reference stars that project inside the image.
     pub in_view: usize,
@@ -105,28 +126,44 @@ pub const CONFIDENCE_RADIUS_FLOOR_PX: f64 = 0.5;
 pub fn refine(
     r0: Matrix3<f64>,
     dets: &[Detection],
-    det_vectors: &[Vector3<f64>],
     refs: &RefCatalog,
     camera: &Camera,
     hypotheses: u64,
     s: &RefineSettings,
 ) -> Option<Refined> {
     let mut r = r0;
+    let mut camera = camera.clone();
+    let vectors_of = |c: &Camera| -> Vec<Vector3<f64>> {
+        dets.iter().map(|d| c.pixel_to_vector(d.x, d.y)).collect()
+    };
+    let mut det_vectors = vectors_of(&camera);
     let mut pairs: Vec<(usize, u32)> = Vec::new();
     let mut in_view = 0;
     for _ in 0..s.rounds.max(1) {
-        let proj = stars_in_view(&r, refs, camera);
+        let proj = stars_in_view(&r, refs, &camera);
         in_view = proj.len();
         let next = mutual_nearest(dets, &proj, s.match_radius_px);
         if next.len() < 2 {
             return None;
         }
-        let cam: Vec<_> = next.iter().map(|&(d, _)| det_vectors[d]).collect();
-        let icrs: Vec<_> = next
-            .iter()
-            .map(|&(_, id)| refs.stars[id as usize].v)
-            .collect();
-        r = wahba(&cam, &icrs)?;
+        let fit = match s.fit {
+            CameraFit::Distortion if next.len() >= MIN_MATCHES_DISTORTION => CameraFit::Distortion,
+            CameraFit::Distortion | CameraFit::Scale if next.len() >= MIN_MATCHES_SCALE => {
+                CameraFit::Scale
+            }
+            _ => CameraFit::None,
+        };
+        if fit == CameraFit::None {
+            let cam: Vec<_> = next.iter().map(|&(d, _)| det_vectors[d]).collect();
+            let icrs: Vec<_> = next
+                .iter()
+                .map(|&(_, id)| refs.stars[id as usize].v)
+                .collect();
+            r = wahba(&cam, &icrs)?;
+        } else {
+            (r, camera) = fit_camera(r, &camera, dets, &next, refs, fit);
+            det_vectors = vectors_of(&camera);
+        }
         let stable = next == pairs;
         pairs = next;
         if stable {
@@ -165,6 +202,7 @@ pub fn refine(
     let false_match_prob = false_match_probability(close, in_view, p_single, hypotheses);
     Some(Refined {
         r,
+        camera,
         in_view,
         rmse_arcsec: rmse,
         p90_arcsec: p90,
@@ -172,6 +210,86 @@ pub fn refine(
         matches,
         false_match_prob,
     })
+}
+
+/// Fit attitude and camera (focal scale, and k1 with `Distortion`) to matched stars by
+/// Gauss–Newton on pixel residuals, from the current values. Parameters: a small rotation ω
+/// (R ← exp(ω)·R), the log of the focal scale, and k1. The result is kept only if it lowers
+/// the squared residuals.
+fn fit_camera(
+    r: Matrix3<f64>,
+    camera: &Camera,
+    dets: &[Detection],
+    pairs: &[(usize, u32)],
+    refs: &RefCatalog,
+    fit: CameraFit,
+) -> (Matrix3<f64>, Camera) {
+    let n_par = if fit == CameraFit::Distortion { 5 } else { 4 };
+    let apply = |p: &[f64]| -> (Matrix3<f64>, Camera) {
+        let rot = nalgebra::Rotation3::new(Vector3::new(p[0], p[1], p[2])).into_inner() * r;
+        let mut c = camera.clone();
+        c.fx *= p[3].exp();
+        c.fy *= p[3].exp();
+        if n_par == 5 {
+            c.k1 = camera.k1 + p[4];
+        }
+        (rot, c)
+    };
+    let residuals = |p: &[f64]| -> Option<Vec<f64>> {
+        let (rot, c) = apply(p);
+        let mut out = Vec::with_capacity(2 * pairs.len());
+        for &(d, id) in pairs {
+            let (x, y) = c.vector_to_pixel(&(rot * refs.stars[id as usize].v))?;
+            out.push(x - dets[d].x);
+            out.push(y - dets[d].y);
+        }
+        Some(out)
+    };
+    let cost = |f: &[f64]| f.iter().map(|x| x * x).sum::<f64>();
+    let mut p = vec![0.0; n_par];
+    let Some(mut f) = residuals(&p) else {
+        return (r, camera.clone());
+    };
+    let start = cost(&f);
+    let steps = [1e-7, 1e-7, 1e-7, 1e-7, 1e-5];
+    for _ in 0..8 {
+        // Jacobian by forward differences.
+        let m = f.len();
+        let mut j = nalgebra::DMatrix::<f64>::zeros(m, n_par);
+        for k in 0..n_par {
+            let mut q = p.clone();
+            q[k] += steps[k];
+            let Some(fk) = residuals(&q) else {
+                return (r, camera.clone());
+            };
+            for row in 0..m {
+                j[(row, k)] = (fk[row] - f[row]) / steps[k];
+            }
+        }
+        let jt = j.transpose();
+        let Some(delta) = (&jt * &j)
+            .lu()
+            .solve(&(-(&jt * nalgebra::DVector::from_vec(f.clone()))))
+        else {
+            break;
+        };
+        let q: Vec<f64> = p.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
+        match residuals(&q) {
+            Some(fq) if cost(&fq) < cost(&f) => {
+                p = q;
+                f = fq;
+            }
+            _ => break,
+        }
+        if delta.norm() < 1e-12 {
+            break;
+        }
+    }
+    if cost(&f) < start {
+        apply(&p)
+    } else {
+        (r, camera.clone())
+    }
 }
 
 /// Probability that a wrong attitude matches `matched` of the `in_view` catalog stars by chance

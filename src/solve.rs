@@ -29,6 +29,9 @@ pub struct Settings {
     pub refine: RefineSettings,
     /// Use the on-disk cache of distance tables.
     pub table_cache: bool,
+    /// When the scale is uncertain: the range of the true focal length relative to the
+    /// camera's, (lower, upper). The solver tries scales across it.
+    pub scale_range: Option<(f64, f64)>,
 }
 
 impl Default for Settings {
@@ -42,6 +45,7 @@ impl Default for Settings {
             identify: IdentifySettings::default(),
             refine: RefineSettings::default(),
             table_cache: true,
+            scale_range: None,
         }
     }
 }
@@ -69,11 +73,30 @@ pub struct Solver {
     pub refs: RefCatalog,
     pub table: PairTable,
     pub table_origin: TableOrigin,
+    /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
+    pub scales: Vec<f64>,
+}
+
+/// Relative spacing of the focal-length factors of a scale search: each covers ±0.05 %, which
+/// the pair tolerance absorbs.
+pub const SCALE_STEP: f64 = 0.001;
+
+/// The focal-length factors covering [lo, hi], from the one nearest 1 outward.
+pub fn scale_hypotheses(lo: f64, hi: f64) -> Vec<f64> {
+    let (lo, hi) = (lo.min(hi), lo.max(hi));
+    let n = ((hi / lo).ln() / (1.0 + SCALE_STEP).ln()).ceil().max(0.0) as i64;
+    let mut v: Vec<f64> = (0..=n)
+        .map(|k| lo * (hi / lo).powf(if n == 0 { 0.5 } else { k as f64 / n as f64 }))
+        .collect();
+    v.sort_by(|a, b| a.ln().abs().total_cmp(&b.ln().abs()));
+    v
 }
 
 /// A frame's input to the vote.
 #[derive(Clone, Debug)]
 pub struct Prepared {
+    /// The camera at the scale tried.
+    pub camera: Camera,
     /// Camera-frame direction of every detection.
     pub vectors: Vec<Vector3<f64>>,
     /// Pair ranges of the `n_vote` brightest.
@@ -108,10 +131,16 @@ impl Solver {
             double_sep_rad: settings.double_star_px * camera.ifov_rad(),
         };
         let refs = RefCatalog::select(catalog, selection)?;
+        let scales = match settings.scale_range {
+            Some((lo, hi)) => scale_hypotheses(lo, hi),
+            None => vec![1.0],
+        };
+        // Pairs as far apart as the widest field tried (the shortest focal length).
+        let shortest = scales.iter().copied().fold(f64::MAX, f64::min);
         let (table, table_origin) = table::load_or_build(
             &refs,
             catalog.content_hash,
-            camera.diagonal_rad(),
+            scaled(&camera, shortest).diagonal_rad(),
             settings.table_cache,
         );
         Ok(Solver {
@@ -120,39 +149,51 @@ impl Solver {
             refs,
             table,
             table_origin,
+            scales,
         })
     }
 
-    /// What the vote needs from a detection list: the stars' directions and the pair ranges
-    /// of the brightest; None when there are too few stars to identify.
-    pub fn prepare(&self, detections: &[Detection]) -> Option<Prepared> {
-        let s = &self.settings.identify;
+    /// What the vote needs from a detection list at scale hypothesis `h` (an index into
+    /// `scales`): the stars' directions and the pair ranges of the brightest; None when there
+    /// are too few stars to identify.
+    pub fn prepare(&self, detections: &[Detection], h: usize) -> Option<Prepared> {
+        let mut s = self.settings.identify;
         if detections.len() < 3 {
             return None;
         }
+        let camera = scaled(&self.camera, self.scales[h]);
+        if self.scales.len() > 1 {
+            // Each hypothesis stands for ±SCALE_STEP/2 around its focal length.
+            s.scale_tol += SCALE_STEP / 2.0;
+        }
         let vectors: Vec<Vector3<f64>> = detections
             .iter()
-            .map(|d| self.camera.pixel_to_vector(d.x, d.y))
+            .map(|d| camera.pixel_to_vector(d.x, d.y))
             .collect();
         let n_vote = vectors.len().min(s.vote_stars);
         Some(Prepared {
-            ranges: identify::pair_ranges(&vectors[..n_vote], &self.camera, s),
+            ranges: identify::pair_ranges(&vectors[..n_vote], &camera, &s),
             n_vote,
             k: s.candidates_per_star(n_vote),
             vectors,
+            camera,
         })
     }
 
-    /// Identify the stars of a detection list, voting on the CPU.
+    /// Identify the stars of a detection list, voting on the CPU: the scales in turn until
+    /// one solves.
     pub fn identify(&self, detections: Vec<Detection>) -> Solution {
-        let outcome = match self.prepare(&detections) {
-            None => Outcome::Unsolved("too_few_stars"),
-            Some(p) => {
-                let voted =
-                    identify::vote_cpu(&self.table, &p.ranges, p.n_vote, self.refs.len(), p.k);
-                self.finish(&detections, &p.vectors, &voted)
+        let mut outcome = Outcome::Unsolved("too_few_stars");
+        for h in 0..self.scales.len() {
+            let Some(p) = self.prepare(&detections, h) else {
+                break;
+            };
+            let voted = identify::vote_cpu(&self.table, &p.ranges, p.n_vote, self.refs.len(), p.k);
+            outcome = self.finish(&detections, &p, &voted);
+            if matches!(outcome, Outcome::Solved(_)) {
+                break;
             }
-        };
+        }
         Solution {
             detections,
             outcome,
@@ -163,17 +204,22 @@ impl Solver {
     pub fn finish(
         &self,
         detections: &[Detection],
-        vectors: &[Vector3<f64>],
+        p: &Prepared,
         voted: &identify::VoteResult,
     ) -> Outcome {
         let s = &self.settings;
+        let vectors = &p.vectors;
         let n_vote = voted.candidates.len() / voted.k.max(1);
+        let mut id_settings = s.identify;
+        if self.scales.len() > 1 {
+            id_settings.scale_tol += SCALE_STEP / 2.0;
+        }
         let ids = identify::verify(
             voted,
             &vectors[..n_vote],
             &self.refs,
-            &self.camera,
-            &s.identify,
+            &p.camera,
+            &id_settings,
         );
         if ids.len() < 2 {
             return Outcome::Unsolved("no_consistent_match");
@@ -186,14 +232,20 @@ impl Solver {
         let Some(r0) = wahba(&cam, &icrs) else {
             return Outcome::Unsolved("no_consistent_match");
         };
+        let mut refine_settings = s.refine;
+        if self.scales.len() > 1 && refine_settings.fit == refine::CameraFit::None {
+            // The scale was searched: fit it.
+            refine_settings.fit = refine::CameraFit::Scale;
+        }
+        // Every scale tried multiplies the hypotheses a chance match could come from.
+        let hypotheses = voted.hypotheses.saturating_mul(self.scales.len() as u64);
         let Some(refined) = refine::refine(
             r0,
             detections,
-            vectors,
             &self.refs,
-            &self.camera,
-            voted.hypotheses,
-            &s.refine,
+            &p.camera,
+            hypotheses,
+            &refine_settings,
         ) else {
             return Outcome::Unsolved("no_consistent_match");
         };
@@ -228,7 +280,7 @@ impl Solver {
                 rec.reason = Some(reason.to_string());
             }
             Outcome::Solved(r) => {
-                let p = pointing(&r.r, &self.camera);
+                let p = pointing(&r.r, &r.camera);
                 rec.status = Status::Solved;
                 rec.ra_deg = Some(p.ra_deg);
                 rec.dec_deg = Some(p.dec_deg);
@@ -237,8 +289,11 @@ impl Solver {
                 rec.rotation_matrix = Some(std::array::from_fn(|i| {
                     std::array::from_fn(|j| r.r[(i, j)])
                 }));
-                rec.fov_x_deg = Some(self.camera.fov_x_deg());
-                rec.fov_y_deg = Some(self.camera.fov_y_deg());
+                rec.fov_x_deg = Some(r.camera.fov_x_deg());
+                rec.fov_y_deg = Some(r.camera.fov_y_deg());
+                if r.camera.k1 != self.camera.k1 {
+                    rec.distortion_k1 = Some(r.camera.k1);
+                }
                 rec.stars_matched = Some(r.matches.len());
                 rec.rmse_arcsec = Some(r.rmse_arcsec);
                 rec.p90_arcsec = Some(r.p90_arcsec);
@@ -269,4 +324,12 @@ impl Solver {
         }
         rec
     }
+}
+
+/// The camera with its focal lengths multiplied by `factor`.
+pub fn scaled(camera: &Camera, factor: f64) -> Camera {
+    let mut c = camera.clone();
+    c.fx *= factor;
+    c.fy *= factor;
+    c
 }

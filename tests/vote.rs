@@ -140,7 +140,7 @@ fn gpu_votes_equal_cpu_on_simulated_frames() {
         .iter()
         .filter_map(|f| {
             let d = gpustar::detect::detect(f, &solver.settings.detect);
-            solver.prepare(&d).map(|p| VoteJob {
+            solver.prepare(&d, 0).map(|p| VoteJob {
                 ranges: p.ranges,
                 stars: p.n_vote,
                 k: p.k,
