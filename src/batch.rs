@@ -4,10 +4,12 @@
 
 use crate::camera::Camera;
 use crate::catalog::Catalog;
+use crate::dark::Darks;
 use crate::detect::{self, Detection};
 use crate::frame::Frame;
 use crate::gpu::Gpu;
 use crate::gpu::vote::{GpuTable, VoteJob};
+use crate::products::Products;
 use crate::record::{Record, Timing};
 use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
 use anyhow::Result;
@@ -55,25 +57,19 @@ pub struct Solvers {
     pub catalog: Catalog,
     pub settings: Settings,
     pub camera: CameraSource,
+    /// Fixed-pattern removal applied to every decoded frame.
+    pub darks: Darks,
+    /// Per-frame files written beside the records (WCS headers, annotated PNGs).
+    pub products: Products,
     map: Mutex<HashMap<(u32, u32), SharedSolver>>,
 }
 
 /// A frame read from its file (or why it could not be).
 pub struct Decoded {
     pub name: String,
+    pub path: PathBuf,
     pub frame: std::result::Result<Frame, String>,
     pub decode_ms: f64,
-}
-
-/// Read and decode one file.
-pub fn decode(path: &Path, name: &str) -> Decoded {
-    let t0 = Instant::now();
-    let frame = Frame::read(path).map_err(|e| format!("{e:#}"));
-    Decoded {
-        name: name.to_string(),
-        frame,
-        decode_ms: t0.elapsed().as_secs_f64() * 1e3,
-    }
 }
 
 impl Solvers {
@@ -82,8 +78,43 @@ impl Solvers {
             catalog,
             settings,
             camera,
+            darks: Darks::None,
+            products: Products::default(),
             map: Mutex::new(HashMap::new()),
         }
+    }
+
+    /// Read and decode one file, and remove its fixed pattern when asked.
+    pub fn decode(&self, path: &Path, name: &str) -> Decoded {
+        let t0 = Instant::now();
+        let frame = Frame::read(path)
+            .map_err(|e| format!("{e:#}"))
+            .and_then(|f| self.darks.apply(path, f));
+        Decoded {
+            name: name.to_string(),
+            path: path.to_path_buf(),
+            frame,
+            decode_ms: t0.elapsed().as_secs_f64() * 1e3,
+        }
+    }
+
+    /// The record of a solved or unsolved frame, and its products when asked for.
+    fn record(
+        &self,
+        solver: &Solver,
+        d: &Decoded,
+        frame: &Frame,
+        sol: &Solution,
+        timing: Timing,
+        backend: &str,
+    ) -> Record {
+        let mut r = solver.record(&d.name, sol, timing, backend);
+        if let Err(e) = self.products.write(&d.path, &d.name, frame, solver, sol) {
+            // The solution stands; the user learns which file is missing and why.
+            tracing::warn!("{}: {e:#}", d.name);
+            r.warnings.push(format!("{e:#}"));
+        }
+        r
     }
 
     /// The solver for frames of this size, or why there is none (built once per size).
@@ -121,23 +152,16 @@ impl Solvers {
 
     /// Solve a decoded frame on the CPU: one record.
     pub fn solve_cpu(&self, d: Decoded) -> Record {
-        let frame = match d.frame {
+        let frame = match &d.frame {
             Ok(f) => f,
-            Err(e) => return Record::error(&d.name, e, BACKEND_CPU),
+            Err(e) => return Record::error(&d.name, e.clone(), BACKEND_CPU),
         };
         let solver = self.get(frame.width, frame.height);
         let solver = match solver.as_ref() {
             Ok(s) => s,
             Err(e) => return Record::error(&d.name, e.clone(), BACKEND_CPU),
         };
-        let (sol, detect_ms, identify_ms) = solver.solve_frame(&frame);
-        let timing = Timing {
-            decode: d.decode_ms,
-            detect: detect_ms,
-            identify: identify_ms,
-            total: d.decode_ms + detect_ms + identify_ms,
-        };
-        solver.record(&d.name, &sol, timing, BACKEND_CPU)
+        solve_with(self, solver, &d, frame)
     }
 }
 
@@ -183,8 +207,11 @@ impl GpuRunner {
                     .iter()
                     .map(|(_, d)| Record::error(&d.name, e.clone(), &self.name()))
                     .collect(),
-                Ok(s) if self.failed => group.into_iter().map(|(_, d)| solve_with(s, d)).collect(),
-                Ok(s) => self.solve_group(s, &group),
+                Ok(s) if self.failed => group
+                    .iter()
+                    .map(|(_, d)| solve_with(solvers, s, d, decoded_frame(d)))
+                    .collect(),
+                Ok(s) => self.solve_group(solvers, s, &group),
             };
             for (i, r) in indices.into_iter().zip(recs) {
                 records[i] = Some(r);
@@ -206,11 +233,13 @@ impl GpuRunner {
     }
 
     /// Frames of one size on the GPU; on a GPU error, the CPU takes over for good.
-    fn solve_group(&mut self, solver: &Solver, group: &[(usize, Decoded)]) -> Vec<Record> {
-        let frames: Vec<&Frame> = group
-            .iter()
-            .map(|(_, d)| d.frame.as_ref().expect("grouped frames decoded"))
-            .collect();
+    fn solve_group(
+        &mut self,
+        solvers: &Solvers,
+        solver: &Solver,
+        group: &[(usize, Decoded)],
+    ) -> Vec<Record> {
+        let frames: Vec<&Frame> = group.iter().map(|(_, d)| decoded_frame(d)).collect();
         match self.gpu_group(solver, &frames) {
             Ok((solutions, detect_ms, identify_ms)) => {
                 let backend = self.gpu.backend_name();
@@ -218,14 +247,15 @@ impl GpuRunner {
                 group
                     .iter()
                     .zip(solutions)
-                    .map(|((_, d), sol)| {
+                    .zip(&frames)
+                    .map(|(((_, d), sol), frame)| {
                         let timing = Timing {
                             decode: d.decode_ms,
                             detect: detect_ms / n,
                             identify: identify_ms / n,
                             total: d.decode_ms + (detect_ms + identify_ms) / n,
                         };
-                        solver.record(&d.name, &sol, timing, &backend)
+                        solvers.record(solver, d, frame, &sol, timing, &backend)
                     })
                     .collect()
             }
@@ -234,17 +264,7 @@ impl GpuRunner {
                 self.failed = true;
                 group
                     .iter()
-                    .map(|(_, d)| {
-                        let frame = d.frame.as_ref().expect("grouped frames decoded");
-                        solve_with(
-                            solver,
-                            Decoded {
-                                name: d.name.clone(),
-                                frame: Ok(frame.clone()),
-                                decode_ms: d.decode_ms,
-                            },
-                        )
-                    })
+                    .map(|(_, d)| solve_with(solvers, solver, d, decoded_frame(d)))
                     .collect()
             }
         }
@@ -318,19 +338,20 @@ impl GpuRunner {
 }
 
 /// Solve a decoded frame with a known solver on the CPU.
-fn solve_with(solver: &Solver, d: Decoded) -> Record {
-    let frame = match d.frame {
-        Ok(f) => f,
-        Err(e) => return Record::error(&d.name, e, BACKEND_CPU),
-    };
-    let (sol, detect_ms, identify_ms) = solver.solve_frame(&frame);
+fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) -> Record {
+    let (sol, detect_ms, identify_ms) = solver.solve_frame(frame);
     let timing = Timing {
         decode: d.decode_ms,
         detect: detect_ms,
         identify: identify_ms,
         total: d.decode_ms + detect_ms + identify_ms,
     };
-    solver.record(&d.name, &sol, timing, BACKEND_CPU)
+    solvers.record(solver, d, frame, &sol, timing, BACKEND_CPU)
+}
+
+/// The frame of a decoded input that was grouped for solving (only decoded ones are).
+fn decoded_frame(d: &Decoded) -> &Frame {
+    d.frame.as_ref().expect("grouped frames decoded")
 }
 
 /// The backend in use.
@@ -386,7 +407,10 @@ impl Pipeline {
 
     /// One record per input, in input order.
     pub fn process_batch(&mut self, inputs: &[(PathBuf, String)]) -> Vec<Record> {
-        let decoded: Vec<Decoded> = inputs.iter().map(|(p, n)| decode(p, n)).collect();
+        let decoded: Vec<Decoded> = inputs
+            .iter()
+            .map(|(p, n)| self.solvers.decode(p, n))
+            .collect();
         match &mut self.backend {
             Backend::Cpu => decoded
                 .into_iter()

@@ -3,9 +3,11 @@
 use crate::batch::{Backend, BackendChoice, CameraSource, Solvers};
 use crate::camera::Camera;
 use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
+use crate::dark::Darks;
 use crate::evaluate;
 use crate::inputs::{self, Input, Shard};
 use crate::output::{self, Format, RecordWriter};
+use crate::products::Products;
 use crate::refine::CameraFit;
 use crate::run::{self as stream, RunOptions};
 use crate::simulate::{self, SimSettings};
@@ -256,6 +258,24 @@ pub struct SolveOpts {
     /// Report `solved` only when the probability of a chance match is below this.
     #[arg(long, default_value_t = 1e-6)]
     pub max_false_prob: f64,
+    /// Subtract this dark frame (same size, any readable format) from every frame before
+    /// detection: removes hot pixels and fixed-pattern noise.
+    #[arg(long, value_name = "FILE", conflicts_with = "dark_median")]
+    pub dark: Option<PathBuf>,
+    /// Subtract from each frame the per-pixel median of up to 25 frames of its directory (of
+    /// the same size): a dark made from the data, for cameras with fixed-pattern noise and
+    /// no dark frame. Needs at least 3 frames per directory, pointing at different skies.
+    #[arg(long)]
+    pub dark_median: bool,
+    /// Write a FITS WCS header (TAN, plus SIP when distortion is fitted or given) for each
+    /// solved frame here, at the input's relative path with the extension .wcs.
+    #[arg(long, value_name = "DIR")]
+    pub wcs_dir: Option<PathBuf>,
+    /// Write an annotated PNG of each readable frame here (identified stars circled in green
+    /// with their HIP number, other detections in red, catalog stars in the frame that
+    /// nothing matched as cyan crosses), at the input's relative path with the extension .png.
+    #[arg(long, value_name = "DIR")]
+    pub annotate_dir: Option<PathBuf>,
     /// No progress bar, warnings or summary on stderr.
     #[arg(short, long)]
     pub quiet: bool,
@@ -308,6 +328,10 @@ pub struct SimulateArgs {
     /// Catalog CSV to draw stars from (default: built-in).
     #[arg(long)]
     pub catalog: Option<PathBuf>,
+    /// Take the frames with this camera model (TOML, as for batch: non-square pixels,
+    /// principal point, distortion, mirror) instead of --size and --fov-deg.
+    #[arg(long, conflicts_with_all = ["size", "fov_deg"])]
+    pub camera: Option<PathBuf>,
 }
 
 fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
@@ -530,7 +554,16 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     if let Some(w) = warning {
         tracing::warn!("{w}");
     }
-    let solvers = Solvers::new(catalog, s, camera);
+    let mut solvers = Solvers::new(catalog, s, camera);
+    solvers.darks = match (&o.dark, o.dark_median) {
+        (Some(path), _) => Darks::from_file(path).context("--dark")?,
+        (None, true) => Darks::directory_median(),
+        (None, false) => Darks::None,
+    };
+    solvers.products = Products {
+        wcs_dir: o.wcs_dir.clone(),
+        annotate_dir: o.annotate_dir.clone(),
+    };
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
     let bar = progress_bar(inputs.len() as u64, o.quiet);
@@ -768,6 +801,10 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         bits: a.bits,
         false_stars: a.false_stars,
         hot_pixels: a.hot_pixels,
+        camera: match &a.camera {
+            Some(p) => Some(Camera::from_toml_file(p)?.0),
+            None => None,
+        },
         ..SimSettings::default()
     };
     let t0 = Instant::now();

@@ -9,12 +9,14 @@
 //! [`solve`] ties a camera to them; [`batch`] runs many files; [`simulate`] and [`evaluate`]
 //! make and score synthetic sets.
 
+pub mod annotate;
 pub mod attitude;
 pub mod batch;
 pub mod camera;
 pub mod catalog;
 pub mod cli;
 pub mod cpu;
+pub mod dark;
 pub mod detect;
 pub mod evaluate;
 pub mod frame;
@@ -22,9 +24,11 @@ pub mod gpu;
 pub mod identify;
 pub mod inputs;
 pub mod output;
+pub mod products;
 pub mod record;
 pub mod refine;
 pub mod run;
 pub mod simulate;
 pub mod solve;
 pub mod table;
+pub mod wcs;

@@ -16,7 +16,7 @@ pub enum Format {
     Csv,
 }
 
-pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend";
+pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1";
 
 /// Writes records as whole lines: lines are collected and handed to the file in one write
 /// per flush, so a crash leaves at most one incomplete last line (which `--resume` drops).
@@ -103,6 +103,7 @@ fn csv_row(r: &Record) -> String {
         num(r.false_match_prob),
         r.timing_ms.total.to_string(),
         csv_field(&r.backend),
+        num(r.distortion_k1),
     ]
     .join(",")
 }

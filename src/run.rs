@@ -5,7 +5,7 @@
 //! being handed out and being written (the writer returns a ticket for each record it writes,
 //! and the feeder needs one to hand out the next input).
 
-use crate::batch::{Backend, Counts, Decoded, Solvers, decode};
+use crate::batch::{Backend, Counts, Decoded, Solvers};
 use crate::inputs::Input;
 use crate::output::RecordWriter;
 use crate::record::Record;
@@ -80,7 +80,7 @@ pub fn run(
                     scope.spawn(move || {
                         for (i, input) in rx {
                             let r = guarded(&input.name, || {
-                                solvers.solve_cpu(decode(&input.path, &input.name))
+                                solvers.solve_cpu(solvers.decode(&input.path, &input.name))
                             });
                             if tx.send((i, r)).is_err() {
                                 break;
@@ -95,12 +95,15 @@ pub fn run(
                     let (rx, tx) = (work_rx.clone(), frame_tx.clone());
                     scope.spawn(move || {
                         for (i, input) in rx {
-                            let d = std::panic::catch_unwind(|| decode(&input.path, &input.name))
-                                .unwrap_or_else(|p| Decoded {
-                                    name: input.name.clone(),
-                                    frame: Err(panic_message(&p)),
-                                    decode_ms: 0.0,
-                                });
+                            let d = std::panic::catch_unwind(|| {
+                                solvers.decode(&input.path, &input.name)
+                            })
+                            .unwrap_or_else(|p| Decoded {
+                                name: input.name.clone(),
+                                path: input.path.clone(),
+                                frame: Err(panic_message(&p)),
+                                decode_ms: 0.0,
+                            });
                             if tx.send((i, d)).is_err() {
                                 break;
                             }

@@ -46,6 +46,19 @@ pub struct SimSettings {
     pub false_stars: usize,
     /// Hot pixels (single bright pixels) per frame.
     pub hot_pixels: usize,
+    /// A full camera model (non-square pixels, principal point, distortion, mirror) instead
+    /// of `width`, `height` and `fov_x_deg`.
+    pub camera: Option<Camera>,
+}
+
+impl SimSettings {
+    /// The camera the frames are taken with.
+    pub fn camera(&self) -> Result<Camera> {
+        match &self.camera {
+            Some(c) => Ok(c.clone()),
+            None => Camera::from_fov(self.width, self.height, self.fov_x_deg),
+        }
+    }
 }
 
 impl Default for SimSettings {
@@ -67,6 +80,7 @@ impl Default for SimSettings {
             bits: 8,
             false_stars: 3,
             hot_pixels: 5,
+            camera: None,
         }
     }
 }
@@ -144,11 +158,11 @@ pub fn add_spot(signal: &mut [f64], w: u32, h: u32, x: f64, y: f64, electrons: f
 
 /// Render one frame: the pixels (as u16 in ADU) and its truth.
 pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u16>, Truth)> {
-    let camera = Camera::from_fov(s.width, s.height, s.fov_x_deg)?;
+    let camera = s.camera()?;
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(index as u64);
     let r = random_rotation(&mut rng);
-    let (w, h) = (s.width, s.height);
+    let (w, h) = (camera.width, camera.height);
     let vig = |x: f64, y: f64| {
         let (dx, dy) = (x - camera.cx, y - camera.cy);
         let rmax2 = camera.cx * camera.cx + camera.cy * camera.cy;
@@ -230,7 +244,7 @@ pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u
         rotation_matrix: std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)])),
         quaternion: quaternion(&r),
         epoch: s.epoch,
-        mirrored: false,
+        mirrored: camera.mirrored,
         width: w,
         height: h,
         fov_x_deg: camera.fov_x_deg(),
@@ -260,23 +274,28 @@ pub fn write_set(
     let mut truth_file = std::io::BufWriter::new(
         std::fs::File::create(out.join("truth.jsonl")).context("cannot create truth.jsonl")?,
     );
+    let camera = s.camera()?;
     for k in 0..s.frames {
         let (pixels, truth) = render(catalog, s, k)?;
         let path = out.join(&truth.file);
-        write_png(&path, s.width, s.height, &pixels, s.bits)
+        write_png(&path, camera.width, camera.height, &pixels, s.bits)
             .with_context(|| format!("cannot write {}", path.display()))?;
         writeln!(truth_file, "{}", serde_json::to_string(&truth)?)?;
         progress(k + 1);
     }
     truth_file.flush()?;
-    std::fs::write(
-        out.join("camera.toml"),
-        format!(
+    let text = match &s.camera {
+        None => format!(
             "# written by gpustar simulate\nwidth = {}\nheight = {}\nfov_x_deg = {}\n",
             s.width, s.height, s.fov_x_deg
         ),
-    )
-    .context("cannot write camera.toml")?;
+        Some(c) => format!(
+            "# written by gpustar simulate\nwidth = {}\nheight = {}\nfx_px = {}\nfy_px = {}\n\
+             cx_px = {}\ncy_px = {}\nk1 = {}\nk2 = {}\nmirrored = {}\n",
+            c.width, c.height, c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.mirrored
+        ),
+    };
+    std::fs::write(out.join("camera.toml"), text).context("cannot write camera.toml")?;
     Ok(())
 }
 

@@ -250,6 +250,14 @@ impl Solver {
             return Outcome::Unsolved("no_consistent_match");
         };
         if refined.false_match_prob > s.refine.max_false_prob {
+            tracing::debug!(
+                "low confidence: {} of {} catalog stars in view matched, false-match \
+                 probability {:.2e} (scale {:.4})",
+                refined.matches.len(),
+                refined.in_view,
+                refined.false_match_prob,
+                p.camera.fx / self.camera.fx
+            );
             return Outcome::Unsolved("low_confidence");
         }
         Outcome::Solved(refined)
