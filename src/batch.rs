@@ -68,6 +68,8 @@ pub struct Solvers {
 pub struct Decoded {
     pub name: String,
     pub path: PathBuf,
+    /// The frame's own observation epoch (FITS DATE-OBS), if the file has one.
+    pub epoch: Option<f64>,
     pub frame: std::result::Result<Frame, String>,
     pub decode_ms: f64,
 }
@@ -87,12 +89,14 @@ impl Solvers {
     /// Read and decode one file, and remove its fixed pattern when asked.
     pub fn decode(&self, path: &Path, name: &str) -> Decoded {
         let t0 = Instant::now();
-        let frame = Frame::read(path)
-            .map_err(|e| format!("{e:#}"))
-            .and_then(|f| self.darks.apply(path, f));
+        let (frame, epoch) = match Frame::read_dated(path) {
+            Ok((f, epoch)) => (self.darks.apply(path, f), epoch),
+            Err(e) => (Err(format!("{e:#}")), None),
+        };
         Decoded {
             name: name.to_string(),
             path: path.to_path_buf(),
+            epoch,
             frame,
             decode_ms: t0.elapsed().as_secs_f64() * 1e3,
         }
@@ -240,7 +244,8 @@ impl GpuRunner {
         group: &[(usize, Decoded)],
     ) -> Vec<Record> {
         let frames: Vec<&Frame> = group.iter().map(|(_, d)| decoded_frame(d)).collect();
-        match self.gpu_group(solver, &frames) {
+        let epochs: Vec<Option<f64>> = group.iter().map(|(_, d)| d.epoch).collect();
+        match self.gpu_group(solver, &frames, &epochs) {
             Ok((solutions, detect_ms, identify_ms)) => {
                 let backend = self.gpu.backend_name();
                 let n = group.len() as f64;
@@ -278,6 +283,7 @@ impl GpuRunner {
         &mut self,
         solver: &Solver,
         frames: &[&Frame],
+        epochs: &[Option<f64>],
     ) -> Result<(Vec<Solution>, f64, f64)> {
         let settings = &solver.settings.detect;
         let t0 = Instant::now();
@@ -322,15 +328,17 @@ impl GpuRunner {
                 .collect();
             let voted = self.gpu.vote(table, &jobs)?;
             for ((i, p), v) in prepared.iter().zip(voted) {
-                outcomes[*i] = solver.finish(&detections[*i], p, &v);
+                outcomes[*i] = solver.finish(&detections[*i], p, &v, epochs[*i]);
             }
         }
         let solutions = detections
             .into_iter()
             .zip(outcomes)
-            .map(|(detections, outcome)| Solution {
+            .zip(epochs)
+            .map(|((detections, outcome), &epoch)| Solution {
                 detections,
                 outcome,
+                epoch,
             })
             .collect();
         Ok((solutions, detect_ms, t1.elapsed().as_secs_f64() * 1e3))
@@ -339,7 +347,7 @@ impl GpuRunner {
 
 /// Solve a decoded frame with a known solver on the CPU.
 fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) -> Record {
-    let (sol, detect_ms, identify_ms) = solver.solve_frame(frame);
+    let (sol, detect_ms, identify_ms) = solver.solve_frame_at(frame, d.epoch);
     let timing = Timing {
         decode: d.decode_ms,
         detect: detect_ms,

@@ -47,7 +47,7 @@ pub struct Cli {
 pub enum Command {
     /// Solve every image in DIR (sorted by name); one record per file, in that order.
     Batch {
-        /// Directory of images (PNG, JPEG, TIFF).
+        /// Directory of images (PNG, JPEG, TIFF, FITS).
         dir: PathBuf,
         #[command(flatten)]
         opts: SolveOpts,

@@ -17,7 +17,7 @@ pub struct Frame {
 }
 
 /// File extensions `batch` treats as images (lower case).
-pub const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff"];
+pub const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff", "fits", "fit", "fts"];
 
 /// Is this path an image by its extension?
 pub fn is_image_path(path: &Path) -> bool {
@@ -40,6 +40,13 @@ impl Frame {
     /// an empty or truncated file (JPEG decoders fill in missing data, so a JPEG must reach its
     /// end-of-image marker), an image larger than gpustar reads, or not enough memory.
     pub fn read(path: &Path) -> Result<Frame> {
+        Frame::read_dated(path).map(|(f, _)| f)
+    }
+
+    /// Decode an image file, with its observation epoch (Julian year) when the file says
+    /// (FITS `DATE-OBS` or `MJD-OBS`). FITS files are recognised by their first card, whatever
+    /// their name.
+    pub fn read_dated(path: &Path) -> Result<(Frame, Option<f64>)> {
         let shown = path.display().to_string();
         // Follows links: a dangling or looping one fails here, with where it leads.
         let meta = std::fs::metadata(path).map_err(|e| match std::fs::read_link(path) {
@@ -58,6 +65,9 @@ impl Frame {
         if meta.len() == 0 {
             bail!("cannot decode {shown}: the file is empty (0 bytes)");
         }
+        if is_fits(path)? {
+            return read_fits(path, &shown, meta.len());
+        }
         // The format from the extension, unless the first bytes say otherwise.
         let reader = ImageReader::open(path)
             .with_context(|| format!("cannot open {shown}"))?
@@ -65,7 +75,7 @@ impl Frame {
             .with_context(|| format!("cannot read {shown}"))?;
         if reader.format() == Some(ImageFormat::Png) {
             if let Some(frame) = read_grey_png(path, &shown, meta.len())? {
-                return Ok(frame);
+                return Ok((frame, None));
             }
         }
         let img = if reader.format() == Some(ImageFormat::Jpeg) {
@@ -84,7 +94,7 @@ impl Frame {
         } else {
             decode(reader, &shown)?
         };
-        Frame::from_image(img)
+        Ok((Frame::from_image(img)?, None))
     }
 
     /// Convert a decoded image (grey or colour, 8 or 16 bits) into a frame.
@@ -110,6 +120,38 @@ impl Frame {
             saturation,
         })
     }
+}
+
+/// Does the file start like FITS (`SIMPLE  =`)?
+fn is_fits(path: &Path) -> Result<bool> {
+    use std::io::Read;
+    let mut head = [0u8; 9];
+    let mut f =
+        std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+    let n = f
+        .read(&mut head)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    Ok(n == head.len() && &head == b"SIMPLE  =")
+}
+
+/// A FITS file's primary image (or first image extension), with its DATE-OBS.
+fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, Option<f64>)> {
+    if file_len > MAX_ALLOC {
+        bail!("cannot decode {shown}: the FITS file is larger than gpustar reads (2 GiB)");
+    }
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
+    let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64).min(MAX_ALLOC / 2);
+    let f = crate::fits::decode_fits(&bytes, max_pixels)
+        .with_context(|| format!("cannot decode {shown}"))?;
+    Ok((
+        Frame {
+            width: f.width,
+            height: f.height,
+            pixels: f.pixels,
+            saturation: f.saturation,
+        },
+        f.epoch,
+    ))
 }
 
 /// Grey PNGs (the usual star-tracker frame) straight through the png crate, a fifth faster

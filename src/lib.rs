@@ -19,6 +19,7 @@ pub mod cpu;
 pub mod dark;
 pub mod detect;
 pub mod evaluate;
+pub mod fits;
 pub mod frame;
 pub mod gpu;
 pub mod identify;

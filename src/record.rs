@@ -65,6 +65,10 @@ pub struct Record {
     /// Radial distortion k1 fitted by refinement (`--fit distortion`); absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distortion_k1: Option<f64>,
+    /// Epoch (Julian year) of the catalog positions the solution used: the run's `--epoch`,
+    /// or the frame's own date (FITS DATE-OBS); solved records only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epoch: Option<f64>,
     /// Problems that did not stop the solution (e.g. a product file that could not be
     /// written); absent when there were none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -95,6 +99,7 @@ impl Record {
             timing_ms: Timing::default(),
             backend: backend.to_string(),
             distortion_k1: None,
+            epoch: None,
             warnings: Vec::new(),
         }
     }

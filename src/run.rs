@@ -101,6 +101,7 @@ pub fn run(
                             .unwrap_or_else(|p| Decoded {
                                 name: input.name.clone(),
                                 path: input.path.clone(),
+                                epoch: None,
                                 frame: Err(panic_message(&p)),
                                 decode_ms: 0.0,
                             });

@@ -12,6 +12,8 @@ use crate::refine::{self, RefineSettings};
 use crate::table::{self, PairTable, TableOrigin};
 use anyhow::Result;
 use nalgebra::Vector3;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// Everything that shapes a run besides the camera.
@@ -75,7 +77,13 @@ pub struct Solver {
     pub table_origin: TableOrigin,
     /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
     pub scales: Vec<f64>,
+    /// `refs` moved to the epochs of frames that carry their own date, by day.
+    epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
 }
+
+/// Frames dated within this many years of the run's epoch use the run's star positions
+/// (about a day: proper motions move no star by a milliarcsecond in that time).
+const SAME_EPOCH_YEARS: f64 = 0.003;
 
 /// Relative spacing of the focal-length factors of a scale search: each covers ±0.05 %, which
 /// the pair tolerance absorbs.
@@ -111,6 +119,8 @@ pub struct Prepared {
 pub struct Solution {
     pub detections: Vec<Detection>,
     pub outcome: Outcome,
+    /// The frame's own observation epoch (FITS DATE-OBS), if it has one.
+    pub epoch: Option<f64>,
 }
 
 #[derive(Clone, Debug)]
@@ -150,7 +160,21 @@ impl Solver {
             table,
             table_origin,
             scales,
+            epochs: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// The reference stars at a frame's own epoch, when it has one that differs from the
+    /// run's; None = the run's (`self.refs`).
+    pub fn refs_at(&self, epoch: Option<f64>) -> Option<Arc<RefCatalog>> {
+        let e = epoch.filter(|e| (e - self.refs.selection.epoch).abs() > SAME_EPOCH_YEARS)?;
+        let day = (e * 365.25).round() as i64;
+        let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
+        Some(
+            map.entry(day)
+                .or_insert_with(|| Arc::new(self.refs.at_epoch(e)))
+                .clone(),
+        )
     }
 
     /// What the vote needs from a detection list at scale hypothesis `h` (an index into
@@ -182,14 +206,14 @@ impl Solver {
 
     /// Identify the stars of a detection list, voting on the CPU: the scales in turn until
     /// one solves.
-    pub fn identify(&self, detections: Vec<Detection>) -> Solution {
+    pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
         let mut outcome = Outcome::Unsolved("too_few_stars");
         for h in 0..self.scales.len() {
             let Some(p) = self.prepare(&detections, h) else {
                 break;
             };
             let voted = identify::vote_cpu(&self.table, &p.ranges, p.n_vote, self.refs.len(), p.k);
-            outcome = self.finish(&detections, &p, &voted);
+            outcome = self.finish(&detections, &p, &voted, epoch);
             if matches!(outcome, Outcome::Solved(_)) {
                 break;
             }
@@ -197,15 +221,18 @@ impl Solver {
         Solution {
             detections,
             outcome,
+            epoch,
         }
     }
 
-    /// Verification, attitude, refinement and acceptance after the vote.
+    /// Verification, attitude, refinement and acceptance after the vote; refinement uses the
+    /// star positions at the frame's `epoch` when it has one.
     pub fn finish(
         &self,
         detections: &[Detection],
         p: &Prepared,
         voted: &identify::VoteResult,
+        epoch: Option<f64>,
     ) -> Outcome {
         let s = &self.settings;
         let vectors = &p.vectors;
@@ -224,10 +251,12 @@ impl Solver {
         if ids.len() < 2 {
             return Outcome::Unsolved("no_consistent_match");
         }
+        let at_epoch = self.refs_at(epoch);
+        let refs = at_epoch.as_deref().unwrap_or(&self.refs);
         let cam: Vec<_> = ids.iter().map(|m| vectors[m.star]).collect();
         let icrs: Vec<_> = ids
             .iter()
-            .map(|m| self.refs.stars[m.ref_id as usize].v)
+            .map(|m| refs.stars[m.ref_id as usize].v)
             .collect();
         let Some(r0) = wahba(&cam, &icrs) else {
             return Outcome::Unsolved("no_consistent_match");
@@ -242,7 +271,7 @@ impl Solver {
         let Some(refined) = refine::refine(
             r0,
             detections,
-            &self.refs,
+            refs,
             &p.camera,
             hypotheses,
             &refine_settings,
@@ -265,10 +294,15 @@ impl Solver {
 
     /// Solve a decoded frame on the CPU.
     pub fn solve_frame(&self, frame: &Frame) -> (Solution, f64, f64) {
+        self.solve_frame_at(frame, None)
+    }
+
+    /// Solve a decoded frame on the CPU, with its own observation epoch if it has one.
+    pub fn solve_frame_at(&self, frame: &Frame, epoch: Option<f64>) -> (Solution, f64, f64) {
         let t0 = Instant::now();
         let dets = detect::detect(frame, &self.settings.detect);
         let t1 = Instant::now();
-        let sol = self.identify(dets);
+        let sol = self.identify(dets, epoch);
         let t2 = Instant::now();
         (
             sol,
@@ -288,6 +322,9 @@ impl Solver {
                 rec.reason = Some(reason.to_string());
             }
             Outcome::Solved(r) => {
+                let at_epoch = self.refs_at(sol.epoch);
+                let refs = at_epoch.as_deref().unwrap_or(&self.refs);
+                rec.epoch = Some(refs.selection.epoch);
                 let p = pointing(&r.r, &r.camera);
                 rec.status = Status::Solved;
                 rec.ra_deg = Some(p.ra_deg);
@@ -312,7 +349,7 @@ impl Solver {
                     .iter()
                     .map(|m| {
                         let d = &sol.detections[m.det];
-                        let star = &self.refs.stars[m.ref_id as usize];
+                        let star = &refs.stars[m.ref_id as usize];
                         let (ra, dec) = vector_to_radec(&star.v);
                         MatchRecord {
                             x: d.x,

@@ -46,11 +46,16 @@ impl Star {
         let (sa, ca) = self.ra_rad.sin_cos();
         let (sd, cd) = self.dec_rad.sin_cos();
         let p = Vector3::new(cd * ca, cd * sa, sd);
+        (p + self.motion() * (epoch - HIPPARCOS_EPOCH)).normalize()
+    }
+
+    /// Proper motion as a tangent vector of the unit sphere, radians per year.
+    pub fn motion(&self) -> Vector3<f64> {
+        let (sa, ca) = self.ra_rad.sin_cos();
+        let (sd, cd) = self.dec_rad.sin_cos();
         let e_ra = Vector3::new(-sa, ca, 0.0);
         let e_dec = Vector3::new(-sd * ca, -sd * sa, cd);
-        let dt = epoch - HIPPARCOS_EPOCH;
-        let motion = (e_ra * self.pmra_mas_yr + e_dec * self.pmdec_mas_yr) * (MAS_TO_RAD * dt);
-        (p + motion).normalize()
+        (e_ra * self.pmra_mas_yr + e_dec * self.pmdec_mas_yr) * MAS_TO_RAD
     }
 }
 
@@ -173,6 +178,9 @@ pub struct RefStar {
     pub hip: u32,
     /// ICRS unit vector at the selection's epoch.
     pub v: Vector3<f64>,
+    /// Proper motion, radians per year along the sphere (flux-weighted for a merged group):
+    /// moves `v` to a frame's own epoch (see [`RefCatalog::at_epoch`]).
+    pub motion: Vector3<f64>,
     pub mag: f64,
     /// Number of catalog stars merged into this one (1 for a single star).
     pub members: u32,
@@ -201,6 +209,7 @@ impl RefCatalog {
             .map(|s| RefStar {
                 hip: s.hip,
                 v: s.vector_at(selection.epoch),
+                motion: s.motion(),
                 mag: s.mag,
                 members: 1,
             })
@@ -233,6 +242,28 @@ impl RefCatalog {
             selection,
             doubles_removed,
         })
+    }
+
+    /// The same stars (same ids) moved to another epoch: for a frame that carries its own
+    /// date (FITS DATE-OBS) while the distance table was made for the run's epoch. Pair
+    /// distances change by far less than the vote's tolerance over decades; positions do not.
+    pub fn at_epoch(&self, epoch: f64) -> RefCatalog {
+        let dt = epoch - self.selection.epoch;
+        RefCatalog {
+            stars: self
+                .stars
+                .iter()
+                .map(|s| RefStar {
+                    v: (s.v + s.motion * dt).normalize(),
+                    ..*s
+                })
+                .collect(),
+            selection: Selection {
+                epoch,
+                ..self.selection
+            },
+            doubles_removed: self.doubles_removed,
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -298,9 +329,15 @@ fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
             .copied()
             .min_by(|&a, &b| stars[a].mag.total_cmp(&stars[b].mag))
             .unwrap();
+        let motion = members
+            .iter()
+            .map(|&i| stars[i].motion * flux(&stars[i]))
+            .sum::<Vector3<f64>>()
+            / total;
         out.push(RefStar {
             hip: stars[brightest].hip,
             v: centre,
+            motion,
             mag: -2.5 * total.log10(),
             members: members.len() as u32,
         });
