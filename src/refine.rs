@@ -139,23 +139,10 @@ pub fn refine(
     let mut det_vectors = vectors_of(&camera);
     let mut pairs: Vec<(usize, u32)> = Vec::new();
     let mut in_view = 0;
-    // Enough rounds to come back to the match radius after the wider first ones.
-    let rounds = if s.fit == CameraFit::Distortion {
-        s.rounds.max(3)
-    } else {
-        s.rounds.max(1)
-    };
-    for round in 0..rounds {
+    for _ in 0..s.rounds.max(1) {
         let proj = stars_in_view(&r, refs, &camera);
         in_view = proj.len();
-        // When distortion is fitted, the first rounds reach farther (4×, then 2× the radius):
-        // before k1 is known, stars near the edges sit several pixels from their projections.
-        let reach = if s.fit == CameraFit::Distortion {
-            (4.0 / f64::from(1u32 << round.min(2))).max(1.0)
-        } else {
-            1.0
-        };
-        let next = mutual_nearest(dets, &proj, s.match_radius_px * reach);
+        let next = mutual_nearest(dets, &proj, s.match_radius_px);
         if next.len() < 2 {
             return None;
         }
@@ -177,7 +164,7 @@ pub fn refine(
             (r, camera) = fit_camera(r, &camera, dets, &next, refs, fit);
             det_vectors = vectors_of(&camera);
         }
-        let stable = next == pairs && reach == 1.0;
+        let stable = next == pairs;
         pairs = next;
         if stable {
             break;
