@@ -32,4 +32,5 @@ pub mod run;
 pub mod simulate;
 pub mod solve;
 pub mod table;
+pub mod triangle;
 pub mod wcs;

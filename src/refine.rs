@@ -122,13 +122,15 @@ fn mutual_nearest(dets: &[Detection], proj: &[(u32, f64, f64)], radius: f64) -> 
 /// a match being closer than typical centroid errors.
 pub const CONFIDENCE_RADIUS_FLOOR_PX: f64 = 0.5;
 
-/// Refine a first attitude; None when nothing matches.
+/// Refine a first attitude; None when nothing matches. `hypotheses` and `fixed` (the stars
+/// that made the hypothesis: 2 for a pair, 3 for a triangle) enter the false-match probability.
 pub fn refine(
     r0: Matrix3<f64>,
     dets: &[Detection],
     refs: &RefCatalog,
     camera: &Camera,
     hypotheses: u64,
+    fixed: usize,
     s: &RefineSettings,
 ) -> Option<Refined> {
     let mut r = r0;
@@ -199,7 +201,7 @@ pub fn refine(
     let close = matches.iter().filter(|m| m.residual_px <= radius).count();
     let area = camera.width as f64 * camera.height as f64;
     let p_single = (dets.len() as f64 * std::f64::consts::PI * radius * radius / area).min(1.0);
-    let false_match_prob = false_match_probability(close, in_view, p_single, hypotheses);
+    let false_match_prob = false_match_probability(close, in_view, p_single, hypotheses, fixed);
     Some(Refined {
         r,
         camera,
@@ -293,19 +295,21 @@ fn fit_camera(
 }
 
 /// Probability that a wrong attitude matches `matched` of the `in_view` catalog stars by chance
-/// (tetra3's binomial test): two stars fix a hypothesis, each other star in view lands within
-/// the radius of some detection with probability `p_single`; the tail is multiplied by the
-/// number of hypotheses voting considered (Bonferroni).
+/// (tetra3's binomial test): `fixed` stars (two for a voted pair, three for a triangle) fix a
+/// hypothesis, each other star in view lands within the radius of some detection with
+/// probability `p_single`; the tail is multiplied by the number of hypotheses considered
+/// (Bonferroni).
 pub fn false_match_probability(
     matched: usize,
     in_view: usize,
     p_single: f64,
     hypotheses: u64,
+    fixed: usize,
 ) -> f64 {
-    if matched < 3 || in_view < matched {
+    if matched <= fixed || in_view < matched {
         return 1.0;
     }
-    let tail = binomial_tail(in_view - 2, matched - 2, p_single);
+    let tail = binomial_tail(in_view - fixed, matched - fixed, p_single);
     (tail * hypotheses.max(1) as f64).min(1.0)
 }
 
@@ -350,7 +354,7 @@ mod tests {
 
     #[test]
     fn false_match_probability_needs_three_stars() {
-        assert_eq!(false_match_probability(2, 10, 1e-4, 1), 1.0);
-        assert!(false_match_probability(6, 10, 1e-4, 1000) < 1e-9);
+        assert_eq!(false_match_probability(2, 10, 1e-4, 1, 2), 1.0);
+        assert!(false_match_probability(6, 10, 1e-4, 1000, 2) < 1e-9);
     }
 }

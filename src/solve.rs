@@ -8,8 +8,9 @@ use crate::detect::{self, DetectSettings, Detection};
 use crate::frame::Frame;
 use crate::identify::{self, IdentifySettings};
 use crate::record::{MatchRecord, Record, Status, Timing};
-use crate::refine::{self, RefineSettings};
+use crate::refine::{self, RefineSettings, Refined};
 use crate::table::{self, PairTable, TableOrigin};
+use crate::triangle;
 use anyhow::Result;
 use nalgebra::Vector3;
 use std::collections::HashMap;
@@ -225,14 +226,42 @@ impl Solver {
         }
     }
 
-    /// Verification, attitude, refinement and acceptance after the vote; refinement uses the
-    /// star positions at the frame's `epoch` when it has one.
+    /// Verification, attitude, refinement and acceptance after the vote, and the triangle
+    /// fallback when the vote's candidates hold no consistent set; refinement uses the star
+    /// positions at the frame's `epoch` when it has one.
     pub fn finish(
         &self,
         detections: &[Detection],
         p: &Prepared,
         voted: &identify::VoteResult,
         epoch: Option<f64>,
+    ) -> Outcome {
+        let at_epoch = self.refs_at(epoch);
+        let refs = at_epoch.as_deref().unwrap_or(&self.refs);
+        let outcome = self.finish_vote(detections, p, voted, refs);
+        if matches!(outcome, Outcome::Solved(_)) || p.n_vote < 4 {
+            return outcome;
+        }
+        self.finish_triangles(detections, p, voted.hypotheses, refs)
+            .map_or(outcome, Outcome::Solved)
+    }
+
+    /// Refinement settings for this solver: the scale is fitted when it was searched.
+    fn refine_settings(&self) -> RefineSettings {
+        let mut rs = self.settings.refine;
+        if self.scales.len() > 1 && rs.fit == refine::CameraFit::None {
+            rs.fit = refine::CameraFit::Scale;
+        }
+        rs
+    }
+
+    /// The vote's path: the consistent set of candidates, Wahba, refinement.
+    fn finish_vote(
+        &self,
+        detections: &[Detection],
+        p: &Prepared,
+        voted: &identify::VoteResult,
+        refs: &RefCatalog,
     ) -> Outcome {
         let s = &self.settings;
         let vectors = &p.vectors;
@@ -251,8 +280,6 @@ impl Solver {
         if ids.len() < 2 {
             return Outcome::Unsolved("no_consistent_match");
         }
-        let at_epoch = self.refs_at(epoch);
-        let refs = at_epoch.as_deref().unwrap_or(&self.refs);
         let cam: Vec<_> = ids.iter().map(|m| vectors[m.star]).collect();
         let icrs: Vec<_> = ids
             .iter()
@@ -261,21 +288,11 @@ impl Solver {
         let Some(r0) = wahba(&cam, &icrs) else {
             return Outcome::Unsolved("no_consistent_match");
         };
-        let mut refine_settings = s.refine;
-        if self.scales.len() > 1 && refine_settings.fit == refine::CameraFit::None {
-            // The scale was searched: fit it.
-            refine_settings.fit = refine::CameraFit::Scale;
-        }
         // Every scale tried multiplies the hypotheses a chance match could come from.
         let hypotheses = voted.hypotheses.saturating_mul(self.scales.len() as u64);
-        let Some(refined) = refine::refine(
-            r0,
-            detections,
-            refs,
-            &p.camera,
-            hypotheses,
-            &refine_settings,
-        ) else {
+        let rs = self.refine_settings();
+        let Some(refined) = refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &rs)
+        else {
             return Outcome::Unsolved("no_consistent_match");
         };
         if refined.false_match_prob > s.refine.max_false_prob {
@@ -290,6 +307,29 @@ impl Solver {
             return Outcome::Unsolved("low_confidence");
         }
         Outcome::Solved(refined)
+    }
+
+    /// The triangle fallback (see [`triangle`]): the first confirmed triangle, in brightness
+    /// order, whose refined attitude passes the false-match test. That test counts the vote's
+    /// hypotheses and every triangle's, for every scale tried, and three stars as fixed.
+    fn finish_triangles(
+        &self,
+        detections: &[Detection],
+        p: &Prepared,
+        vote_hypotheses: u64,
+        refs: &RefCatalog,
+    ) -> Option<Refined> {
+        let vectors = &p.vectors[..p.n_vote];
+        let (hyps, matched) = triangle::triangles(&self.table, &p.ranges, vectors, &self.refs);
+        let hypotheses = (vote_hypotheses + matched).saturating_mul(self.scales.len() as u64);
+        let rs = self.refine_settings();
+        hyps.iter().find_map(|t| {
+            let cam = t.stars.map(|i| vectors[i]);
+            let icrs = t.refs.map(|id| refs.stars[id as usize].v);
+            let r0 = wahba(&cam, &icrs)?;
+            let refined = refine::refine(r0, detections, refs, &p.camera, hypotheses, 3, &rs)?;
+            (refined.false_match_prob <= self.settings.refine.max_false_prob).then_some(refined)
+        })
     }
 
     /// Solve a decoded frame on the CPU.

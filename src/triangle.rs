@@ -1,0 +1,141 @@
+//! Side-side-side triangle matching (seed 002's final step, without its radial features): the
+//! fallback when voting finds no consistent set.
+//!
+//! Voting ranks each image star's catalog candidates by how many pairs agree with them. In a
+//! dense catalog (a narrow field with a deep magnitude limit) with many false detections among
+//! the voters, chance candidates collect as many votes as the true ones, which then fall out of
+//! the kept candidates. A triangle asks more of chance: three catalog stars whose three
+//! distances all match three image stars, with the same handedness. Each match fixes an
+//! attitude that refinement then tests against every star in view (the false-match probability
+//! counts every triangle hypothesis tried, on top of the vote's).
+
+use crate::catalog::RefCatalog;
+use crate::cpu::vote::PairRange;
+use crate::table::PairTable;
+use nalgebra::Vector3;
+use std::collections::{HashMap, HashSet};
+
+/// The brightest image stars that form triangles (56 triangles for 8).
+pub const TRIANGLE_STARS: usize = 8;
+
+/// At most this many confirmed triangles per frame and scale are refined.
+pub const MAX_HYPOTHESES: usize = 1000;
+
+/// A hypothesis: image stars `stars` are catalog stars `refs`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Triangle {
+    pub stars: [usize; 3],
+    pub refs: [u32; 3],
+}
+
+/// Catalog pairs of one image pair: each star's partners, and the pairs as a set.
+struct Side {
+    partners: HashMap<u32, Vec<u32>>,
+    pairs: HashSet<(u32, u32)>,
+}
+
+impl Side {
+    fn new(table: &PairTable, r: &PairRange) -> Side {
+        let mut partners: HashMap<u32, Vec<u32>> = HashMap::new();
+        let mut pairs = HashSet::new();
+        for row in table.range(r.lo, r.hi) {
+            let (a, b) = table.pair(row);
+            partners.entry(a).or_default().push(b);
+            partners.entry(b).or_default().push(a);
+            pairs.insert((a.min(b), a.max(b)));
+        }
+        Side { partners, pairs }
+    }
+
+    fn has(&self, a: u32, b: u32) -> bool {
+        self.pairs.contains(&(a.min(b), a.max(b)))
+    }
+}
+
+/// Triangle hypotheses among the brightest `TRIANGLE_STARS` of the voting stars, brightest
+/// triangles first (by the sum of their ranks, then lexicographically), each confirmed by a
+/// fourth star whose three distances to the triangle's catalog stars match too (Mortari's
+/// pyramid): chance rarely passes that, so few hypotheses reach refinement. At most
+/// `MAX_HYPOTHESES`. `ranges` are the vote's pair ranges; `vectors` the stars' camera-frame
+/// directions; handedness must agree with the catalog's (a proper rotation keeps it).
+/// Returns also how many catalog triangles matched before confirmation: the hypotheses a
+/// chance match could have come from.
+pub fn triangles(
+    table: &PairTable,
+    ranges: &[PairRange],
+    vectors: &[Vector3<f64>],
+    refs: &RefCatalog,
+) -> (Vec<Triangle>, u64) {
+    let n = vectors.len().min(TRIANGLE_STARS);
+    let sides: HashMap<(usize, usize), Side> = ranges
+        .iter()
+        .filter(|r| (r.i as usize) < n && (r.j as usize) < n)
+        .map(|r| {
+            let (i, j) = (r.i.min(r.j) as usize, r.i.max(r.j) as usize);
+            ((i, j), Side::new(table, r))
+        })
+        .collect();
+    let side = |a: usize, b: usize| sides.get(&(a.min(b), a.max(b)));
+    let v = |id: u32| refs.stars[id as usize].v;
+    let mut order: Vec<[usize; 3]> = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            for k in j + 1..n {
+                order.push([i, j, k]);
+            }
+        }
+    }
+    order.sort_by_key(|t| (t[0] + t[1] + t[2], *t));
+    let mut out = Vec::new();
+    let mut matched = 0u64;
+    for [i, j, k] in order {
+        let (Some(ij), Some(ik), Some(jk)) = (side(i, j), side(i, k), side(j, k)) else {
+            continue;
+        };
+        let handed = vectors[i].cross(&vectors[j]).dot(&vectors[k]) > 0.0;
+        // Rows in table order, each pair both ways round: deterministic.
+        let mut rows: Vec<(u32, u32)> = ij.pairs.iter().copied().collect();
+        rows.sort_unstable();
+        for (a, b) in rows {
+            for (p, q) in [(a, b), (b, a)] {
+                let Some(third) = ik.partners.get(&p) else {
+                    continue;
+                };
+                let mut rs: Vec<u32> = third
+                    .iter()
+                    .copied()
+                    .filter(|&r| r != q && jk.has(q, r))
+                    .collect();
+                rs.sort_unstable();
+                rs.dedup();
+                for r in rs {
+                    if (v(p).cross(&v(q)).dot(&v(r)) > 0.0) != handed {
+                        continue;
+                    }
+                    matched += 1;
+                    let confirmed = (0..n).filter(|l| ![i, j, k].contains(l)).any(|l| {
+                        let (Some(il), Some(jl), Some(kl)) = (side(i, l), side(j, l), side(k, l))
+                        else {
+                            return false;
+                        };
+                        il.partners.get(&p).is_some_and(|ss| {
+                            ss.iter()
+                                .any(|&s| s != q && s != r && jl.has(q, s) && kl.has(r, s))
+                        })
+                    });
+                    if !confirmed {
+                        continue;
+                    }
+                    out.push(Triangle {
+                        stars: [i, j, k],
+                        refs: [p, q, r],
+                    });
+                    if out.len() == MAX_HYPOTHESES {
+                        return (out, matched);
+                    }
+                }
+            }
+        }
+    }
+    (out, matched)
+}
