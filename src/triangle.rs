@@ -13,7 +13,7 @@ use crate::catalog::RefCatalog;
 use crate::cpu::vote::PairRange;
 use crate::table::PairTable;
 use nalgebra::Vector3;
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 
 /// The brightest image stars that form triangles (56 triangles for 8).
 pub const TRIANGLE_STARS: usize = 8;
@@ -28,27 +28,44 @@ pub struct Triangle {
     pub refs: [u32; 3],
 }
 
-/// Catalog pairs of one image pair: each star's partners, and the pairs as a set.
+/// Catalog pairs of one image pair, sorted for lookups by binary search (faster here than
+/// hashing: a side holds thousands of pairs and is probed millions of times).
 struct Side {
-    partners: HashMap<u32, Vec<u32>>,
-    pairs: HashSet<(u32, u32)>,
+    /// (star, partner), both ways round, sorted.
+    partners: Vec<(u32, u32)>,
+    /// The pairs as `min << 16 | max`, sorted.
+    keys: Vec<u32>,
 }
 
 impl Side {
     fn new(table: &PairTable, r: &PairRange) -> Side {
-        let mut partners: HashMap<u32, Vec<u32>> = HashMap::new();
-        let mut pairs = HashSet::new();
-        for row in table.range(r.lo, r.hi) {
+        let rows = table.range(r.lo, r.hi);
+        let mut partners = Vec::with_capacity(2 * rows.len());
+        let mut keys = Vec::with_capacity(rows.len());
+        for row in rows {
             let (a, b) = table.pair(row);
-            partners.entry(a).or_default().push(b);
-            partners.entry(b).or_default().push(a);
-            pairs.insert((a.min(b), a.max(b)));
+            partners.push((a, b));
+            partners.push((b, a));
+            keys.push(a.min(b) << 16 | a.max(b));
         }
-        Side { partners, pairs }
+        partners.sort_unstable();
+        keys.sort_unstable();
+        Side { partners, keys }
+    }
+
+    /// The partners of catalog star `a` on this side.
+    fn of(&self, a: u32) -> impl Iterator<Item = u32> + '_ {
+        let start = self.partners.partition_point(|&(x, _)| x < a);
+        self.partners[start..]
+            .iter()
+            .take_while(move |&&(x, _)| x == a)
+            .map(|&(_, b)| b)
     }
 
     fn has(&self, a: u32, b: u32) -> bool {
-        self.pairs.contains(&(a.min(b), a.max(b)))
+        self.keys
+            .binary_search(&(a.min(b) << 16 | a.max(b)))
+            .is_ok()
     }
 }
 
@@ -93,22 +110,11 @@ pub fn triangles(
             continue;
         };
         let handed = vectors[i].cross(&vectors[j]).dot(&vectors[k]) > 0.0;
-        // Rows in table order, each pair both ways round: deterministic.
-        let mut rows: Vec<(u32, u32)> = ij.pairs.iter().copied().collect();
-        rows.sort_unstable();
-        for (a, b) in rows {
-            for (p, q) in [(a, b), (b, a)] {
-                let Some(third) = ik.partners.get(&p) else {
-                    continue;
-                };
-                let mut rs: Vec<u32> = third
-                    .iter()
-                    .copied()
-                    .filter(|&r| r != q && jk.has(q, r))
-                    .collect();
-                rs.sort_unstable();
-                rs.dedup();
-                for r in rs {
+        // Each pair both ways round, in sorted order: deterministic.
+        for &(p, q) in &ij.partners {
+            {
+                // Partners come sorted and once each (`of` walks the sorted pairs).
+                for r in ik.of(p).filter(|&r| r != q && jk.has(q, r)) {
                     if (v(p).cross(&v(q)).dot(&v(r)) > 0.0) != handed {
                         continue;
                     }
@@ -118,10 +124,8 @@ pub fn triangles(
                         else {
                             return false;
                         };
-                        il.partners.get(&p).is_some_and(|ss| {
-                            ss.iter()
-                                .any(|&s| s != q && s != r && jl.has(q, s) && kl.has(r, s))
-                        })
+                        il.of(p)
+                            .any(|s| s != q && s != r && jl.has(q, s) && kl.has(r, s))
                     });
                     if !confirmed {
                         continue;

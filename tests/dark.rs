@@ -10,17 +10,19 @@ use std::path::Path;
 
 const SIZE: u32 = 512;
 
-/// 60 bright 2×2 blobs at fixed places, brighter than most stars.
+/// 120 bright 3×3 blobs at fixed places, brighter than all but the brightest stars.
 fn pattern() -> Vec<u16> {
     let mut p = vec![0u16; (SIZE * SIZE) as usize];
     let mut state = 12345u32;
-    for _ in 0..60 {
+    for _ in 0..120 {
         state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
-        let x = (state >> 8) % (SIZE - 2);
+        let x = (state >> 8) % (SIZE - 3);
         state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
-        let y = (state >> 8) % (SIZE - 2);
-        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-            p[((y + dy) * SIZE + x + dx) as usize] = 150;
+        let y = (state >> 8) % (SIZE - 3);
+        for dy in 0..3 {
+            for dx in 0..3 {
+                p[((y + dy) * SIZE + x + dx) as usize] = 210;
+            }
         }
     }
     p
