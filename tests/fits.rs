@@ -79,30 +79,15 @@ fn fits_frames_solve_at_their_own_epoch() {
         let path = dir.join(format!("f{k}.fits"));
         write_fits(&path, 640, 480, &pixels, k % 2 == 1, "2030-01-01T12:00:00");
     }
-    let out = common::gpustar()
-        .arg("batch")
-        .arg(&dir)
-        .args([
-            "--fov-deg",
-            "15",
-            "--mag-limit",
-            "6",
-            "--backend",
-            "cpu",
-            "-q",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let records: Vec<serde_json::Value> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let records = common::run_records(common::gpustar().arg("batch").arg(&dir).args([
+        "--fov-deg",
+        "15",
+        "--mag-limit",
+        "6",
+        "--backend",
+        "cpu",
+        "-q",
+    ]));
     assert_eq!(records.len(), 4);
     // 2030-01-01T12:00 UT is JD 2462503.0: 2000 + 10957.5 / 365.25 = 2029.9999316.
     let epoch = 2000.0 + (2_462_503.0 - 2_451_545.0) / 365.25;

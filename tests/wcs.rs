@@ -96,38 +96,28 @@ fn wcs_headers_map_catalog_stars_to_their_centroids_and_frames_are_annotated() {
         "width = 800\nheight = 600\nfx_px = 2500.0\nfy_px = 2540.0\n",
     )
     .unwrap();
-    let out = common::gpustar()
-        .arg("batch")
-        .arg(&sim)
-        .arg("--camera")
-        .arg(&given)
-        .args([
-            "--mag-limit",
-            "6",
-            "--fit",
-            "distortion",
-            "--fov-tolerance",
-            "0.01",
-            "--backend",
-            "cpu",
-            "-q",
-        ])
-        .arg("--wcs-dir")
-        .arg(&wcs)
-        .arg("--annotate-dir")
-        .arg(&ann)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let records = common::run_records(
+        common::gpustar()
+            .arg("batch")
+            .arg(&sim)
+            .arg("--camera")
+            .arg(&given)
+            .args([
+                "--mag-limit",
+                "6",
+                "--fit",
+                "distortion",
+                "--fov-tolerance",
+                "0.01",
+                "--backend",
+                "cpu",
+                "-q",
+            ])
+            .arg("--wcs-dir")
+            .arg(&wcs)
+            .arg("--annotate-dir")
+            .arg(&ann),
     );
-    let records: Vec<serde_json::Value> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
     assert_eq!(records.len(), 4);
     let mut checked = 0;
     let mut sip = 0;

@@ -29,6 +29,21 @@ pub fn gpustar() -> std::process::Command {
     c
 }
 
+/// Run a gpustar command that must succeed; its records (JSON Lines on stdout).
+pub fn run_records(cmd: &mut std::process::Command) -> Vec<serde_json::Value> {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
 /// The GPU (lavapipe in CI), or None with a printed reason. In CI (`CI=true`) a missing
 /// adapter fails the test instead: GPU = CPU must be checked there.
 pub fn gpu(test: &str) -> Option<gpustar::gpu::Gpu> {
