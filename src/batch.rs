@@ -308,7 +308,7 @@ impl GpuRunner {
             Err(e) => anyhow::bail!("{e}"),
         };
         let mut outcomes: Vec<Outcome> = vec![Outcome::Unsolved("too_few_stars"); frames.len()];
-        for h in 0..solver.scales.len() {
+        for h in 0..solver.passes.len() {
             let prepared: Vec<(usize, Prepared)> = detections
                 .iter()
                 .enumerate()

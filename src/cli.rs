@@ -244,11 +244,15 @@ pub struct SolveOpts {
     #[arg(long, default_value_t = 5.0)]
     pub sigma: f32,
     /// Brightest detected stars that take part in the vote.
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = 40)]
     pub vote_stars: usize,
     /// Pair distance tolerance from centroid errors, pixels.
     #[arg(long, default_value_t = 0.5)]
     pub pair_tol_px: f64,
+    /// Do not retry frames that fail with wide tolerances (pair tolerance 3 px, match radius
+    /// 5 px, for centroids off by a pixel or more).
+    #[arg(long)]
+    pub no_wide_retry: bool,
     /// Pair distance tolerance from focal-length and distortion errors, relative.
     #[arg(long, default_value_t = 0.0002)]
     pub scale_tol: f64,
@@ -304,6 +308,10 @@ pub struct SimulateArgs {
     /// Hot pixels per frame.
     #[arg(long, default_value_t = 5)]
     pub hot_pixels: usize,
+    /// Centroid noise: draw each catalog star this far off its true place (Gaussian sigma in
+    /// x and in y, pixels); the truth keeps the true places.
+    #[arg(long, default_value_t = 0.0)]
+    pub centroid_noise_px: f64,
     /// Bits per pixel: 8 or 16.
     #[arg(long, default_value_t = 8)]
     pub bits: u8,
@@ -508,6 +516,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     let mut s = settings(&o.catalog, camera_mag);
     s.detect.k_sigma = o.sigma;
     s.identify.vote_stars = o.vote_stars;
+    s.wide_retry = !o.no_wide_retry;
     s.identify.pair_tol_px = o.pair_tol_px;
     s.identify.scale_tol = o.scale_tol;
     s.refine.match_radius_px = o.match_radius_px;
@@ -801,6 +810,7 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         bits: a.bits,
         false_stars: a.false_stars,
         hot_pixels: a.hot_pixels,
+        centroid_noise_px: a.centroid_noise_px,
         camera: match &a.camera {
             Some(p) => Some(Camera::from_toml_file(p)?.0),
             None => None,
@@ -808,7 +818,8 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         ..SimSettings::default()
     };
     let t0 = Instant::now();
-    simulate::write_set(&catalog, &s, &a.out, |_| {})?;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    simulate::write_set(&catalog, &s, &a.out, threads, |_| {})?;
     eprintln!(
         "gpustar: wrote {} frames, truth.jsonl and camera.toml to {} in {:.1} s",
         a.frames,

@@ -23,6 +23,10 @@ pub struct FrameVerdict {
     pub error_arcsec: Option<f64>,
     /// Matches whose HIP is not a truth star of this frame within `id_tol_px` of the centroid.
     pub false_ids: usize,
+    /// The other matches: stars identified correctly.
+    pub correct_ids: usize,
+    /// The record's identification time (ms).
+    pub identify_ms: f64,
     /// Catalog stars whose centre falls on the frame (from the truth file).
     pub stars_in_view: usize,
 }
@@ -90,6 +94,8 @@ pub fn evaluate(
             correct: false,
             error_arcsec: None,
             false_ids: 0,
+            correct_ids: 0,
+            identify_ms: rec.timing_ms.identify,
             stars_in_view: t.stars.len(),
         };
         match rec.status {
@@ -123,7 +129,9 @@ pub fn evaluate(
                                 .is_some_and(|(x, y)| (x - m.x).hypot(y - m.y) <= id_tol_px)
                         }
                     };
-                    if !ok {
+                    if ok {
+                        v.correct_ids += 1;
+                    } else {
                         v.false_ids += 1;
                     }
                 }

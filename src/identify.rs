@@ -25,7 +25,7 @@ pub struct IdentifySettings {
 impl Default for IdentifySettings {
     fn default() -> Self {
         IdentifySettings {
-            vote_stars: 30,
+            vote_stars: 40,
             pair_tol_px: 0.5,
             scale_tol: 0.0002,
             candidate_nodes: 512,

@@ -46,6 +46,9 @@ pub struct SimSettings {
     pub false_stars: usize,
     /// Hot pixels (single bright pixels) per frame.
     pub hot_pixels: usize,
+    /// Gaussian error (sigma, pixels, in x and in y) of where each catalog star is drawn,
+    /// while the truth keeps its true place: the centroid noise of star-tracker studies.
+    pub centroid_noise_px: f64,
     /// A full camera model (non-square pixels, principal point, distortion, mirror) instead
     /// of `width`, `height` and `fov_x_deg`.
     pub camera: Option<Camera>,
@@ -80,6 +83,7 @@ impl Default for SimSettings {
             bits: 8,
             false_stars: 3,
             hot_pixels: 5,
+            centroid_noise_px: 0.0,
             camera: None,
         }
     }
@@ -169,6 +173,12 @@ pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u
         1.0 - s.vignetting * (dx * dx + dy * dy) / rmax2.max(1.0)
     };
     let margin = 4.0 * s.psf_sigma_px;
+    let mut noise_rng = ChaCha8Rng::seed_from_u64(s.seed);
+    noise_rng.set_stream(index as u64 | 1 << 63);
+    let noise = (s.centroid_noise_px > 0.0)
+        .then(|| Normal::new(0.0, s.centroid_noise_px))
+        .transpose()
+        .context("centroid noise")?;
     let mut signal = vec![0f64; (w * h) as usize];
     let mut stars = Vec::new();
     let boresight = r.transpose() * Vector3::z();
@@ -186,7 +196,13 @@ pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u
             continue;
         }
         let e = s.flux_mag0_e * 10f64.powf(-0.4 * star.mag) * vig(x, y);
-        add_spot(&mut signal, w, h, x, y, e, s.psf_sigma_px);
+        // Drawn off its true place by the centroid noise, from a stream of its own: the
+        // frame is otherwise the same as without noise (sky, false stars, hot pixels).
+        let (dx, dy) = match noise {
+            Some(n) => (n.sample(&mut noise_rng), n.sample(&mut noise_rng)),
+            None => (0.0, 0.0),
+        };
+        add_spot(&mut signal, w, h, x + dx, y + dy, e, s.psf_sigma_px);
         if camera.contains(x, y) {
             stars.push(TruthStar {
                 hip: star.hip,
@@ -260,39 +276,74 @@ pub fn frame_name(index: usize) -> String {
     format!("sim_{index:05}.png")
 }
 
-/// Write `s.frames` frames, `truth.jsonl` and `camera.toml` into `out`.
+/// Write `s.frames` frames, `truth.jsonl` and `camera.toml` into `out`, rendering on
+/// `threads` threads (frames are independent: each has its own random stream, so the files do
+/// not depend on the thread count). `progress` gets the number of frames written so far.
 pub fn write_set(
     catalog: &Catalog,
     s: &SimSettings,
     out: &Path,
+    threads: usize,
     mut progress: impl FnMut(usize),
 ) -> Result<()> {
     if s.bits != 8 && s.bits != 16 {
         bail!("--bits must be 8 or 16, got {}", s.bits);
     }
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let camera = s.camera()?;
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let (tx, rx) = crossbeam_channel::unbounded::<(usize, Result<Truth>)>();
+    let mut truths: Vec<Option<Truth>> = vec![None; s.frames];
+    std::thread::scope(|scope| -> Result<()> {
+        for _ in 0..threads.clamp(1, s.frames.max(1)) {
+            let (tx, next, camera) = (tx.clone(), &next, &camera);
+            scope.spawn(move || {
+                loop {
+                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    if k >= s.frames {
+                        break;
+                    }
+                    let done = render(catalog, s, k).and_then(|(pixels, truth)| {
+                        let path = out.join(&truth.file);
+                        write_png(&path, camera.width, camera.height, &pixels, s.bits)
+                            .with_context(|| format!("cannot write {}", path.display()))?;
+                        Ok(truth)
+                    });
+                    let failed = done.is_err();
+                    if tx.send((k, done)).is_err() || failed {
+                        // Stop taking frames; the receiver reports the error.
+                        next.store(s.frames, std::sync::atomic::Ordering::Relaxed);
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        for (written, (k, truth)) in rx.iter().enumerate() {
+            truths[k] = Some(truth?);
+            progress(written + 1);
+        }
+        Ok(())
+    })?;
     let mut truth_file = std::io::BufWriter::new(
         std::fs::File::create(out.join("truth.jsonl")).context("cannot create truth.jsonl")?,
     );
-    let camera = s.camera()?;
-    for k in 0..s.frames {
-        let (pixels, truth) = render(catalog, s, k)?;
-        let path = out.join(&truth.file);
-        write_png(&path, camera.width, camera.height, &pixels, s.bits)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        writeln!(truth_file, "{}", serde_json::to_string(&truth)?)?;
-        progress(k + 1);
+    for truth in truths.iter().flatten() {
+        writeln!(truth_file, "{}", serde_json::to_string(truth)?)?;
     }
     truth_file.flush()?;
+    // The camera file carries the limiting magnitude, so that batch uses the catalog as deep
+    // as the frames are and no deeper.
     let text = match &s.camera {
         None => format!(
-            "# written by gpustar simulate\nwidth = {}\nheight = {}\nfov_x_deg = {}\n",
-            s.width, s.height, s.fov_x_deg
+            "# written by gpustar simulate\nwidth = {}\nheight = {}\nfov_x_deg = {}\n\
+             mag_limit = {}\n",
+            s.width, s.height, s.fov_x_deg, s.mag_limit
         ),
         Some(c) => format!(
             "# written by gpustar simulate\nwidth = {}\nheight = {}\nfx_px = {}\nfy_px = {}\n\
-             cx_px = {}\ncy_px = {}\nk1 = {}\nk2 = {}\nmirrored = {}\n",
-            c.width, c.height, c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.mirrored
+             cx_px = {}\ncy_px = {}\nk1 = {}\nk2 = {}\nmirrored = {}\nmag_limit = {}\n",
+            c.width, c.height, c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.mirrored, s.mag_limit
         ),
     };
     std::fs::write(out.join("camera.toml"), text).context("cannot write camera.toml")?;

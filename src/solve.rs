@@ -35,6 +35,9 @@ pub struct Settings {
     /// When the scale is uncertain: the range of the true focal length relative to the
     /// camera's, (lower, upper). The solver tries scales across it.
     pub scale_range: Option<(f64, f64)>,
+    /// Frames that do not solve are tried again with wide tolerances
+    /// ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
+    pub wide_retry: bool,
 }
 
 impl Default for Settings {
@@ -49,6 +52,7 @@ impl Default for Settings {
             refine: RefineSettings::default(),
             table_cache: true,
             scale_range: None,
+            wide_retry: true,
         }
     }
 }
@@ -78,6 +82,9 @@ pub struct Solver {
     pub table_origin: TableOrigin,
     /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
     pub scales: Vec<f64>,
+    /// The hypotheses tried in turn until one solves: every scale with the settings'
+    /// tolerances, then (when `wide_retry`) every scale again with the wide ones.
+    pub passes: Vec<Pass>,
     /// `refs` moved to the epochs of frames that carry their own date, by day.
     epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
 }
@@ -101,6 +108,21 @@ pub fn scale_hypotheses(lo: f64, hi: f64) -> Vec<f64> {
     v
 }
 
+/// One way of trying a frame: a focal-length factor and whether the tolerances are wide.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pass {
+    pub scale: f64,
+    pub wide: bool,
+}
+
+/// The wide retry's pair tolerance and match radius (pixels): for frames whose centroids are
+/// off by a pixel or more (blur, defocus, coarse centroiding), which the settings' tolerances
+/// (tuned for sub-pixel centroids) reject. A frame gets them only after failing with those;
+/// the false-match test counts the extra hypotheses. Chosen with the centroid-noise sweep of
+/// `scripts/study.py` (1.5 px noise: 32 % of frames solve without the retry, 96 % with it).
+pub const WIDE_PAIR_TOL_PX: f64 = 3.0;
+pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
+
 /// A frame's input to the vote.
 #[derive(Clone, Debug)]
 pub struct Prepared {
@@ -113,6 +135,10 @@ pub struct Prepared {
     pub n_vote: usize,
     /// Candidates kept per star.
     pub k: usize,
+    /// The identification settings of this pass (tolerances).
+    pub identify: IdentifySettings,
+    /// Refinement settings of this pass (match radius, what is fitted).
+    pub refine: RefineSettings,
 }
 
 /// What the identification of one frame found (before it becomes a record).
@@ -146,6 +172,11 @@ impl Solver {
             Some((lo, hi)) => scale_hypotheses(lo, hi),
             None => vec![1.0],
         };
+        let wide = [false, true];
+        let passes = wide[..1 + settings.wide_retry as usize]
+            .iter()
+            .flat_map(|&wide| scales.iter().map(move |&scale| Pass { scale, wide }))
+            .collect();
         // Pairs as far apart as the widest field tried (the shortest focal length).
         let shortest = scales.iter().copied().fold(f64::MAX, f64::min);
         let (table, table_origin) = table::load_or_build(
@@ -161,6 +192,7 @@ impl Solver {
             table,
             table_origin,
             scales,
+            passes,
             epochs: Mutex::new(HashMap::new()),
         })
     }
@@ -178,18 +210,28 @@ impl Solver {
         )
     }
 
-    /// What the vote needs from a detection list at scale hypothesis `h` (an index into
-    /// `scales`): the stars' directions and the pair ranges of the brightest; None when there
-    /// are too few stars to identify.
+    /// What the vote needs from a detection list for pass `h` (an index into `passes`): the
+    /// stars' directions and the pair ranges of the brightest; None when there are too few
+    /// stars to identify.
     pub fn prepare(&self, detections: &[Detection], h: usize) -> Option<Prepared> {
+        let pass = self.passes[h];
         let mut s = self.settings.identify;
+        let mut rs = self.settings.refine;
         if detections.len() < 3 {
             return None;
         }
-        let camera = scaled(&self.camera, self.scales[h]);
+        let camera = scaled(&self.camera, pass.scale);
         if self.scales.len() > 1 {
-            // Each hypothesis stands for ±SCALE_STEP/2 around its focal length.
+            // Each hypothesis stands for ±SCALE_STEP/2 around its focal length, and the
+            // refinement fits the scale.
             s.scale_tol += SCALE_STEP / 2.0;
+            if rs.fit == refine::CameraFit::None {
+                rs.fit = refine::CameraFit::Scale;
+            }
+        }
+        if pass.wide {
+            s.pair_tol_px = s.pair_tol_px.max(WIDE_PAIR_TOL_PX);
+            rs.match_radius_px = rs.match_radius_px.max(WIDE_MATCH_RADIUS_PX);
         }
         let vectors: Vec<Vector3<f64>> = detections
             .iter()
@@ -202,14 +244,16 @@ impl Solver {
             k: s.candidates_per_star(n_vote),
             vectors,
             camera,
+            identify: s,
+            refine: rs,
         })
     }
 
-    /// Identify the stars of a detection list, voting on the CPU: the scales in turn until
+    /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
     /// one solves.
     pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
         let mut outcome = Outcome::Unsolved("too_few_stars");
-        for h in 0..self.scales.len() {
+        for h in 0..self.passes.len() {
             let Some(p) = self.prepare(&detections, h) else {
                 break;
             };
@@ -246,15 +290,6 @@ impl Solver {
             .map_or(outcome, Outcome::Solved)
     }
 
-    /// Refinement settings for this solver: the scale is fitted when it was searched.
-    fn refine_settings(&self) -> RefineSettings {
-        let mut rs = self.settings.refine;
-        if self.scales.len() > 1 && rs.fit == refine::CameraFit::None {
-            rs.fit = refine::CameraFit::Scale;
-        }
-        rs
-    }
-
     /// The vote's path: the consistent set of candidates, Wahba, refinement.
     fn finish_vote(
         &self,
@@ -266,16 +301,12 @@ impl Solver {
         let s = &self.settings;
         let vectors = &p.vectors;
         let n_vote = voted.candidates.len() / voted.k.max(1);
-        let mut id_settings = s.identify;
-        if self.scales.len() > 1 {
-            id_settings.scale_tol += SCALE_STEP / 2.0;
-        }
         let ids = identify::verify(
             voted,
             &vectors[..n_vote],
             &self.refs,
             &p.camera,
-            &id_settings,
+            &p.identify,
         );
         if ids.len() < 2 {
             return Outcome::Unsolved("no_consistent_match");
@@ -288,10 +319,10 @@ impl Solver {
         let Some(r0) = wahba(&cam, &icrs) else {
             return Outcome::Unsolved("no_consistent_match");
         };
-        // Every scale tried multiplies the hypotheses a chance match could come from.
-        let hypotheses = voted.hypotheses.saturating_mul(self.scales.len() as u64);
-        let rs = self.refine_settings();
-        let Some(refined) = refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &rs)
+        // Every pass tried multiplies the hypotheses a chance match could come from.
+        let hypotheses = voted.hypotheses.saturating_mul(self.passes.len() as u64);
+        let Some(refined) =
+            refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
         else {
             return Outcome::Unsolved("no_consistent_match");
         };
@@ -311,7 +342,7 @@ impl Solver {
 
     /// The triangle fallback (see [`triangle`]): the first confirmed triangle, in brightness
     /// order, whose refined attitude passes the false-match test. That test counts the vote's
-    /// hypotheses and every triangle's, for every scale tried, and three stars as fixed.
+    /// hypotheses and every triangle's, for every pass tried, and three stars as fixed.
     fn finish_triangles(
         &self,
         detections: &[Detection],
@@ -321,13 +352,13 @@ impl Solver {
     ) -> Option<Refined> {
         let vectors = &p.vectors[..p.n_vote];
         let (hyps, matched) = triangle::triangles(&self.table, &p.ranges, vectors, &self.refs);
-        let hypotheses = (vote_hypotheses + matched).saturating_mul(self.scales.len() as u64);
-        let rs = self.refine_settings();
+        let hypotheses = (vote_hypotheses + matched).saturating_mul(self.passes.len() as u64);
         hyps.iter().find_map(|t| {
             let cam = t.stars.map(|i| vectors[i]);
             let icrs = t.refs.map(|id| refs.stars[id as usize].v);
             let r0 = wahba(&cam, &icrs)?;
-            let refined = refine::refine(r0, detections, refs, &p.camera, hypotheses, 3, &rs)?;
+            let refined =
+                refine::refine(r0, detections, refs, &p.camera, hypotheses, 3, &p.refine)?;
             (refined.false_match_prob <= self.settings.refine.max_false_prob).then_some(refined)
         })
     }
