@@ -247,7 +247,7 @@ pub struct SolveOpts {
     #[arg(long, default_value_t = 40)]
     pub vote_stars: usize,
     /// Pair distance tolerance from centroid errors, pixels.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.4)]
     pub pair_tol_px: f64,
     /// Do not retry frames that fail with wide tolerances (pair tolerance 3 px, match radius
     /// 5 px, for centroids off by a pixel or more).

@@ -26,7 +26,7 @@ impl Default for IdentifySettings {
     fn default() -> Self {
         IdentifySettings {
             vote_stars: 40,
-            pair_tol_px: 0.5,
+            pair_tol_px: 0.4,
             scale_tol: 0.0002,
             candidate_nodes: 512,
         }
