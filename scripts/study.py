@@ -888,7 +888,7 @@ def chart_false_ids(sets, path):
         ax.set_ylim(0, max(bottom + [0.1]) * 1.35)
         ax.set_title(f"{lab}: double-star handling", fontsize=9)
         ax.legend(fontsize=7, loc="upper left")
-    fig.suptitle("Share of frames with 1, 2, 3+ false star IDs (label: share without; seed 000: 94.38 % → 99.98 %)",
+    fig.suptitle("Frames with 1, 2, 3+ false star IDs\n(label: share without; seed 000: 94.38 % → 99.98 %)",
                  fontsize=9)
     fig.tight_layout()
     fig.savefig(path)

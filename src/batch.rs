@@ -316,7 +316,7 @@ impl GpuRunner {
                 .filter_map(|(i, d)| solver.prepare(d, h).map(|p| (i, p)))
                 .collect();
             if prepared.is_empty() {
-                break;
+                continue;
             }
             let jobs: Vec<VoteJob> = prepared
                 .iter()

@@ -249,10 +249,10 @@ pub struct SolveOpts {
     /// Pair distance tolerance from centroid errors, pixels.
     #[arg(long, default_value_t = 0.4)]
     pub pair_tol_px: f64,
-    /// Do not retry frames that fail with wide tolerances (pair tolerance 3 px, match radius
-    /// 5 px, for centroids off by a pixel or more).
+    /// Do not retry frames that fail: first with up to 60 voting stars (when there are more
+    /// than --vote-stars), then with wide tolerances (pair 4 px, match radius 5 px).
     #[arg(long)]
-    pub no_wide_retry: bool,
+    pub no_retry: bool,
     /// Pair distance tolerance from focal-length and distortion errors, relative.
     #[arg(long, default_value_t = 0.0002)]
     pub scale_tol: f64,
@@ -516,7 +516,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     let mut s = settings(&o.catalog, camera_mag);
     s.detect.k_sigma = o.sigma;
     s.identify.vote_stars = o.vote_stars;
-    s.wide_retry = !o.no_wide_retry;
+    s.retry = !o.no_retry;
     s.identify.pair_tol_px = o.pair_tol_px;
     s.identify.scale_tol = o.scale_tol;
     s.refine.match_radius_px = o.match_radius_px;

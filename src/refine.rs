@@ -172,6 +172,73 @@ pub fn refine(
             break;
         }
     }
+    let (mut matches, scatter) = residuals(&r, &camera, dets, &det_vectors, refs, &pairs);
+    // The evidence of a match is how close it is: chance places a star within r of one of the
+    // detections with probability N·πr²/area. r is three times the scatter of the residuals
+    // (with 3 degrees of freedom taken by the fit), at least CONFIDENCE_RADIUS_FLOOR_PX, at
+    // most the match radius; matches farther out count as unmatched.
+    let radius = (3.0 * scatter).clamp(CONFIDENCE_RADIUS_FLOOR_PX, s.match_radius_px);
+    let close = matches.iter().filter(|m| m.residual_px <= radius).count();
+    let area = camera.width as f64 * camera.height as f64;
+    let p_single = (dets.len() as f64 * std::f64::consts::PI * radius * radius / area).min(1.0);
+    let false_match_prob = false_match_probability(close, in_view, p_single, hypotheses, fixed);
+    // Centroids scattered by more than a third of the match radius (blur, defocus) leave many
+    // of their stars outside it: once the solution is accepted, the attitude is fitted again to
+    // the mutual nearest stars within POLISH_RADIUS_MAX match radii, which recovers them.
+    let accepted = false_match_prob <= s.max_false_prob;
+    if accepted && s.fit == CameraFit::None && 3.0 * scatter > s.match_radius_px {
+        // The scatter of matches cut off at the match radius understates the true one.
+        let wide = POLISH_RADIUS_MAX * s.match_radius_px;
+        for _ in 0..s.rounds.max(1) {
+            let proj = stars_in_view(&r, refs, &camera);
+            let next = mutual_nearest(dets, &proj, wide);
+            if next.len() < pairs.len() {
+                break;
+            }
+            let cam: Vec<_> = next.iter().map(|&(d, _)| det_vectors[d]).collect();
+            let icrs: Vec<_> = next
+                .iter()
+                .map(|&(_, id)| refs.stars[id as usize].v)
+                .collect();
+            let Some(r1) = wahba(&cam, &icrs) else { break };
+            r = r1;
+            let stable = next == pairs;
+            pairs = next;
+            if stable {
+                break;
+            }
+        }
+        matches = residuals(&r, &camera, dets, &det_vectors, refs, &pairs).0;
+    }
+    let mut res: Vec<f64> = matches.iter().map(|m| m.residual_arcsec).collect();
+    res.sort_by(f64::total_cmp);
+    let rmse = (res.iter().map(|x| x * x).sum::<f64>() / res.len() as f64).sqrt();
+    let p90 = res[((res.len() as f64 * 0.9).ceil() as usize).clamp(1, res.len()) - 1];
+    Some(Refined {
+        r,
+        camera,
+        in_view,
+        rmse_arcsec: rmse,
+        p90_arcsec: p90,
+        max_arcsec: *res.last().unwrap(),
+        matches,
+        false_match_prob,
+    })
+}
+
+/// The polish's largest match radius, in match radii.
+const POLISH_RADIUS_MAX: f64 = 3.0;
+
+/// The matches with their residuals under `r`, and the scatter of the pixel residuals (with
+/// 3 degrees of freedom taken by the fit).
+fn residuals(
+    r: &Matrix3<f64>,
+    camera: &Camera,
+    dets: &[Detection],
+    det_vectors: &[Vector3<f64>],
+    refs: &RefCatalog,
+    pairs: &[(usize, u32)],
+) -> (Vec<Match>, f64) {
     let matches: Vec<Match> = pairs
         .iter()
         .map(|&(det, ref_id)| {
@@ -187,31 +254,9 @@ pub fn refine(
             }
         })
         .collect();
-    let mut res: Vec<f64> = matches.iter().map(|m| m.residual_arcsec).collect();
-    res.sort_by(f64::total_cmp);
-    let rmse = (res.iter().map(|x| x * x).sum::<f64>() / res.len() as f64).sqrt();
-    let p90 = res[((res.len() as f64 * 0.9).ceil() as usize).clamp(1, res.len()) - 1];
-    // The evidence of a match is how close it is: chance places a star within r of one of the
-    // detections with probability N·πr²/area. r is three times the scatter of the residuals
-    // (with 3 degrees of freedom taken by the fit), at least CONFIDENCE_RADIUS_FLOOR_PX, at
-    // most the match radius; matches farther out count as unmatched.
     let dof = (2 * matches.len()).saturating_sub(3).max(1) as f64;
     let scatter = (matches.iter().map(|m| m.residual_px.powi(2)).sum::<f64>() / dof).sqrt();
-    let radius = (3.0 * scatter).clamp(CONFIDENCE_RADIUS_FLOOR_PX, s.match_radius_px);
-    let close = matches.iter().filter(|m| m.residual_px <= radius).count();
-    let area = camera.width as f64 * camera.height as f64;
-    let p_single = (dets.len() as f64 * std::f64::consts::PI * radius * radius / area).min(1.0);
-    let false_match_prob = false_match_probability(close, in_view, p_single, hypotheses, fixed);
-    Some(Refined {
-        r,
-        camera,
-        in_view,
-        rmse_arcsec: rmse,
-        p90_arcsec: p90,
-        max_arcsec: *res.last().unwrap(),
-        matches,
-        false_match_prob,
-    })
+    (matches, scatter)
 }
 
 /// Fit attitude and camera (focal scale, and k1 with `Distortion`) to matched stars by

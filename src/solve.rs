@@ -35,9 +35,10 @@ pub struct Settings {
     /// When the scale is uncertain: the range of the true focal length relative to the
     /// camera's, (lower, upper). The solver tries scales across it.
     pub scale_range: Option<(f64, f64)>,
-    /// Frames that do not solve are tried again with wide tolerances
-    /// ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
-    pub wide_retry: bool,
+    /// Frames that do not solve are tried again: with more voting stars
+    /// ([`RETRY_VOTE_STARS`]), then with wide tolerances ([`WIDE_PAIR_TOL_PX`],
+    /// [`WIDE_MATCH_RADIUS_PX`]).
+    pub retry: bool,
 }
 
 impl Default for Settings {
@@ -52,7 +53,7 @@ impl Default for Settings {
             refine: RefineSettings::default(),
             table_cache: true,
             scale_range: None,
-            wide_retry: true,
+            retry: true,
         }
     }
 }
@@ -82,8 +83,8 @@ pub struct Solver {
     pub table_origin: TableOrigin,
     /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
     pub scales: Vec<f64>,
-    /// The hypotheses tried in turn until one solves: every scale with the settings'
-    /// tolerances, then (when `wide_retry`) every scale again with the wide ones.
+    /// The hypotheses tried in turn until one solves: every scale with the settings, then
+    /// (when `retry`) every scale with more voting stars, and every scale with wide tolerances.
     pub passes: Vec<Pass>,
     /// `refs` moved to the epochs of frames that carry their own date, by day.
     epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
@@ -108,19 +109,37 @@ pub fn scale_hypotheses(lo: f64, hi: f64) -> Vec<f64> {
     v
 }
 
-/// One way of trying a frame: a focal-length factor and whether the tolerances are wide.
+/// One way of trying a frame: a focal-length factor and what the vote is given.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pass {
     pub scale: f64,
-    pub wide: bool,
+    pub kind: PassKind,
 }
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PassKind {
+    /// The settings as given.
+    First,
+    /// Up to [`RETRY_VOTE_STARS`] stars vote (only for frames with more than `vote_stars`).
+    MoreStars,
+    /// Wide pair tolerance and match radius.
+    Wide,
+}
+
+/// Voting stars of the first retry. Many false stars (satellites, debris, glints) can outshine
+/// most real ones, so that the brightest `vote_stars` hold too few stars to outvote chance:
+/// voting with more of the faint stars brings the real ones back. Not the default because the
+/// vote's cost grows with the square of its stars. From the study (`scripts/study.py`): at 40
+/// false stars per 18° frame, 50 % of frames solve with 40 voting stars, 99 % with this retry.
+pub const RETRY_VOTE_STARS: usize = 60;
 
 /// The wide retry's pair tolerance and match radius (pixels): for frames whose centroids are
 /// off by a pixel or more (blur, defocus, coarse centroiding), which the settings' tolerances
 /// (tuned for sub-pixel centroids) reject. A frame gets them only after failing with those;
-/// the false-match test counts the extra hypotheses. Chosen with the centroid-noise sweep of
-/// `scripts/study.py` (1.5 px noise: 32 % of frames solve without the retry, 96 % with it).
-pub const WIDE_PAIR_TOL_PX: f64 = 3.0;
+/// the false-match test counts the extra hypotheses. From the study's centroid-noise sweep:
+/// at 1.5 px noise 34 % of frames solve without the retries, 99.5 % with them (97 % with a
+/// 3 px pair tolerance).
+pub const WIDE_PAIR_TOL_PX: f64 = 4.0;
 pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
 
 /// A frame's input to the vote.
@@ -172,10 +191,10 @@ impl Solver {
             Some((lo, hi)) => scale_hypotheses(lo, hi),
             None => vec![1.0],
         };
-        let wide = [false, true];
-        let passes = wide[..1 + settings.wide_retry as usize]
+        let kinds = [PassKind::First, PassKind::MoreStars, PassKind::Wide];
+        let passes = kinds[..if settings.retry { 3 } else { 1 }]
             .iter()
-            .flat_map(|&wide| scales.iter().map(move |&scale| Pass { scale, wide }))
+            .flat_map(|&kind| scales.iter().map(move |&scale| Pass { scale, kind }))
             .collect();
         // Pairs as far apart as the widest field tried (the shortest focal length).
         let shortest = scales.iter().copied().fold(f64::MAX, f64::min);
@@ -212,13 +231,19 @@ impl Solver {
 
     /// What the vote needs from a detection list for pass `h` (an index into `passes`): the
     /// stars' directions and the pair ranges of the brightest; None when there are too few
-    /// stars to identify.
+    /// stars to identify, or the pass would add no star to the vote.
     pub fn prepare(&self, detections: &[Detection], h: usize) -> Option<Prepared> {
         let pass = self.passes[h];
         let mut s = self.settings.identify;
         let mut rs = self.settings.refine;
         if detections.len() < 3 {
             return None;
+        }
+        if pass.kind == PassKind::MoreStars {
+            if detections.len() <= s.vote_stars || s.vote_stars >= RETRY_VOTE_STARS {
+                return None;
+            }
+            s.vote_stars = RETRY_VOTE_STARS;
         }
         let camera = scaled(&self.camera, pass.scale);
         if self.scales.len() > 1 {
@@ -229,7 +254,7 @@ impl Solver {
                 rs.fit = refine::CameraFit::Scale;
             }
         }
-        if pass.wide {
+        if pass.kind == PassKind::Wide {
             s.pair_tol_px = s.pair_tol_px.max(WIDE_PAIR_TOL_PX);
             rs.match_radius_px = rs.match_radius_px.max(WIDE_MATCH_RADIUS_PX);
         }
@@ -255,7 +280,7 @@ impl Solver {
         let mut outcome = Outcome::Unsolved("too_few_stars");
         for h in 0..self.passes.len() {
             let Some(p) = self.prepare(&detections, h) else {
-                break;
+                continue;
             };
             let voted = identify::vote_cpu(&self.table, &p.ranges, p.n_vote, self.refs.len(), p.k);
             outcome = self.finish(&detections, &p, &voted, epoch);

@@ -48,11 +48,11 @@ fn noise_moves_the_stars_drawn_and_keeps_the_truth() {
 
 /// (solved, wrong): wrong = attitude more than 1° from the truth (at 1.5 px noise a correct
 /// solution's roll can be off by a few hundred arcseconds, so 0.1° would count imprecision).
-fn solve(wide_retry: bool, set: &[(Frame, Truth)]) -> (usize, usize) {
+fn solve(retry: bool, set: &[(Frame, Truth)]) -> (usize, usize) {
     let settings = Settings {
         mag_limit: Some(6.0),
         table_cache: false,
-        wide_retry,
+        retry,
         ..Settings::default()
     };
     let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
@@ -71,7 +71,7 @@ fn solve(wide_retry: bool, set: &[(Frame, Truth)]) -> (usize, usize) {
 }
 
 #[test]
-fn the_wide_retry_solves_frames_with_pixel_centroid_noise() {
+fn the_retry_solves_frames_with_pixel_centroid_noise() {
     let set = frames(&sim(1.5), 12);
     let (with, wrong_with) = solve(true, &set);
     let (without, wrong_without) = solve(false, &set);
