@@ -713,6 +713,14 @@ def plt():
     return pyplot
 
 
+def save_chart(p, fig, path):
+    """Lay out, write and close a finished chart."""
+    fig.tight_layout()
+    fig.savefig(path)
+    p.close(fig)
+    return True
+
+
 def chart_stars_in_view(sets, path):
     p = plt()
     fig, ax = p.subplots(figsize=(7, 3.6))
@@ -734,10 +742,7 @@ def chart_stars_in_view(sets, path):
     ax.set_ylabel("fraction of frames")
     ax.set_title("Stars in view")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    p.close(fig)
-    return True
+    return save_chart(p, fig, path)
 
 
 def chart_sweep(ctx, sets, sweep, path):
@@ -780,10 +785,7 @@ def chart_sweep(ctx, sets, sweep, path):
             ax.set_ylim(bottom=0)
     axes[0][0].legend(fontsize=8, loc="lower left")
     fig.suptitle(f"Sweep of {label} (base: 18° FOV, Hp ≤ 6, 3 false stars, 5 hot pixels, no centroid noise)")
-    fig.tight_layout()
-    fig.savefig(path)
-    p.close(fig)
-    return True
+    return save_chart(p, fig, path)
 
 
 def id_sets(sets):
@@ -816,10 +818,7 @@ def chart_identified(ctx, sets, path):
     ax.set_ylim(0, 105)
     ax.set_title("Fraction of the stars in view identified (cf. seed 000 Fig. 12); open markers: 10° FOV")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    p.close(fig)
-    return True
+    return save_chart(p, fig, path)
 
 
 def chart_identify_time(ctx, sets, path):
@@ -850,10 +849,7 @@ def chart_identify_time(ctx, sets, path):
     ax.set_ylabel("identification time per frame (ms, log)")
     ax.set_title("Identification time vs stars in view (cf. seed 000 Fig. 9); open markers: 10° FOV")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path)
-    p.close(fig)
-    return True
+    return save_chart(p, fig, path)
 
 
 def false_id_groups(sets):
@@ -890,10 +886,7 @@ def chart_false_ids(sets, path):
         ax.legend(fontsize=7, loc="upper left")
     fig.suptitle("Frames with 1, 2, 3+ false star IDs\n(label: share without; seed 000: 94.38 % → 99.98 %)",
                  fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path)
-    p.close(fig)
-    return True
+    return save_chart(p, fig, path)
 
 
 # ---------------------------------------------------------------------------------------------
