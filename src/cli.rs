@@ -443,13 +443,20 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let truth = simulate::read_truth(&truth)?;
             let records = evaluate::read_records(&results)?;
             let (s, frames) = evaluate::evaluate(&truth, &records, tolerance_deg, id_tolerance_px);
+            let mut text = String::new();
             if per_frame {
                 for f in &frames {
-                    println!("{}", serde_json::to_string(f)?);
+                    text += &serde_json::to_string(f)?;
+                    text.push('\n');
                 }
             }
-            println!("{}", serde_json::to_string_pretty(&s)?);
-            Ok(ExitCode::SUCCESS)
+            text += &serde_json::to_string_pretty(&s)?;
+            text.push('\n');
+            // A reader that stops early (`| head`) is not an error.
+            match std::io::stdout().lock().write_all(text.as_bytes()) {
+                Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+                _ => Ok(ExitCode::SUCCESS),
+            }
         }
         Command::Catalog(CatalogCommand::Import {
             hip2,
