@@ -792,24 +792,33 @@ def id_sets(sets):
     return [(name, lab) for name, lab in (("headline10", "10°"), ("base18", "18°")) if sets.get(name, {}).get("rows")]
 
 
-def chart_identified(ctx, sets, path):
-    p = plt()
-    fig, ax = p.subplots(figsize=(7.5, 4))
-    drawn = False
+def binned_lines(ctx, sets, select, value):
+    """Per (set at 10° and 18°, series) with rows: (set label, series, rows, bins of `value` by
+    stars in view, plot style: open markers at 10°). `select` filters the rows first."""
     for name, lab in id_sets(sets):
         for k, series in enumerate(series_order(ctx)):
             rows = sets[name]["rows"].get(series)
             if not rows:
                 continue
-            b = binned([r for r in rows if r["stars_in_view"] > 0], lambda r: r["correct_ids"] / r["stars_in_view"])
+            b = binned([r for r in rows if select(r)], value)
             if not b:
                 continue
             st = dict(style(series, k))
             if lab == "10°":
                 st["markerfacecolor"] = "white"
-            ax.plot([x["stars_in_view"] for x in b], [100 * x["mean"] for x in b],
-                    label=f"{series_label(series)}, {lab} ({len(rows)} frames)", **st)
-            drawn = True
+            yield lab, series, rows, b, st
+
+
+def chart_identified(ctx, sets, path):
+    p = plt()
+    fig, ax = p.subplots(figsize=(7.5, 4))
+    drawn = False
+    lines = binned_lines(ctx, sets, lambda r: r["stars_in_view"] > 0,
+                         lambda r: r["correct_ids"] / r["stars_in_view"])
+    for lab, series, rows, b, st in lines:
+        ax.plot([x["stars_in_view"] for x in b], [100 * x["mean"] for x in b],
+                label=f"{series_label(series)}, {lab} ({len(rows)} frames)", **st)
+        drawn = True
     if not drawn:
         p.close(fig)
         return False
@@ -825,22 +834,12 @@ def chart_identify_time(ctx, sets, path):
     p = plt()
     fig, ax = p.subplots(figsize=(7.5, 4))
     drawn = False
-    for name, lab in id_sets(sets):
-        for k, series in enumerate(series_order(ctx)):
-            rows = sets[name]["rows"].get(series)
-            if not rows:
-                continue
-            b = binned(rows, lambda r: r["identify_ms"])
-            if not b:
-                continue
-            st = dict(style(series, k))
-            if lab == "10°":
-                st["markerfacecolor"] = "white"
-            what = "T_solve" if series == CEDAR else "identify"
-            xs = [x["stars_in_view"] for x in b]
-            ax.plot(xs, [x["median"] for x in b], label=f"{series_label(series)} {what}, {lab} (median; p90 dotted)", **st)
-            ax.plot(xs, [x["p90"] for x in b], color=st["color"], linestyle=":", alpha=0.8)
-            drawn = True
+    for lab, series, _, b, st in binned_lines(ctx, sets, lambda r: True, lambda r: r["identify_ms"]):
+        what = "T_solve" if series == CEDAR else "identify"
+        xs = [x["stars_in_view"] for x in b]
+        ax.plot(xs, [x["median"] for x in b], label=f"{series_label(series)} {what}, {lab} (median; p90 dotted)", **st)
+        ax.plot(xs, [x["p90"] for x in b], color=st["color"], linestyle=":", alpha=0.8)
+        drawn = True
     if not drawn:
         p.close(fig)
         return False

@@ -156,12 +156,7 @@ pub fn refine(
             _ => CameraFit::None,
         };
         if fit == CameraFit::None {
-            let cam: Vec<_> = next.iter().map(|&(d, _)| det_vectors[d]).collect();
-            let icrs: Vec<_> = next
-                .iter()
-                .map(|&(_, id)| refs.stars[id as usize].v)
-                .collect();
-            r = wahba(&cam, &icrs)?;
+            r = fit_attitude(&next, &det_vectors, refs)?;
         } else {
             (r, camera) = fit_camera(r, &camera, dets, &next, refs, fit);
             det_vectors = vectors_of(&camera);
@@ -195,12 +190,9 @@ pub fn refine(
             if next.len() < pairs.len() {
                 break;
             }
-            let cam: Vec<_> = next.iter().map(|&(d, _)| det_vectors[d]).collect();
-            let icrs: Vec<_> = next
-                .iter()
-                .map(|&(_, id)| refs.stars[id as usize].v)
-                .collect();
-            let Some(r1) = wahba(&cam, &icrs) else { break };
+            let Some(r1) = fit_attitude(&next, &det_vectors, refs) else {
+                break;
+            };
             r = r1;
             let stable = next == pairs;
             pairs = next;
@@ -224,6 +216,20 @@ pub fn refine(
         matches,
         false_match_prob,
     })
+}
+
+/// The attitude that best maps the matched stars onto their detections (Wahba).
+fn fit_attitude(
+    pairs: &[(usize, u32)],
+    det_vectors: &[Vector3<f64>],
+    refs: &RefCatalog,
+) -> Option<Matrix3<f64>> {
+    let cam: Vec<_> = pairs.iter().map(|&(d, _)| det_vectors[d]).collect();
+    let icrs: Vec<_> = pairs
+        .iter()
+        .map(|&(_, id)| refs.stars[id as usize].v)
+        .collect();
+    wahba(&cam, &icrs)
 }
 
 /// The polish's largest match radius, in match radii.

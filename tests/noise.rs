@@ -1,12 +1,14 @@
 //! Centroid noise: `simulate --centroid-noise-px` draws stars off their true places and keeps the
-//! truth; the wide retry solves frames whose centroids are off by a pixel or more, which the
+//! truth; the retries solve frames whose centroids are off by a pixel or more, which the
 //! default tolerances (tuned for sub-pixel centroids) reject, without wrong answers.
+
+mod common;
 
 use gpustar::attitude::attitude_error;
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::frame::Frame;
-use gpustar::simulate::{SimSettings, Truth, render};
+use gpustar::simulate::{SimSettings, Truth};
 use gpustar::solve::{Outcome, Settings, Solver};
 use nalgebra::Matrix3;
 
@@ -18,27 +20,11 @@ fn sim(noise: f64) -> SimSettings {
     }
 }
 
-fn frames(s: &SimSettings, n: usize) -> Vec<(Frame, Truth)> {
-    let cat = Catalog::builtin();
-    (0..n)
-        .map(|k| {
-            let (pixels, truth) = render(&cat, s, k).unwrap();
-            let f = Frame {
-                width: s.width,
-                height: s.height,
-                pixels,
-                saturation: 255,
-            };
-            (f, truth)
-        })
-        .collect()
-}
-
 #[test]
 fn noise_moves_the_stars_drawn_and_keeps_the_truth() {
     let cat = Catalog::builtin();
-    let (clean, t0) = render(&cat, &sim(0.0), 3).unwrap();
-    let (noisy, t1) = render(&cat, &sim(1.0), 3).unwrap();
+    let (clean, t0) = gpustar::simulate::render(&cat, &sim(0.0), 3).unwrap();
+    let (noisy, t1) = gpustar::simulate::render(&cat, &sim(1.0), 3).unwrap();
     assert_eq!(
         t0, t1,
         "the truth is the same attitude and the true star places"
@@ -72,7 +58,7 @@ fn solve(retry: bool, set: &[(Frame, Truth)]) -> (usize, usize) {
 
 #[test]
 fn the_retry_solves_frames_with_pixel_centroid_noise() {
-    let set = frames(&sim(1.5), 12);
+    let set = common::rendered(&sim(1.5), 12);
     let (with, wrong_with) = solve(true, &set);
     let (without, wrong_without) = solve(false, &set);
     println!(

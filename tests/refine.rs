@@ -3,12 +3,14 @@
 //! the fit recovers it; with the focal length uncertain the scale search finds it, and a
 //! range that excludes the true scale solves nothing (no wrong answers when the scale is free).
 
+mod common;
+
 use gpustar::attitude::attitude_error;
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::frame::Frame;
 use gpustar::refine::CameraFit;
-use gpustar::simulate::{SimSettings, Truth, render};
+use gpustar::simulate::{SimSettings, Truth};
 use gpustar::solve::{Outcome, Settings, Solver};
 use nalgebra::Matrix3;
 
@@ -24,24 +26,12 @@ fn odd_camera() -> Camera {
 }
 
 fn frames(camera: &Camera, n: usize) -> Vec<(Frame, Truth)> {
-    let cat = Catalog::builtin();
     let s = SimSettings {
         camera: Some(camera.clone()),
         seed: 7,
         ..SimSettings::default()
     };
-    (0..n)
-        .map(|k| {
-            let (pixels, truth) = render(&cat, &s, k).unwrap();
-            let f = Frame {
-                width: camera.width,
-                height: camera.height,
-                pixels,
-                saturation: 255,
-            };
-            (f, truth)
-        })
-        .collect()
+    common::rendered(&s, n)
 }
 
 fn settings() -> Settings {

@@ -164,6 +164,27 @@ pub fn drawn(rows: &[&str]) -> gpustar::frame::Frame {
     }
 }
 
+/// Frames 0..n of a simulation, decoded as batch would see them, with their truth.
+pub fn rendered(
+    s: &gpustar::simulate::SimSettings,
+    n: usize,
+) -> Vec<(gpustar::frame::Frame, gpustar::simulate::Truth)> {
+    let cat = gpustar::catalog::Catalog::builtin();
+    let camera = s.camera().unwrap();
+    (0..n)
+        .map(|k| {
+            let (pixels, truth) = gpustar::simulate::render(&cat, s, k).unwrap();
+            let frame = gpustar::frame::Frame {
+                width: camera.width,
+                height: camera.height,
+                pixels,
+                saturation: if s.bits == 8 { 255 } else { 65535 },
+            };
+            (frame, truth)
+        })
+        .collect()
+}
+
 /// A solver for a pinhole camera with catalog stars to magnitude 6 (no table cache).
 pub fn solver(fov: f64, size: (u32, u32)) -> gpustar::solve::Solver {
     let s = gpustar::solve::Settings {
