@@ -249,8 +249,9 @@ pub struct SolveOpts {
     /// Pair distance tolerance from centroid errors, pixels.
     #[arg(long, default_value_t = 0.4)]
     pub pair_tol_px: f64,
-    /// Do not retry frames that fail: first with up to 60 voting stars (when there are more
-    /// than --vote-stars), then with wide tolerances (pair 4 px, match radius 5 px).
+    /// Do not retry frames that fail: first with up to 60 voting stars, then with the voters
+    /// spread over a grid of 16 cells (both when there are more stars than --vote-stars), then
+    /// with wide tolerances (pair 4 px, match radius 5 px).
     #[arg(long)]
     pub no_retry: bool,
     /// Pair distance tolerance from focal-length and distortion errors, relative.

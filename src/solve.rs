@@ -36,8 +36,8 @@ pub struct Settings {
     /// camera's, (lower, upper). The solver tries scales across it.
     pub scale_range: Option<(f64, f64)>,
     /// Frames that do not solve are tried again: with more voting stars
-    /// ([`RETRY_VOTE_STARS`]), then with wide tolerances ([`WIDE_PAIR_TOL_PX`],
-    /// [`WIDE_MATCH_RADIUS_PX`]).
+    /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`]), then
+    /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
     pub retry: bool,
 }
 
@@ -84,7 +84,8 @@ pub struct Solver {
     /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
     pub scales: Vec<f64>,
     /// The hypotheses tried in turn until one solves: every scale with the settings, then
-    /// (when `retry`) every scale with more voting stars, and every scale with wide tolerances.
+    /// (when `retry`) every scale with more voting stars, with voters spread over the frame,
+    /// and with wide tolerances.
     pub passes: Vec<Pass>,
     /// `refs` moved to the epochs of frames that carry their own date, by day.
     epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
@@ -122,6 +123,9 @@ pub enum PassKind {
     First,
     /// Up to [`RETRY_VOTE_STARS`] stars vote (only for frames with more than `vote_stars`).
     MoreStars,
+    /// The voters are the brightest of each cell of a grid over the frame, then the second
+    /// brightest, and so on (only for frames with more than `vote_stars`).
+    Spread,
     /// Wide pair tolerance and match radius.
     Wide,
 }
@@ -140,20 +144,64 @@ pub const RETRY_VOTE_STARS: usize = 60;
 /// at 1.5 px noise 34 % of frames solve without the retries, 99.5 % with them (97 % with a
 /// 3 px pair tolerance).
 pub const WIDE_PAIR_TOL_PX: f64 = 4.0;
+
+/// About how many cells the spread retry divides a frame into (square cells, as many as fit
+/// the frame's shape). A bright cluster of false stars (lit foliage, a roof edge, a nebula, a
+/// hot corner) can fill the brightest `vote_stars` by itself and leave too few real stars in
+/// the vote; taking the stars round the cells in turn, as astrometry.net's `uniformize` does,
+/// lets each part of the sky put its own brightest forward. cedar-solve's `tree.jpg` (tree
+/// branches lit in a third of the frame) holds 4 of its stars among its 40 brightest
+/// detections and 9 among 40 taken this way, 7 among the first 12.
+pub const SPREAD_CELLS: u32 = 16;
+
+/// The spread retry's triangle fallback forms triangles among this many of its first stars
+/// (220 triangles; [`triangle::TRIANGLE_STARS`] otherwise): the brightest star of each cell
+/// is more often a real one, and in a dense part of the sky (the Milky Way) triangles confirmed
+/// by a fourth star find what the vote's counts cannot single out.
+pub const SPREAD_TRIANGLE_STARS: usize = 12;
 pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
+
+/// The detections (brightest first) in the spread retry's order: the brightest of each of
+/// about [`SPREAD_CELLS`] square cells over a `width`×`height` frame, in brightness order,
+/// then the second brightest of each, and so on.
+pub fn spread_order(detections: &[Detection], width: u32, height: u32) -> Vec<usize> {
+    let (w, h) = (width.max(1) as f64, height.max(1) as f64);
+    let side = (w * h / SPREAD_CELLS as f64).sqrt();
+    let (nx, ny) = ((w / side).round().max(1.0), (h / side).round().max(1.0));
+    let cell = |d: &Detection| {
+        let cx = ((d.x + 0.5) / w * nx).floor().clamp(0.0, nx - 1.0);
+        let cy = ((d.y + 0.5) / h * ny).floor().clamp(0.0, ny - 1.0);
+        (cy * nx + cx) as usize
+    };
+    let mut seen = vec![0usize; (nx * ny) as usize];
+    let mut round: Vec<(usize, usize)> = detections
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let c = cell(d);
+            seen[c] += 1;
+            (seen[c] - 1, i)
+        })
+        .collect();
+    round.sort_unstable();
+    round.into_iter().map(|(_, i)| i).collect()
+}
 
 /// A frame's input to the vote.
 #[derive(Clone, Debug)]
 pub struct Prepared {
     /// The camera at the scale tried.
     pub camera: Camera,
-    /// Camera-frame direction of every detection.
+    /// Camera-frame direction of every detection, in the pass's voting order (brightness,
+    /// or spread over the frame): the first `n_vote` vote.
     pub vectors: Vec<Vector3<f64>>,
     /// Pair ranges of the `n_vote` brightest.
     pub ranges: Vec<crate::cpu::vote::PairRange>,
     pub n_vote: usize,
     /// Candidates kept per star.
     pub k: usize,
+    /// The first this many of `vectors` form the triangle fallback's triangles.
+    pub triangle_stars: usize,
     /// The identification settings of this pass (tolerances).
     pub identify: IdentifySettings,
     /// Refinement settings of this pass (match radius, what is fitted).
@@ -191,8 +239,13 @@ impl Solver {
             Some((lo, hi)) => scale_hypotheses(lo, hi),
             None => vec![1.0],
         };
-        let kinds = [PassKind::First, PassKind::MoreStars, PassKind::Wide];
-        let passes = kinds[..if settings.retry { 3 } else { 1 }]
+        let kinds = [
+            PassKind::First,
+            PassKind::MoreStars,
+            PassKind::Spread,
+            PassKind::Wide,
+        ];
+        let passes = kinds[..if settings.retry { kinds.len() } else { 1 }]
             .iter()
             .flat_map(|&kind| scales.iter().map(move |&scale| Pass { scale, kind }))
             .collect();
@@ -245,6 +298,10 @@ impl Solver {
             }
             s.vote_stars = RETRY_VOTE_STARS;
         }
+        // Without more stars than voters, spreading would vote with the same stars.
+        if pass.kind == PassKind::Spread && detections.len() <= s.vote_stars {
+            return None;
+        }
         let camera = scaled(&self.camera, pass.scale);
         if self.scales.len() > 1 {
             // Each hypothesis stands for ±SCALE_STEP/2 around its focal length, and the
@@ -258,15 +315,24 @@ impl Solver {
             s.pair_tol_px = s.pair_tol_px.max(WIDE_PAIR_TOL_PX);
             rs.match_radius_px = rs.match_radius_px.max(WIDE_MATCH_RADIUS_PX);
         }
-        let vectors: Vec<Vector3<f64>> = detections
+        let order = match pass.kind {
+            PassKind::Spread => spread_order(detections, camera.width, camera.height),
+            _ => (0..detections.len()).collect(),
+        };
+        let vectors: Vec<Vector3<f64>> = order
             .iter()
-            .map(|d| camera.pixel_to_vector(d.x, d.y))
+            .map(|&i| camera.pixel_to_vector(detections[i].x, detections[i].y))
             .collect();
         let n_vote = vectors.len().min(s.vote_stars);
         Some(Prepared {
             ranges: identify::pair_ranges(&vectors[..n_vote], &camera, &s),
             n_vote,
             k: s.candidates_per_star(n_vote),
+            triangle_stars: match pass.kind {
+                PassKind::Spread => SPREAD_TRIANGLE_STARS,
+                _ => triangle::TRIANGLE_STARS,
+            }
+            .min(n_vote),
             vectors,
             camera,
             identify: s,
@@ -376,7 +442,12 @@ impl Solver {
         refs: &RefCatalog,
     ) -> Option<Refined> {
         let vectors = &p.vectors[..p.n_vote];
-        let (hyps, matched) = triangle::triangles(&self.table, &p.ranges, vectors, &self.refs);
+        let (hyps, matched) = triangle::triangles(
+            &self.table,
+            &p.ranges,
+            &vectors[..p.triangle_stars],
+            &self.refs,
+        );
         let hypotheses = (vote_hypotheses + matched).saturating_mul(self.passes.len() as u64);
         hyps.iter().find_map(|t| {
             let cam = t.stars.map(|i| vectors[i]);

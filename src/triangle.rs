@@ -69,8 +69,9 @@ impl Side {
     }
 }
 
-/// Triangle hypotheses among the brightest `TRIANGLE_STARS` of the voting stars, brightest
-/// triangles first (by the sum of their ranks, then lexicographically), each confirmed by a
+/// Triangle hypotheses among `vectors` (the brightest [`TRIANGLE_STARS`] voting stars, or the
+/// spread retry's first stars), first triangles first (by the sum of the stars' places in
+/// `vectors`, then lexicographically), each confirmed by a
 /// fourth star whose three distances to the triangle's catalog stars match too (Mortari's
 /// pyramid): chance rarely passes that, so few hypotheses reach refinement. At most
 /// `MAX_HYPOTHESES`. `ranges` are the vote's pair ranges; `vectors` the stars' camera-frame
@@ -83,7 +84,7 @@ pub fn triangles(
     vectors: &[Vector3<f64>],
     refs: &RefCatalog,
 ) -> (Vec<Triangle>, u64) {
-    let n = vectors.len().min(TRIANGLE_STARS);
+    let n = vectors.len();
     let sides: HashMap<(usize, usize), Side> = ranges
         .iter()
         .filter(|r| (r.i as usize) < n && (r.j as usize) < n)

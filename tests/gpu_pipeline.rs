@@ -186,3 +186,36 @@ fn backend_gpu_through_the_binary_names_the_adapter() {
         assert_eq!(r["status"], "solved");
     }
 }
+
+#[test]
+fn gpu_records_equal_cpu_records_on_frames_the_spread_retry_solves() {
+    let Some(g) = gpu("gpu_records_equal_cpu_records_on_frames_the_spread_retry_solves") else {
+        return;
+    };
+    // Simulated 14° frames with a bright cluster of spots in one corner (tests/spread.rs):
+    // only the spread retry solves them.
+    let tmp = tempfile::tempdir().unwrap();
+    let s = gpustar::simulate::SimSettings {
+        fov_x_deg: 14.0,
+        mag_limit: 6.0,
+        seed: 5,
+        ..Default::default()
+    };
+    for (k, (mut f, _)) in common::rendered(&s, 4).into_iter().enumerate() {
+        common::crowd_corner(&mut f, 90, k as u64);
+        let px: Vec<u8> = f.pixels.iter().map(|&p| p as u8).collect();
+        image::GrayImage::from_raw(f.width, f.height, px)
+            .unwrap()
+            .save(tmp.path().join(format!("crowded_{k}.png")))
+            .unwrap();
+    }
+    let files = inputs(tmp.path());
+    let gpu_records =
+        pipeline(Backend::Gpu(Box::new(GpuRunner::new(g))), 14.0, 2000.0).process_batch(&files);
+    let cpu_records = pipeline(Backend::Cpu, 14.0, 2000.0).process_batch(&files);
+    assert_eq!(gpu_records.len(), 4);
+    for (a, b) in gpu_records.into_iter().zip(cpu_records) {
+        assert_eq!(a.status, gpustar::record::Status::Solved, "{}", a.file);
+        assert_eq!(comparable(a), comparable(b));
+    }
+}

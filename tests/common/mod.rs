@@ -218,3 +218,30 @@ pub fn assert_votes_equal(
         );
     }
 }
+
+/// Paint `n` bright round spots (σ 1.2 px) into the top-right quarter of an 8-bit frame: a
+/// cluster brighter than most stars.
+pub fn crowd_corner(frame: &mut gpustar::frame::Frame, n: usize, seed: u64) {
+    let mut state = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    let mut next = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (w, h) = (frame.width as f64, frame.height as f64);
+    for _ in 0..n {
+        let cx = w / 2.0 + next() * w / 2.0;
+        let cy = next() * h / 2.0;
+        let peak = 120.0 + 120.0 * next();
+        for y in (cy as i64 - 5).max(0)..(cy as i64 + 6).min(h as i64) {
+            for x in (cx as i64 - 5).max(0)..(cx as i64 + 6).min(w as i64) {
+                let r2 = (x as f64 - cx).powi(2) + (y as f64 - cy).powi(2);
+                let p = &mut frame.pixels[(y * w as i64 + x) as usize];
+                *p = (*p as f64 + peak * (-r2 / (2.0 * 1.44)).exp()).min(255.0) as u16;
+            }
+        }
+    }
+}
