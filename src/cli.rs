@@ -84,7 +84,8 @@ pub enum Command {
         #[arg(long, default_value_t = 0.1)]
         tolerance_deg: f64,
         /// A star ID is false when the star is not within this many pixels of where the truth
-        /// puts it.
+        /// puts it (its listed position; for a star off the truth's list, its catalog position
+        /// through the truth attitude and the lens the truth's list implies).
         #[arg(long, default_value_t = 3.0)]
         id_tolerance_px: f64,
         /// Also print one line per frame.

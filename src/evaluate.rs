@@ -4,10 +4,10 @@
 use crate::attitude::attitude_error;
 use crate::camera::Camera;
 use crate::catalog::radec_to_vector;
-use crate::record::{Record, Status};
+use crate::record::{MatchRecord, Record, Status};
 use crate::simulate::Truth;
 use anyhow::{Context, Result};
-use nalgebra::Matrix3;
+use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::path::Path;
@@ -66,6 +66,57 @@ fn truth_camera(t: &Truth) -> Camera {
     cam
 }
 
+/// Fewest truth-list stars that [`truth_lens`] fits from.
+const TRUTH_LENS_MIN_STARS: usize = 5;
+
+/// The truth camera `cam` (a pinhole of the truth's fields of view) with the focal lengths and
+/// radial distortion k1 that the truth's own star list implies: its stars' pixel positions
+/// against their catalog directions through the truth attitude, by least squares (the catalog
+/// directions are those of the record's matches of those stars). A truth made with a
+/// distorted lens (cedar-solve's virgo.jpg: up to 8 px from a pinhole) puts a star that is not
+/// on its list where this camera does, not where the pinhole does (whose fields of view the
+/// distortion has also bent). `cam` as it is with fewer than [`TRUTH_LENS_MIN_STARS`] such
+/// stars.
+fn truth_lens(t: &Truth, cam: &Camera, r: &Matrix3<f64>, matches: &[MatchRecord]) -> Camera {
+    // Normalised coordinates (u, w) of the pinhole and (ou, ow) observed:
+    // ou = u (1 + ex + k1 ρ²), ow = w (1 + ey + k1 ρ²), ρ² = u² + w²; unknowns (ex, ey, k1).
+    let mut a = Matrix3::<f64>::zeros();
+    let mut b = Vector3::<f64>::zeros();
+    let mut n = 0;
+    for m in matches {
+        let Some(ts) = t.stars.iter().find(|ts| ts.hip == m.hip) else {
+            continue;
+        };
+        let Some((px, py)) = cam.vector_to_pixel(&(r * radec_to_vector(m.ra_deg, m.dec_deg)))
+        else {
+            continue;
+        };
+        let (u, w) = ((px - cam.cx) / cam.fx, (py - cam.cy) / cam.fy);
+        let (ou, ow) = ((ts.x - cam.cx) / cam.fx, (ts.y - cam.cy) / cam.fy);
+        let r2 = u * u + w * w;
+        for (row, resid) in [
+            (Vector3::new(u, 0.0, u * r2), ou - u),
+            (Vector3::new(0.0, w, w * r2), ow - w),
+        ] {
+            a += row * row.transpose();
+            b += row * resid;
+        }
+        n += 1;
+    }
+    let mut lens = cam.clone();
+    let Some(x) = (n >= TRUTH_LENS_MIN_STARS)
+        .then(|| a.lu().solve(&b))
+        .flatten()
+    else {
+        return lens;
+    };
+    // ou = u (1 + ex) (1 + k1' ρ²) to first order in k1 ρ², with k1' = k1 / (1 + ex).
+    lens.fx *= 1.0 + x[0];
+    lens.fy *= 1.0 + x[1];
+    lens.k1 = x[2] / (1.0 + 0.5 * (x[0] + x[1]));
+    lens
+}
+
 fn matrix(m: &[[f64; 3]; 3]) -> Matrix3<f64> {
     Matrix3::from_fn(|i, j| m[i][j])
 }
@@ -115,9 +166,10 @@ pub fn evaluate(
                 } else {
                     s.wrong += 1;
                 }
-                let cam = truth_camera(t);
                 let truth_r = matrix(&t.rotation_matrix);
-                for m in rec.matches.iter().flatten() {
+                let matches = rec.matches.as_deref().unwrap_or_default();
+                let cam = truth_lens(t, &truth_camera(t), &truth_r, matches);
+                for m in matches {
                     s.matched_ids += 1;
                     // A star of the truth list must be where the truth says; another star must
                     // be where the truth attitude puts its catalog position.
@@ -165,4 +217,100 @@ pub fn read_records(path: &Path) -> Result<Vec<Record>> {
                 .with_context(|| format!("{}: line {}: not a result record", path.display(), n + 1))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::catalog::vector_to_radec;
+    use crate::simulate::TruthStar;
+
+    /// A truth made through a lens with k1 = −0.5: eight listed stars and one
+    /// off the list in a corner, where a pinhole puts it 5 px from where the lens does.
+    #[test]
+    fn a_star_off_the_truth_list_is_judged_with_the_distortion_the_list_implies() {
+        let mut lens = Camera::from_fov(1920, 1080, 20.28).unwrap();
+        lens.k1 = -0.5;
+        let dirs: Vec<Vector3<f64>> = [
+            (-700.0, -400.0),
+            (600.0, -300.0),
+            (-200.0, 350.0),
+            (800.0, 450.0),
+            (0.0, 0.0),
+            (-850.0, 100.0),
+            (300.0, 200.0),
+            (-400.0, -100.0),
+            (-950.0, 530.0), // off the list
+        ]
+        .iter()
+        .map(|&(dx, dy)| lens.pixel_to_vector(lens.cx + dx, lens.cy + dy))
+        .collect();
+        let star = |k: usize| {
+            let (x, y) = lens.vector_to_pixel(&dirs[k]).unwrap();
+            (x, y, 1000 + k as u32)
+        };
+        let truth = Truth {
+            file: "f.png".into(),
+            ra_deg: 0.0,
+            dec_deg: 0.0,
+            roll_tetra3_deg: 0.0,
+            rotation_matrix: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            quaternion: [1.0, 0.0, 0.0, 0.0],
+            epoch: 2000.0,
+            mirrored: false,
+            width: 1920,
+            height: 1080,
+            fov_x_deg: lens.fov_x_deg(),
+            fov_y_deg: lens.fov_y_deg(),
+            stars: (0..8)
+                .map(|k| {
+                    let (x, y, hip) = star(k);
+                    TruthStar {
+                        hip,
+                        x,
+                        y,
+                        mag: 5.0,
+                    }
+                })
+                .collect(),
+            false_stars: Vec::new(),
+        };
+        let mut rec = Record::empty("f.png", "cpu");
+        rec.status = Status::Solved;
+        rec.rotation_matrix = Some(truth.rotation_matrix);
+        rec.matches = Some(
+            (0..9)
+                .map(|k| {
+                    let (x, y, hip) = star(k);
+                    let (ra_deg, dec_deg) = vector_to_radec(&dirs[k]);
+                    MatchRecord {
+                        x,
+                        y,
+                        hip,
+                        ra_deg,
+                        dec_deg,
+                        mag: 5.0,
+                        flux: 1.0,
+                        residual_arcsec: 0.0,
+                    }
+                })
+                .collect(),
+        );
+        let pinhole = truth_camera(&truth);
+        let (px, py) = pinhole.vector_to_pixel(&dirs[8]).unwrap();
+        let (x, y, _) = star(8);
+        let off = (px - x).hypot(py - y);
+        assert!(off > 3.0, "a pinhole puts it {off} px away");
+        let fitted = truth_lens(
+            &truth,
+            &pinhole,
+            &Matrix3::identity(),
+            rec.matches.as_ref().unwrap(),
+        );
+        let (fx, fy) = fitted.vector_to_pixel(&dirs[8]).unwrap();
+        let d = (fx - x).hypot(fy - y);
+        assert!(d < 0.5, "the fitted lens puts it {d} px away");
+        let (s, v) = evaluate(&[truth], &[rec], 0.1, 3.0);
+        assert_eq!((s.correct, s.false_ids, v[0].correct_ids), (1, 0, 9));
+    }
 }
