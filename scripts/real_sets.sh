@@ -23,7 +23,7 @@ for line in open(sys.argv[1]):
     t = json.loads(line)
     print(t["file"], round(t["fov_x_deg"], 3), t["epoch"])
 ' "$real/cedar-solve/truth.jsonl" | while read -r file fov epoch; do
-  "$gpustar" solve "$real/cedar-solve/$file" --fov-deg "$fov" --epoch "$epoch" -q "$@" >> "$out/cedar-solve.jsonl" || true
+  "$gpustar" solve "$real/cedar-solve/$file" --fov-deg "$fov" --fov-tolerance 0.01 --epoch "$epoch" -q "$@" >> "$out/cedar-solve.jsonl" || true
 done
 for set in esa-tetra3 cedar-solve openstartracker swarm-a; do
   echo "== $set"

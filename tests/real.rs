@@ -100,9 +100,8 @@ fn swarm_frames_are_solved_with_a_fitted_scale_and_distortion() {
 }
 
 /// cedar-solve's sample frames: several cameras, each frame solved the way its user would,
-/// with its own FOV (truth.jsonl). Every star ID must be right. roof.jpg's truth attitude is
-/// off (our roll matches it to 0.014°, our pointing is 0.37° from it, at the edge of its SIP fit)
-/// and tree.jpg's lit branches outshine its stars: the other 11 must solve within 0.1°.
+/// with its own FOV (truth.jsonl, to 1 %). Every frame solves and every star ID must be right;
+/// all but roof.jpg and tree.jpg (whose truth attitudes are in doubt, see below) within 0.1°.
 #[test]
 fn cedar_solve_frames_are_solved_each_with_its_own_field_of_view() {
     let Some(shared) = shared_dir("cedar-solve") else {
@@ -123,6 +122,8 @@ fn cedar_solve_frames_are_solved_each_with_its_own_field_of_view() {
         let rec = common::run_records(gpustar().arg("solve").arg(dir.join(file)).args([
             "--fov-deg",
             &fov,
+            "--fov-tolerance",
+            "0.01",
             "--epoch",
             &epoch,
             "--backend",
@@ -150,10 +151,14 @@ fn cedar_solve_frames_are_solved_each_with_its_own_field_of_view() {
     let correct = frames.iter().filter(|f| f["correct"] == true).count();
     println!("cedar-solve: {correct}/13 correct");
     for f in &frames {
+        assert_eq!(f["status"], "solved", "{f}");
         assert_eq!(f["false_ids"], 0, "{f}");
-        let name = f["file"].as_str().unwrap();
-        if f["status"] == "solved" && name != "roof.jpg" {
-            assert_eq!(f["correct"], true, "{f}");
+        // roof.jpg and tree.jpg: their stars fill a third to a half of the frame and their
+        // truth attitudes disagree with their own roll_tetra3 by 0.36° and 0.31°
+        // (scripts/truth_check.py); judged by their star IDs.
+        match f["file"].as_str().unwrap() {
+            "roof.jpg" | "tree.jpg" => assert!(f["correct_ids"].as_u64().unwrap() >= 10, "{f}"),
+            _ => assert_eq!(f["correct"], true, "{f}"),
         }
     }
     assert!(correct >= 11, "{correct}/13 correct");
