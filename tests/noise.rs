@@ -4,13 +4,11 @@
 
 mod common;
 
-use gpustar::attitude::attitude_error;
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::frame::Frame;
 use gpustar::simulate::{SimSettings, Truth};
-use gpustar::solve::{Outcome, Settings, Solver};
-use nalgebra::Matrix3;
+use gpustar::solve::{Settings, Solver};
 
 fn sim(noise: f64) -> SimSettings {
     SimSettings {
@@ -43,17 +41,7 @@ fn solve(retry: bool, set: &[(Frame, Truth)]) -> (usize, usize) {
     };
     let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
     let solver = Solver::new(&Catalog::builtin(), camera, settings).unwrap();
-    let (mut solved, mut wrong) = (0, 0);
-    for (f, t) in set {
-        if let Outcome::Solved(r) = solver.solve_frame(f).0.outcome {
-            solved += 1;
-            let truth = Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
-            if attitude_error(&r.r, &truth).to_degrees() > 1.0 {
-                wrong += 1;
-            }
-        }
-    }
-    (solved, wrong)
+    common::solved_and_wrong(&solver, set, 1.0)
 }
 
 #[test]

@@ -3,12 +3,10 @@
 
 mod common;
 
-use gpustar::attitude::attitude_error;
 use gpustar::detect::Detection;
 use gpustar::frame::Frame;
 use gpustar::simulate::{SimSettings, Truth};
-use gpustar::solve::{Outcome, PassKind, Solver, spread_order};
-use nalgebra::Matrix3;
+use gpustar::solve::{PassKind, Solver, spread_order};
 
 fn det(x: f64, y: f64) -> Detection {
     Detection {
@@ -65,22 +63,12 @@ fn crowded() -> Vec<(Frame, Truth)> {
     set
 }
 
-/// (solved, wrong) with the solver's passes, or without the spread ones.
+/// (solved, wrong: more than 0.1° off) with the solver's passes, or without the spread ones.
 fn solve(solver: &mut Solver, spread: bool, set: &[(Frame, Truth)]) -> (usize, usize) {
     if !spread {
         solver.passes.retain(|p| p.kind != PassKind::Spread);
     }
-    let (mut solved, mut wrong) = (0, 0);
-    for (f, t) in set {
-        if let Outcome::Solved(r) = solver.solve_frame(f).0.outcome {
-            solved += 1;
-            let truth = Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
-            if attitude_error(&r.r, &truth).to_degrees() > 0.1 {
-                wrong += 1;
-            }
-        }
-    }
-    (solved, wrong)
+    common::solved_and_wrong(solver, set, 0.1)
 }
 
 #[test]

@@ -245,3 +245,23 @@ pub fn crowd_corner(frame: &mut gpustar::frame::Frame, n: usize, seed: u64) {
         }
     }
 }
+
+/// (solved, wrong) over simulated frames: wrong = solved with an attitude more than
+/// `wrong_deg` from the truth.
+pub fn solved_and_wrong(
+    solver: &gpustar::solve::Solver,
+    set: &[(gpustar::frame::Frame, gpustar::simulate::Truth)],
+    wrong_deg: f64,
+) -> (usize, usize) {
+    let (mut solved, mut wrong) = (0, 0);
+    for (f, t) in set {
+        if let gpustar::solve::Outcome::Solved(r) = solver.solve_frame(f).0.outcome {
+            solved += 1;
+            let truth = nalgebra::Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
+            if gpustar::attitude::attitude_error(&r.r, &truth).to_degrees() > wrong_deg {
+                wrong += 1;
+            }
+        }
+    }
+    (solved, wrong)
+}
