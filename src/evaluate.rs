@@ -69,6 +69,10 @@ fn truth_camera(t: &Truth) -> Camera {
 /// Fewest truth-list stars that [`truth_lens`] fits from.
 const TRUTH_LENS_MIN_STARS: usize = 5;
 
+/// Largest relative change of the focal lengths, and of the radius at the frame's corners,
+/// that [`truth_lens`] accepts (virgo.jpg's: 0.6 % and 2.3 %).
+const TRUTH_LENS_MAX: f64 = 0.05;
+
 /// The truth camera `cam` (a pinhole of the truth's fields of view) with the focal lengths and
 /// radial distortion k1 that the truth's own star list implies: its stars' pixel positions
 /// against their catalog directions through the truth attitude, by least squares (the catalog
@@ -76,7 +80,8 @@ const TRUTH_LENS_MIN_STARS: usize = 5;
 /// distorted lens (cedar-solve's virgo.jpg: up to 8 px from a pinhole) puts a star that is not
 /// on its list where this camera does, not where the pinhole does (whose fields of view the
 /// distortion has also bent). `cam` as it is with fewer than [`TRUTH_LENS_MIN_STARS`] such
-/// stars.
+/// stars, or when the fit is not a plausible lens (focal lengths or corner distortion more
+/// than [`TRUTH_LENS_MAX`] off: an ill-conditioned fit, e.g. stars only near the centre).
 fn truth_lens(t: &Truth, cam: &Camera, r: &Matrix3<f64>, matches: &[MatchRecord]) -> Camera {
     // Normalised coordinates (u, w) of the pinhole and (ou, ow) observed:
     // ou = u (1 + ex + k1 ρ²), ow = w (1 + ey + k1 ρ²), ρ² = u² + w²; unknowns (ex, ey, k1).
@@ -110,6 +115,11 @@ fn truth_lens(t: &Truth, cam: &Camera, r: &Matrix3<f64>, matches: &[MatchRecord]
     else {
         return lens;
     };
+    let corner2 = (cam.cx.max(cam.width as f64 - cam.cx) / cam.fx).powi(2)
+        + (cam.cy.max(cam.height as f64 - cam.cy) / cam.fy).powi(2);
+    if x[0].abs().max(x[1].abs()).max((x[2] * corner2).abs()) > TRUTH_LENS_MAX {
+        return lens;
+    }
     // ou = u (1 + ex) (1 + k1' ρ²) to first order in k1 ρ², with k1' = k1 / (1 + ex).
     lens.fx *= 1.0 + x[0];
     lens.fy *= 1.0 + x[1];

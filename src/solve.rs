@@ -144,6 +144,7 @@ pub const RETRY_VOTE_STARS: usize = 60;
 /// at 1.5 px noise 34 % of frames solve without the retries, 99.5 % with them (97 % with a
 /// 3 px pair tolerance).
 pub const WIDE_PAIR_TOL_PX: f64 = 4.0;
+pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
 
 /// About how many cells the spread retry divides a frame into (square cells, as many as fit
 /// the frame's shape). A bright cluster of false stars (lit foliage, a roof edge, a nebula, a
@@ -159,7 +160,6 @@ pub const SPREAD_CELLS: u32 = 16;
 /// is more often a real one, and in a dense part of the sky (the Milky Way) triangles confirmed
 /// by a fourth star find what the vote's counts cannot single out.
 pub const SPREAD_TRIANGLE_STARS: usize = 12;
-pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
 
 /// The detections (brightest first) in the spread retry's order: the brightest of each of
 /// about [`SPREAD_CELLS`] square cells over a `width`×`height` frame, in brightness order,
@@ -195,7 +195,7 @@ pub struct Prepared {
     /// Camera-frame direction of every detection, in the pass's voting order (brightness,
     /// or spread over the frame): the first `n_vote` vote.
     pub vectors: Vec<Vector3<f64>>,
-    /// Pair ranges of the `n_vote` brightest.
+    /// Pair ranges of the first `n_vote` of `vectors`.
     pub ranges: Vec<crate::cpu::vote::PairRange>,
     pub n_vote: usize,
     /// Candidates kept per star.
