@@ -454,11 +454,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             }
             text += &serde_json::to_string_pretty(&s)?;
             text.push('\n');
-            // A reader that stops early (`| head`) is not an error.
-            match std::io::stdout().lock().write_all(text.as_bytes()) {
-                Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
-                _ => Ok(ExitCode::SUCCESS),
-            }
+            print_all(&text)
         }
         Command::Catalog(CatalogCommand::Import {
             hip2,
@@ -694,38 +690,47 @@ fn init_logging(verbose: u8) {
 }
 
 fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<ExitCode> {
+    use std::fmt::Write as _;
+    // Written at the end in one piece, so that `| head` ends it quietly (see `print_all`).
+    let mut out = String::new();
     let adapters = crate::gpu::adapters();
-    println!("GPU adapters: {}", adapters.len());
+    writeln!(out, "GPU adapters: {}", adapters.len())?;
     for a in &adapters {
-        println!(
+        writeln!(
+            out,
             "  {} ({}, {}, driver {})",
             a.name, a.backend, a.device_type, a.driver
-        );
+        )?;
     }
     match crate::gpu::Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref()) {
         Ok(g) => {
-            println!("chosen: {}", g.backend_name());
-            println!(
+            writeln!(out, "chosen: {}", g.backend_name())?;
+            writeln!(
+                out,
                 "  limits: Limits::default() with max_storage_buffer_binding_size {} MB, \
                  max_buffer_size {} MB (the adapter's); no optional features",
                 g.limits.max_storage_buffer_binding_size >> 20,
                 g.limits.max_buffer_size >> 20
-            );
+            )?;
         }
-        Err(e) => println!("chosen: none ({e:#})"),
+        Err(e) => writeln!(out, "chosen: none ({e:#})")?,
     }
     let catalog = Catalog::load(o.catalog.as_deref())?;
-    println!("catalog: {}", catalog.source);
-    println!(
+    writeln!(out, "catalog: {}", catalog.source)?;
+    writeln!(
+        out,
         "  stars: {} (Hp {:.2} to {:.2}), positions at J1991.25, propagated to epoch {}",
         catalog.stars.len(),
         catalog.stars.iter().map(|s| s.mag).fold(f64::MAX, f64::min),
         catalog.faintest(),
         o.epoch
-    );
+    )?;
     if c.camera.is_none() && c.fov_deg.is_none() {
-        println!("(give --camera FILE, or --fov-deg DEG --size WxH, to see the distance table)");
-        return Ok(ExitCode::SUCCESS);
+        writeln!(
+            out,
+            "(give --camera FILE, or --fov-deg DEG --size WxH, to see the distance table)"
+        )?;
+        return print_all(&out);
     }
     let (source, camera_mag, _) = camera_source(c)?;
     let camera = match source {
@@ -739,7 +744,8 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
     let mag_limit = s
         .mag_limit
         .unwrap_or_else(|| auto_mag_limit(&catalog, &camera));
-    println!(
+    writeln!(
+        out,
         "camera: {}x{} px, FOV {:.4} x {:.4} deg, diagonal {:.4} deg, {:.2} arcsec/px",
         camera.width,
         camera.height,
@@ -747,7 +753,7 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
         camera.fov_y_deg(),
         camera.diagonal_rad().to_degrees(),
         camera.ifov_rad().to_degrees() * 3600.0
-    );
+    )?;
     let refs = RefCatalog::select(
         &catalog,
         Selection {
@@ -757,7 +763,8 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
             double_sep_rad: s.double_star_px * camera.ifov_rad(),
         },
     )?;
-    println!(
+    writeln!(
+        out,
         "reference stars: {} with Hp <= {mag_limit}{}; double stars ({:?}, < {} px): {} removed",
         refs.len(),
         if s.mag_limit.is_none() {
@@ -768,21 +775,23 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
         s.double_stars,
         s.double_star_px,
         refs.doubles_removed
-    );
+    )?;
     let (t, origin) = table::load_or_build(
         &refs,
         catalog.content_hash,
         camera.diagonal_rad(),
         s.table_cache,
     );
-    println!(
+    writeln!(
+        out,
         "distance table: {} rows, {} bytes (keys + pairs + k-vector of {} bins), pairs closer than {:.4} deg",
         t.len(),
         t.bytes(),
         t.kvector.len() - 1,
         t.max_sep_rad.to_degrees()
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "  {} in {:.1} ms{}",
         if origin.built {
             "built"
@@ -795,11 +804,19 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
             .as_ref()
             .map(|f| format!("; cache {}", f.display()))
             .unwrap_or_default()
-    );
+    )?;
     if let Some(n) = origin.cache_note {
-        println!("  note: {n}");
+        writeln!(out, "  note: {n}")?;
     }
-    Ok(ExitCode::SUCCESS)
+    print_all(&out)
+}
+
+/// Print `text` to stdout; a reader that stops early (`| head`) is not an error.
+fn print_all(text: &str) -> Result<ExitCode> {
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(ExitCode::SUCCESS),
+    }
 }
 
 fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {

@@ -163,3 +163,47 @@ fn a_starless_frame_is_unsolved_with_a_reason() {
     assert_eq!(r["status"], "unsolved");
     assert_eq!(r["reason"], "too_few_stars");
 }
+
+/// `gpustar info | head`, `gpustar evaluate ... | head`: a reader that closes the pipe before
+/// the output comes ends the command quietly (exit 0), not with a broken-pipe panic (101).
+#[test]
+fn a_reader_that_stops_early_ends_info_and_evaluate_quietly() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sim");
+    run_ok(&["simulate", "--out", dir.to_str().unwrap(), "-n", "2"]);
+    let results = tmp.path().join("results.jsonl");
+    run_ok(&[
+        "batch",
+        "--backend",
+        "cpu",
+        dir.to_str().unwrap(),
+        "--camera",
+        dir.join("camera.toml").to_str().unwrap(),
+        "-o",
+        results.to_str().unwrap(),
+    ]);
+    let truth = dir.join("truth.jsonl");
+    let evaluate = [
+        "evaluate",
+        "--per-frame",
+        "--truth",
+        truth.to_str().unwrap(),
+        results.to_str().unwrap(),
+    ];
+    for args in [&["info"][..], &evaluate[..]] {
+        let mut child = gpustar()
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        assert!(
+            out.status.success(),
+            "gpustar {args:?}: {:?} {}",
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+}
