@@ -88,7 +88,9 @@ pub enum Command {
         /// through the truth attitude and the lens the truth's list implies).
         #[arg(long, default_value_t = 3.0)]
         id_tolerance_px: f64,
-        /// Also print one line per frame.
+        /// Also print one line per frame: status, correct, error_arcsec (rotation matrices),
+        /// centre_error_arcsec and roll_error_arcsec (against the truth's ra/dec and
+        /// roll_tetra3_deg), false_ids, correct_ids, identify_ms, stars_in_view.
         #[arg(long)]
         per_frame: bool,
     },

@@ -19,8 +19,17 @@ pub struct FrameVerdict {
     pub status: Status,
     /// Solved within the tolerance.
     pub correct: bool,
-    /// Attitude error (arcsec), for solved frames.
+    /// Attitude error (arcsec), for solved frames: the angle of the rotation between the
+    /// record's and the truth's rotation matrices.
     pub error_arcsec: Option<f64>,
+    /// The record's image-centre RA/Dec against the truth's (arcsec), for solved frames.
+    pub centre_error_arcsec: Option<f64>,
+    /// The roll of the record's rotation matrix (angle from image up to north on the sky,
+    /// tetra3's `Roll`) minus the truth's `roll_tetra3_deg` (arcsec, within ±180°), for solved
+    /// frames that are not mirrored. The truth's matrix follows its image x axis and its roll
+    /// the y axis: where the truth's WCS leaves them off perpendicular (stars in part of the
+    /// frame) the two disagree, and this says how far the record is from the roll.
+    pub roll_error_arcsec: Option<f64>,
     /// Matches whose HIP is not a truth star of this frame within `id_tol_px` of the centroid.
     pub false_ids: usize,
     /// The other matches: stars identified correctly.
@@ -154,6 +163,8 @@ pub fn evaluate(
             status: rec.status,
             correct: false,
             error_arcsec: None,
+            centre_error_arcsec: None,
+            roll_error_arcsec: None,
             false_ids: 0,
             correct_ids: 0,
             identify_ms: rec.timing_ms.identify,
@@ -169,6 +180,18 @@ pub fn evaluate(
                     .map(|r| attitude_error(&r, &matrix(&t.rotation_matrix)).to_degrees())
                     .unwrap_or(f64::INFINITY);
                 v.error_arcsec = Some(err * 3600.0);
+                if let (Some(ra), Some(dec)) = (rec.ra_deg, rec.dec_deg) {
+                    let centre = radec_to_vector(ra, dec)
+                        .angle(&radec_to_vector(t.ra_deg, t.dec_deg))
+                        .to_degrees();
+                    v.centre_error_arcsec = Some(centre * 3600.0);
+                }
+                if let Some(r) = r.filter(|_| !t.mirrored) {
+                    // North in the camera frame, seen from the boresight: up is −y.
+                    let roll = r[(0, 2)].atan2(r[(1, 2)]).to_degrees() + 180.0;
+                    let d = (roll - t.roll_tetra3_deg + 180.0).rem_euclid(360.0) - 180.0;
+                    v.roll_error_arcsec = Some(d * 3600.0);
+                }
                 v.correct = err <= tol_deg;
                 if v.correct {
                     s.correct += 1;
