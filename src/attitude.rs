@@ -42,33 +42,36 @@ pub fn matrix_of_quaternion(q: [f64; 4]) -> Matrix3<f64> {
     *uq.to_rotation_matrix().matrix()
 }
 
-/// RA/Dec of the image centre pixel and the roll (angle from image up to celestial north,
-/// counter-clockwise as displayed; tetra3's `Roll`).
+/// RA/Dec of the image centre pixel and the roll: the angle on the sky at the centre from
+/// image up (toward row 0) to celestial north, counter-clockwise as displayed (toward image
+/// left); tetra3's `Roll`. Measured on the sky, not in pixels, so that non-square pixels
+/// (Swarm's 88.9″ × 171.4″) give the rotation about the line of sight, as the truth files'
+/// `roll_tetra3_deg` does; for square pixels at the principal point the two are the same.
 pub fn pointing(r: &Matrix3<f64>, camera: &Camera) -> Pointing {
-    let centre_cam = camera.centre_vector();
+    let (xc, yc) = (
+        (camera.width as f64 - 1.0) / 2.0,
+        (camera.height as f64 - 1.0) / 2.0,
+    );
+    let centre_cam = camera.pixel_to_vector(xc, yc);
     let centre = r.transpose() * centre_cam;
     let (ra_deg, dec_deg) = vector_to_radec(&centre);
-    // North on the image: the pixel displacement of a small step toward the pole.
-    let pole = Vector3::z();
-    let mut north = pole - centre * pole.dot(&centre);
+    // Directions in the camera frame, in the tangent plane at the centre.
+    let tangent = |v: Vector3<f64>| v - centre_cam * v.dot(&centre_cam);
+    let mut north = tangent(r * Vector3::z());
     if north.norm() < 1e-12 {
         // At a pole every direction is south; use the direction of RA 0 instead.
-        north = Vector3::x() - centre * centre.x;
+        north = tangent(r * Vector3::x());
     }
-    let step = (centre + north.normalize() * 1e-6).normalize();
-    let roll_deg = match (
-        camera.vector_to_pixel(&centre_cam),
-        camera.vector_to_pixel(&(r * step)),
-    ) {
-        (Some((x0, y0)), Some((x1, y1))) => {
-            // Up is −y; counter-clockwise on screen turns up toward −x.
-            (-(x1 - x0))
-                .atan2(-(y1 - y0))
-                .to_degrees()
-                .rem_euclid(360.0)
-        }
-        _ => f64::NAN,
-    };
+    // Image up, and image left made perpendicular to it (off the principal point,
+    // distortion can bend the pixel axes).
+    let up = tangent(camera.pixel_to_vector(xc, yc - 1.0)).normalize();
+    let left = tangent(camera.pixel_to_vector(xc - 1.0, yc));
+    let left = (left - up * left.dot(&up)).normalize();
+    let roll_deg = north
+        .dot(&left)
+        .atan2(north.dot(&up))
+        .to_degrees()
+        .rem_euclid(360.0);
     Pointing {
         ra_deg,
         dec_deg,

@@ -72,3 +72,30 @@ fn attitude_error_is_accurate_for_tiny_angles_and_rounded_matrices() {
             < 1e-12
     );
 }
+
+#[test]
+fn roll_is_measured_on_the_sky_also_with_non_square_pixels() {
+    // Swarm's star tracker: 752×290 pixels of 88.9″ × 171.4″. The identity-like attitude of
+    // the test above, turned by 30° about the line of sight.
+    let mut cam = Camera::from_fov(752, 290, 18.4).unwrap();
+    cam.fy = cam.fx * 88.9 / 171.4;
+    let r0: Matrix3<f64> = Matrix3::new(0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0);
+    let turn = Rotation3::from_axis_angle(&Vector3::z_axis(), 30f64.to_radians()).into_inner();
+    let r = turn * r0;
+    // North in the camera frame; up is −y and left is −x on the sky at the boresight.
+    let n = r * Vector3::z();
+    let on_sky = (-n.x).atan2(-n.y).to_degrees().rem_euclid(360.0);
+    let in_pixels = (-n.x * cam.fx)
+        .atan2(-n.y * cam.fy)
+        .to_degrees()
+        .rem_euclid(360.0);
+    assert!((on_sky - in_pixels).abs() > 10.0, "{on_sky} vs {in_pixels}");
+    let p = pointing(&r, &cam);
+    assert!(
+        (p.roll_deg - on_sky).abs() < 1e-6,
+        "{} vs {on_sky}",
+        p.roll_deg
+    );
+    assert!(p.ra_deg.abs() < 1e-9 || (p.ra_deg - 360.0).abs() < 1e-9);
+    assert!(p.dec_deg.abs() < 1e-9);
+}

@@ -8,7 +8,7 @@ use serde_json::Value;
 /// The camera as a user would write it from the set's camera.json: 1024×768, 11.425°.
 #[test]
 fn esa_tetra3_frames_are_solved_against_truth() {
-    let Some(s) = solve_set(
+    let Some((s, _)) = solve_set(
         "esa-tetra3",
         "scripts/cameras/esa-tetra3.toml",
         &["--epoch", "2019.58"],
@@ -24,7 +24,8 @@ fn esa_tetra3_frames_are_solved_against_truth() {
 }
 
 /// Solve a real set with the repository's camera file and options; the evaluation summary.
-fn solve_set(set: &str, camera: &str, opts: &[&str]) -> Option<Value> {
+/// The evaluation summary and the records.
+fn solve_set(set: &str, camera: &str, opts: &[&str]) -> Option<(Value, Vec<Value>)> {
     let shared = shared_dir(set)?;
     let dir = shared.join("data/real").join(set);
     let cam = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(camera);
@@ -55,7 +56,12 @@ fn solve_set(set: &str, camera: &str, opts: &[&str]) -> Option<Value> {
         .unwrap();
     let s: Value = serde_json::from_slice(&out.stdout).unwrap();
     println!("{set}: {s}");
-    Some(s)
+    let records = std::fs::read_to_string(&results)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    Some((s, records))
 }
 
 /// Faint RGBA frames whose fixed-pattern noise is as bright as their stars, in a 6° field with
@@ -63,7 +69,7 @@ fn solve_set(set: &str, camera: &str, opts: &[&str]) -> Option<Value> {
 /// fallback identifies what the vote cannot. img7 has only 8 faint stars and stays unsolved.
 #[test]
 fn openstartracker_frames_are_solved_with_a_median_dark() {
-    let Some(s) = solve_set(
+    let Some((s, _)) = solve_set(
         "openstartracker",
         "scripts/cameras/openstartracker.toml",
         &["--epoch", "2018.35", "--dark-median"],
@@ -79,7 +85,7 @@ fn openstartracker_frames_are_solved_with_a_median_dark() {
 /// An in-orbit star tracker: 752×290 pixels of 88.9″ × 171.4″ and unknown lens distortion.
 #[test]
 fn swarm_frames_are_solved_with_a_fitted_scale_and_distortion() {
-    let Some(s) = solve_set(
+    let Some((s, records)) = solve_set(
         "swarm-a",
         "scripts/cameras/swarm-a.toml",
         &[
@@ -97,6 +103,25 @@ fn swarm_frames_are_solved_with_a_fitted_scale_and_distortion() {
     assert_eq!(s["correct"], 30, "{s}");
     assert_eq!(s["wrong"], 0, "{s}");
     assert_eq!(s["false_ids"], 0, "{s}");
+    // The record's roll is measured on the sky, as the truth's: with pixels twice as tall as
+    // wide an angle measured in pixels would be off by up to 18° here.
+    let truth = std::fs::read_to_string(
+        shared_dir("swarm-a")
+            .unwrap()
+            .join("data/real/swarm-a/truth.jsonl"),
+    )
+    .unwrap();
+    for line in truth.lines() {
+        let t: Value = serde_json::from_str(line).unwrap();
+        let file = t["file"].as_str().unwrap();
+        let rec = records
+            .iter()
+            .find(|r| r["file"].as_str().unwrap().ends_with(file))
+            .unwrap();
+        let d = rec["roll_deg"].as_f64().unwrap() - t["roll_tetra3_deg"].as_f64().unwrap();
+        let d = (d + 180.0).rem_euclid(360.0) - 180.0;
+        assert!(d.abs() < 0.1, "{file}: roll {d}° off the truth's");
+    }
 }
 
 /// cedar-solve's sample frames: several cameras, each frame solved the way its user would,
