@@ -26,14 +26,19 @@ fn evaluate(dir: &Path, results: &Path) -> Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
-fn simulate_and_solve(extra: &[&str], frames: usize) -> Value {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("sim");
+/// Simulate `frames` frames into `tmp/sim` and solve them on the CPU (catalog to Hp 6):
+/// the frames' directory and the records' file.
+fn simulate_and_batch(
+    tmp: &Path,
+    extra: &[&str],
+    frames: usize,
+) -> (std::path::PathBuf, std::path::PathBuf) {
+    let dir = tmp.join("sim");
     let n = frames.to_string();
     let mut args = vec!["simulate", "--out", dir.to_str().unwrap(), "-n", &n];
     args.extend_from_slice(extra);
     run_ok(&args);
-    let results = tmp.path().join("results.jsonl");
+    let results = tmp.join("results.jsonl");
     run_ok(&[
         "batch",
         "--backend",
@@ -48,6 +53,12 @@ fn simulate_and_solve(extra: &[&str], frames: usize) -> Value {
     ]);
     let text = std::fs::read_to_string(&results).unwrap();
     assert_eq!(text.lines().count(), frames, "one record per frame");
+    (dir, results)
+}
+
+fn simulate_and_solve(extra: &[&str], frames: usize) -> Value {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, results) = simulate_and_batch(tmp.path(), extra, frames);
     evaluate(&dir, &results)
 }
 
@@ -169,19 +180,7 @@ fn a_starless_frame_is_unsolved_with_a_reason() {
 #[test]
 fn a_reader_that_stops_early_ends_info_and_evaluate_quietly() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("sim");
-    run_ok(&["simulate", "--out", dir.to_str().unwrap(), "-n", "2"]);
-    let results = tmp.path().join("results.jsonl");
-    run_ok(&[
-        "batch",
-        "--backend",
-        "cpu",
-        dir.to_str().unwrap(),
-        "--camera",
-        dir.join("camera.toml").to_str().unwrap(),
-        "-o",
-        results.to_str().unwrap(),
-    ]);
+    let (dir, results) = simulate_and_batch(tmp.path(), &[], 2);
     let truth = dir.join("truth.jsonl");
     let evaluate = [
         "evaluate",
