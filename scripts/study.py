@@ -721,6 +721,18 @@ def save_chart(p, fig, path):
     return True
 
 
+def finish_chart(p, fig, ax, drawn, path, xlabel, ylabel, title, legend_size):
+    """Label, write and close a one-panel chart; False (nothing written) when nothing was drawn."""
+    if not drawn:
+        p.close(fig)
+        return False
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=legend_size)
+    return save_chart(p, fig, path)
+
+
 def chart_stars_in_view(sets, path):
     p = plt()
     fig, ax = p.subplots(figsize=(7, 3.6))
@@ -735,14 +747,9 @@ def chart_stars_in_view(sets, path):
         ax.axvspan(seed_range[0], seed_range[1] + 1, color=color, alpha=0.12,
                    label=f"seed 000 Fig. 6 at {fov}°: {seed_range[0]}–{seed_range[1]}")
         drawn = True
-    if not drawn:
-        p.close(fig)
-        return False
-    ax.set_xlabel("catalog stars in view (Hp ≤ 6, centre on the 1024×1024 frame)")
-    ax.set_ylabel("fraction of frames")
-    ax.set_title("Stars in view")
-    ax.legend(fontsize=8)
-    return save_chart(p, fig, path)
+    return finish_chart(p, fig, ax, drawn, path,
+                        "catalog stars in view (Hp ≤ 6, centre on the 1024×1024 frame)",
+                        "fraction of frames", "Stars in view", 8)
 
 
 def chart_sweep(ctx, sets, sweep, path):
@@ -819,15 +826,11 @@ def chart_identified(ctx, sets, path):
         ax.plot([x["stars_in_view"] for x in b], [100 * x["mean"] for x in b],
                 label=f"{series_label(series)}, {lab} ({len(rows)} frames)", **st)
         drawn = True
-    if not drawn:
-        p.close(fig)
-        return False
-    ax.set_xlabel("catalog stars in view (bin mean)")
-    ax.set_ylabel("stars identified correctly / stars in view (%, bin mean)")
     ax.set_ylim(0, 105)
-    ax.set_title("Fraction of the stars in view identified (cf. seed 000 Fig. 12); open markers: 10° FOV")
-    ax.legend(fontsize=8)
-    return save_chart(p, fig, path)
+    return finish_chart(p, fig, ax, drawn, path, "catalog stars in view (bin mean)",
+                        "stars identified correctly / stars in view (%, bin mean)",
+                        "Fraction of the stars in view identified (cf. seed 000 Fig. 12); "
+                        "open markers: 10° FOV", 8)
 
 
 def chart_identify_time(ctx, sets, path):
@@ -840,15 +843,11 @@ def chart_identify_time(ctx, sets, path):
         ax.plot(xs, [x["median"] for x in b], label=f"{series_label(series)} {what}, {lab} (median; p90 dotted)", **st)
         ax.plot(xs, [x["p90"] for x in b], color=st["color"], linestyle=":", alpha=0.8)
         drawn = True
-    if not drawn:
-        p.close(fig)
-        return False
     ax.set_yscale("log")
-    ax.set_xlabel("catalog stars in view (bin mean)")
-    ax.set_ylabel("identification time per frame (ms, log)")
-    ax.set_title("Identification time vs stars in view (cf. seed 000 Fig. 9); open markers: 10° FOV")
-    ax.legend(fontsize=7)
-    return save_chart(p, fig, path)
+    return finish_chart(p, fig, ax, drawn, path, "catalog stars in view (bin mean)",
+                        "identification time per frame (ms, log)",
+                        "Identification time vs stars in view (cf. seed 000 Fig. 9); "
+                        "open markers: 10° FOV", 7)
 
 
 def false_id_groups(sets):

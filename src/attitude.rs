@@ -48,11 +48,8 @@ pub fn matrix_of_quaternion(q: [f64; 4]) -> Matrix3<f64> {
 /// (Swarm's 88.9″ × 171.4″) give the rotation about the line of sight, as the truth files'
 /// `roll_tetra3_deg` does; for square pixels at the principal point the two are the same.
 pub fn pointing(r: &Matrix3<f64>, camera: &Camera) -> Pointing {
-    let (xc, yc) = (
-        (camera.width as f64 - 1.0) / 2.0,
-        (camera.height as f64 - 1.0) / 2.0,
-    );
-    let centre_cam = camera.pixel_to_vector(xc, yc);
+    let (xc, yc) = camera.centre_pixel();
+    let centre_cam = camera.centre_vector();
     let centre = r.transpose() * centre_cam;
     let (ra_deg, dec_deg) = vector_to_radec(&centre);
     // Directions in the camera frame, in the tangent plane at the centre.

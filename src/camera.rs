@@ -199,7 +199,13 @@ impl Camera {
 
     /// Camera-frame vector of the image centre pixel ((W−1)/2, (H−1)/2).
     pub fn centre_vector(&self) -> Vector3<f64> {
-        self.pixel_to_vector(
+        let (x, y) = self.centre_pixel();
+        self.pixel_to_vector(x, y)
+    }
+
+    /// The image centre, ((W − 1)/2, (H − 1)/2) with pixel centres at integers.
+    pub fn centre_pixel(&self) -> (f64, f64) {
+        (
             (self.width as f64 - 1.0) / 2.0,
             (self.height as f64 - 1.0) / 2.0,
         )

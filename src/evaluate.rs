@@ -24,9 +24,9 @@ pub struct FrameVerdict {
     pub error_arcsec: Option<f64>,
     /// The record's image-centre RA/Dec against the truth's (arcsec), for solved frames.
     pub centre_error_arcsec: Option<f64>,
-    /// The roll of the record's rotation matrix (angle from image up to north on the sky,
-    /// tetra3's `Roll`) minus the truth's `roll_tetra3_deg` (arcsec, within ±180°), for solved
-    /// frames that are not mirrored. The truth's matrix follows its image x axis and its roll
+    /// The record's `roll_deg` (angle from image up to north on the sky, tetra3's `Roll`) minus
+    /// the truth's `roll_tetra3_deg` (arcsec, within ±180°), for solved frames that are not
+    /// mirrored. The truth's matrix follows its image x axis and its roll
     /// the y axis: where the truth's WCS leaves them off perpendicular (stars in part of the
     /// frame) the two disagree, and this says how far the record is from the roll.
     pub roll_error_arcsec: Option<f64>,
@@ -186,9 +186,7 @@ pub fn evaluate(
                         .to_degrees();
                     v.centre_error_arcsec = Some(centre * 3600.0);
                 }
-                if let Some(r) = r.filter(|_| !t.mirrored) {
-                    // North in the camera frame, seen from the boresight: up is −y.
-                    let roll = r[(0, 2)].atan2(r[(1, 2)]).to_degrees() + 180.0;
+                if let Some(roll) = rec.roll_deg.filter(|_| !t.mirrored) {
                     let d = (roll - t.roll_tetra3_deg + 180.0).rem_euclid(360.0) - 180.0;
                     v.roll_error_arcsec = Some(d * 3600.0);
                 }

@@ -23,8 +23,8 @@ fn esa_tetra3_frames_are_solved_against_truth() {
     assert!(s["max_error_arcsec"].as_f64().unwrap() < 60.0, "{s}");
 }
 
-/// Solve a real set with the repository's camera file and options; the evaluation summary.
-/// The evaluation summary and the records.
+/// Solve a real set with the repository's camera file and options: the evaluation summary
+/// and the per-frame verdicts.
 fn solve_set(set: &str, camera: &str, opts: &[&str]) -> Option<(Value, Vec<Value>)> {
     let shared = shared_dir(set)?;
     let dir = shared.join("data/real").join(set);
@@ -47,21 +47,31 @@ fn solve_set(set: &str, camera: &str, opts: &[&str]) -> Option<(Value, Vec<Value
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let (s, frames) = evaluate(&dir.join("truth.jsonl"), &results);
+    println!("{set}: {s}");
+    Some((s, frames))
+}
+
+/// `gpustar evaluate --per-frame`: the summary and the per-frame verdicts.
+fn evaluate(truth: &std::path::Path, results: &std::path::Path) -> (Value, Vec<Value>) {
     let out = gpustar()
         .arg("evaluate")
         .arg("--truth")
-        .arg(dir.join("truth.jsonl"))
-        .arg(&results)
+        .arg(truth)
+        .arg(results)
+        .arg("--per-frame")
         .output()
         .unwrap();
-    let s: Value = serde_json::from_slice(&out.stdout).unwrap();
-    println!("{set}: {s}");
-    let records = std::fs::read_to_string(&results)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
-    Some((s, records))
+    let text = String::from_utf8(out.stdout).unwrap();
+    let (frames, summary): (Vec<&str>, Vec<&str>) =
+        text.lines().partition(|l| l.starts_with("{\"file\""));
+    (
+        serde_json::from_str(&summary.join("\n")).unwrap(),
+        frames
+            .iter()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect(),
+    )
 }
 
 /// Faint RGBA frames whose fixed-pattern noise is as bright as their stars, in a 6° field with
@@ -85,7 +95,7 @@ fn openstartracker_frames_are_solved_with_a_median_dark() {
 /// An in-orbit star tracker: 752×290 pixels of 88.9″ × 171.4″ and unknown lens distortion.
 #[test]
 fn swarm_frames_are_solved_with_a_fitted_scale_and_distortion() {
-    let Some((s, records)) = solve_set(
+    let Some((s, frames)) = solve_set(
         "swarm-a",
         "scripts/cameras/swarm-a.toml",
         &[
@@ -105,22 +115,9 @@ fn swarm_frames_are_solved_with_a_fitted_scale_and_distortion() {
     assert_eq!(s["false_ids"], 0, "{s}");
     // The record's roll is measured on the sky, as the truth's: with pixels twice as tall as
     // wide an angle measured in pixels would be off by up to 18° here.
-    let truth = std::fs::read_to_string(
-        shared_dir("swarm-a")
-            .unwrap()
-            .join("data/real/swarm-a/truth.jsonl"),
-    )
-    .unwrap();
-    for line in truth.lines() {
-        let t: Value = serde_json::from_str(line).unwrap();
-        let file = t["file"].as_str().unwrap();
-        let rec = records
-            .iter()
-            .find(|r| r["file"].as_str().unwrap().ends_with(file))
-            .unwrap();
-        let d = rec["roll_deg"].as_f64().unwrap() - t["roll_tetra3_deg"].as_f64().unwrap();
-        let d = (d + 180.0).rem_euclid(360.0) - 180.0;
-        assert!(d.abs() < 0.1, "{file}: roll {d}° off the truth's");
+    for f in &frames {
+        let d = f["roll_error_arcsec"].as_f64().unwrap() / 3600.0;
+        assert!(d.abs() < 0.1, "{}: roll {d}° off the truth's", f["file"]);
     }
 }
 
@@ -158,20 +155,7 @@ fn cedar_solve_frames_are_solved_each_with_its_own_field_of_view() {
         lines += &format!("{}\n", rec[0]);
     }
     std::fs::write(&results, lines).unwrap();
-    let out = gpustar()
-        .arg("evaluate")
-        .arg("--truth")
-        .arg(dir.join("truth.jsonl"))
-        .arg(&results)
-        .arg("--per-frame")
-        .output()
-        .unwrap();
-    let text = String::from_utf8(out.stdout).unwrap();
-    let frames: Vec<Value> = text
-        .lines()
-        .filter(|l| l.starts_with("{\"file\""))
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
+    let (_, frames) = evaluate(&dir.join("truth.jsonl"), &results);
     assert_eq!(frames.len(), 13);
     let correct = frames.iter().filter(|f| f["correct"] == true).count();
     println!("cedar-solve: {correct}/13 correct");

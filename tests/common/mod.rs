@@ -67,7 +67,6 @@ pub fn sim_frames(
     bits: u8,
     seed: u64,
 ) -> Vec<gpustar::frame::Frame> {
-    let cat = gpustar::catalog::Catalog::builtin();
     let s = gpustar::simulate::SimSettings {
         width: size.0,
         height: size.1,
@@ -76,17 +75,7 @@ pub fn sim_frames(
         seed,
         ..Default::default()
     };
-    (0..n)
-        .map(|k| {
-            let (pixels, _) = gpustar::simulate::render(&cat, &s, k).unwrap();
-            gpustar::frame::Frame {
-                width: size.0,
-                height: size.1,
-                pixels,
-                saturation: if bits == 8 { 255 } else { 65535 },
-            }
-        })
-        .collect()
+    rendered(&s, n).into_iter().map(|(f, _)| f).collect()
 }
 
 /// The CPU twins' outputs of every detection stage, dense as the GPU writes them.
@@ -222,20 +211,13 @@ pub fn assert_votes_equal(
 /// Paint `n` bright round spots (σ 1.2 px) into the top-right quarter of an 8-bit frame: a
 /// cluster brighter than most stars.
 pub fn crowd_corner(frame: &mut gpustar::frame::Frame, n: usize, seed: u64) {
-    let mut state = seed
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    let mut next = move || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let (w, h) = (frame.width as f64, frame.height as f64);
     for _ in 0..n {
-        let cx = w / 2.0 + next() * w / 2.0;
-        let cy = next() * h / 2.0;
-        let peak = 120.0 + 120.0 * next();
+        let cx = w / 2.0 + rng.random::<f64>() * w / 2.0;
+        let cy = rng.random::<f64>() * h / 2.0;
+        let peak = 120.0 + 120.0 * rng.random::<f64>();
         for y in (cy as i64 - 5).max(0)..(cy as i64 + 6).min(h as i64) {
             for x in (cx as i64 - 5).max(0)..(cx as i64 + 6).min(w as i64) {
                 let r2 = (x as f64 - cx).powi(2) + (y as f64 - cy).powi(2);
