@@ -146,6 +146,15 @@ pub const RETRY_VOTE_STARS: usize = 60;
 pub const WIDE_PAIR_TOL_PX: f64 = 4.0;
 pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
 
+/// The stages that can accept a frame, the vote and the triangle fallback, share the
+/// false-match budget (`max_false_prob`) evenly: each judges its own hypotheses against half
+/// of it, so the chance that either accepts a wrong attitude stays within the whole. A
+/// triangle is then weighed against the thousands of triangles that matched, not against the
+/// millions of pairs the vote scanned too. openstartracker's img7.png, 6 of its stars above
+/// the noise: its triangle's false-match probability is 6.8e-5 so judged, 0.052 before
+/// (3.4e-7 and 2.6e-4 with `refine::brightest_first`). The vote's path pays a factor of 2.
+pub const STAGES: u64 = 2;
+
 /// About how many cells the spread retry divides a frame into (square cells, as many as fit
 /// the frame's shape). A bright cluster of false stars (lit foliage, a roof edge, a nebula, a
 /// hot corner) can fill the brightest `vote_stars` by itself and leave too few real stars in
@@ -377,7 +386,7 @@ impl Solver {
         if matches!(outcome, Outcome::Solved(_)) || p.n_vote < 4 {
             return outcome;
         }
-        self.finish_triangles(detections, p, voted.hypotheses, refs)
+        self.finish_triangles(detections, p, refs)
             .map_or(outcome, Outcome::Solved)
     }
 
@@ -410,8 +419,11 @@ impl Solver {
         let Some(r0) = wahba(&cam, &icrs) else {
             return Outcome::Unsolved("no_consistent_match");
         };
-        // Every pass tried multiplies the hypotheses a chance match could come from.
-        let hypotheses = voted.hypotheses.saturating_mul(self.passes.len() as u64);
+        // Every pass tried multiplies the hypotheses a chance match could come from; the vote
+        // has half the error budget (see `STAGES`).
+        let hypotheses = voted
+            .hypotheses
+            .saturating_mul(STAGES * self.passes.len() as u64);
         let Some(refined) =
             refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
         else {
@@ -432,13 +444,13 @@ impl Solver {
     }
 
     /// The triangle fallback (see [`triangle`]): the first confirmed triangle, in brightness
-    /// order, whose refined attitude passes the false-match test. That test counts the vote's
-    /// hypotheses and every triangle's, for every pass tried, and three stars as fixed.
+    /// order, whose refined attitude passes the false-match test. That test counts every
+    /// triangle that matched, for every pass tried, with its half of the error budget (see
+    /// `STAGES`), and three stars as fixed.
     fn finish_triangles(
         &self,
         detections: &[Detection],
         p: &Prepared,
-        vote_hypotheses: u64,
         refs: &RefCatalog,
     ) -> Option<Refined> {
         let vectors = &p.vectors[..p.n_vote];
@@ -448,7 +460,7 @@ impl Solver {
             &vectors[..p.triangle_stars],
             &self.refs,
         );
-        let hypotheses = (vote_hypotheses + matched).saturating_mul(self.passes.len() as u64);
+        let hypotheses = matched.saturating_mul(STAGES * self.passes.len() as u64);
         hyps.iter().find_map(|t| {
             let cam = t.stars.map(|i| vectors[i]);
             let icrs = t.refs.map(|id| refs.stars[id as usize].v);

@@ -76,10 +76,12 @@ fn evaluate(truth: &std::path::Path, results: &std::path::Path) -> (Value, Vec<V
 
 /// Faint RGBA frames whose fixed-pattern noise is as bright as their stars, in a 6° field with
 /// Hp ≤ 8 (37,505 catalog stars): the directory median removes the pattern and the triangle
-/// fallback identifies what the vote cannot. img7 has only 8 faint stars and stays unsolved.
+/// fallback identifies what the vote cannot. img7 shows only 6 of its stars above the noise
+/// (its truth lists 11): a triangle of them is accepted because the false-match test looks at
+/// the brightest detections first and judges triangles among triangles (solve::STAGES).
 #[test]
 fn openstartracker_frames_are_solved_with_a_median_dark() {
-    let Some((s, _)) = solve_set(
+    let Some((s, frames)) = solve_set(
         "openstartracker",
         "scripts/cameras/openstartracker.toml",
         &["--epoch", "2018.35", "--dark-median"],
@@ -87,9 +89,11 @@ fn openstartracker_frames_are_solved_with_a_median_dark() {
         return;
     };
     assert_eq!(s["frames"], 9);
-    assert!(s["correct"].as_u64().unwrap() >= 8, "{s}");
+    assert_eq!(s["correct"], 9, "{s}");
     assert_eq!(s["wrong"], 0, "{s}");
     assert_eq!(s["false_ids"], 0, "{s}");
+    let img7 = frames.iter().find(|f| f["file"] == "img7.png").unwrap();
+    assert!(img7["correct_ids"].as_u64().unwrap() >= 6, "{img7}");
 }
 
 /// An in-orbit star tracker: 752×290 pixels of 88.9″ × 171.4″ and unknown lens distortion.

@@ -1,0 +1,60 @@
+//! The false-match test of refinement: stars matched among the brightest detections are
+//! stronger evidence than the same stars matched among many faint ones.
+
+mod common;
+
+use gpustar::detect::Detection;
+use gpustar::refine::{RefineSettings, refine, stars_in_view};
+use nalgebra::Rotation3;
+use rand::{Rng, SeedableRng};
+
+fn detection(x: f64, y: f64, flux: f64) -> Detection {
+    Detection {
+        x,
+        y,
+        flux,
+        area: 5,
+        peak: flux as u32,
+        saturated: false,
+    }
+}
+
+/// Six catalog stars and 94 noise detections; the same positions, once with the stars the
+/// brightest, once with them the faintest. Only the order differs, and only the first is
+/// accepted (1e-6): six matches among 100 detections are what chance gives to one of a million
+/// hypotheses, six among the brightest ten are not.
+#[test]
+fn six_stars_among_the_brightest_are_accepted_and_among_the_faintest_not() {
+    let solver = common::solver(10.0, (1024, 1024));
+    let r = Rotation3::from_euler_angles(0.3, -0.2, 1.1).into_inner();
+    let mut view = stars_in_view(&r, &solver.refs, &solver.camera);
+    assert!(view.len() >= 10, "{} stars in view", view.len());
+    view.sort_by(|a, b| {
+        let mag = |id: u32| solver.refs.stars[id as usize].mag;
+        mag(a.0).total_cmp(&mag(b.0))
+    });
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let mut jitter = || 0.6 * (rng.random::<f64>() - 0.5);
+    let stars: Vec<Detection> = view[..6]
+        .iter()
+        .map(|&(_, x, y)| detection(x + jitter(), y + jitter(), 1000.0))
+        .collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+    let noise: Vec<Detection> = (0..94)
+        .map(|i| {
+            let (x, y) = (rng.random::<f64>() * 1024.0, rng.random::<f64>() * 1024.0);
+            detection(x, y, 100.0 - i as f64)
+        })
+        .collect();
+    let prob = |dets: &[Detection]| {
+        let s = RefineSettings::default();
+        let refined = refine(r, dets, &solver.refs, &solver.camera, 1_000_000, 3, &s).unwrap();
+        assert_eq!(refined.matches.len(), 6);
+        refined.false_match_prob
+    };
+    let brightest = prob(&[stars.clone(), noise.clone()].concat());
+    let faintest = prob(&[noise, stars].concat());
+    println!("false-match probability: stars brightest {brightest:.2e}, faintest {faintest:.2e}");
+    assert!(brightest <= 1e-6, "{brightest:e}");
+    assert!(faintest > 1e-6, "{faintest:e}");
+}
