@@ -11,10 +11,13 @@ per frame, for square-pixel frames (the roll comparison assumes square pixels):
   roll_diff   the matrix's roll minus roll_tetra3 (deg): the WCS's axis skew at the centre;
   star_fit    the angle (deg) between the matrix and the pinhole attitude fitted (Wahba, SVD)
               to the truth's own identified stars at the truth's centre scale;
+  truth_px    the median distance (pixels) between the truth's identified stars and their
+              catalog positions projected through the matrix (pinhole, centre scale);
 with --records DIR (DIR/<set>.jsonl, as scripts/real_sets.sh writes them), also
   ours        the angle (deg) between the record's attitude and the matrix;
   ours_fit    the angle (deg) between the record's attitude and the pinhole fit of the truth's
-              stars that the record identified (the same stars, the truth's pixel positions).
+              stars that the record identified (the same stars, the truth's pixel positions);
+  ours_px     truth_px with the record's attitude in place of the matrix.
 
 Frames where |roll_diff| or star_fit exceed --min-deg are marked '*'. Needs numpy and
 ../shared/catalog/hip2.dat (positions moved to the truth epoch by proper motion).
@@ -75,7 +78,10 @@ def main():
     a = ap.parse_args()
     real = Path(a.real)
     hip = catalog(real / "../../catalog/hip2.dat")
-    print(f"{'set/file':44} {'stars':>5} {'roll_diff':>9} {'star_fit':>8} {'ours':>6} {'ours_fit':>8}")
+    print(
+        f"{'set/file':44} {'stars':>5} {'roll_diff':>9} {'star_fit':>8} {'truth_px':>8} "
+        f"{'ours':>6} {'ours_fit':>8} {'ours_px':>7}"
+    )
     for truth_file in sorted(real.glob("*/truth.jsonl")):
         records = {}
         if a.records:
@@ -95,20 +101,31 @@ def main():
             cam = [np.array([s["x"] - cx, s["y"] - cy, f]) / math.hypot(s["x"] - cx, s["y"] - cy, f) for s in stars]
             sky = [at_epoch(hip[s["hip"]], t["epoch"]) for s in stars]
             fit = wahba(cam, sky)
+
+            def median_px(r):
+                v = np.asarray(sky) @ r.T
+                x = cx + f * v[:, 0] / v[:, 2] - np.array([s["x"] for s in stars])
+                y = cy + f * v[:, 1] / v[:, 2] - np.array([s["y"] for s in stars])
+                return float(np.median(np.hypot(x, y)))
+
             roll_diff = (roll_deg(truth) - t["roll_tetra3_deg"] + 180) % 360 - 180
             star_fit = angle_deg(fit, truth)
-            ours = ours_fit = ""
+            ours = ours_fit = ours_px = ""
             rec = records.get(t["file"])
             if rec and rec.get("status") == "solved":
                 r = np.array(rec["rotation_matrix"])
                 ours = f"{angle_deg(r, truth):.3f}"
+                ours_px = f"{median_px(r):.2f}"
                 ids = {m["hip"] for m in rec["matches"]}
                 same = [k for k, s in enumerate(stars) if s["hip"] in ids]
                 if len(same) >= 3:
                     ours_fit = f"{angle_deg(r, wahba([cam[k] for k in same], [sky[k] for k in same])):.3f}"
             mark = "*" if max(abs(roll_diff), star_fit) > a.min_deg else ""
             name = f"{truth_file.parent.name}/{t['file']}"[:44]
-            print(f"{name:44} {len(stars):5} {roll_diff:9.3f} {star_fit:8.3f} {ours:>6} {ours_fit:>8} {mark}")
+            print(
+                f"{name:44} {len(stars):5} {roll_diff:9.3f} {star_fit:8.3f} {median_px(truth):8.2f} "
+                f"{ours:>6} {ours_fit:>8} {ours_px:>7} {mark}"
+            )
 
 
 if __name__ == "__main__":
