@@ -70,6 +70,14 @@ def roll_deg(r):
     return (math.degrees(math.atan2(north[0], north[1])) + 180) % 360
 
 
+def median_px(r, sky, pixels, f, cx, cy):
+    """Median distance (px) between `pixels` and the `sky` vectors projected through r
+    (pinhole of focal length f, centre (cx, cy))."""
+    v = np.asarray(sky) @ r.T
+    proj = np.stack([cx + f * v[:, 0] / v[:, 2], cy + f * v[:, 1] / v[:, 2]], axis=1)
+    return float(np.median(np.hypot(*(proj - pixels).T)))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("real", nargs="?", default=str(HERE / "../../shared/data/real"))
@@ -101,12 +109,7 @@ def main():
             cam = [np.array([s["x"] - cx, s["y"] - cy, f]) / math.hypot(s["x"] - cx, s["y"] - cy, f) for s in stars]
             sky = [at_epoch(hip[s["hip"]], t["epoch"]) for s in stars]
             fit = wahba(cam, sky)
-
-            def median_px(r):
-                v = np.asarray(sky) @ r.T
-                x = cx + f * v[:, 0] / v[:, 2] - np.array([s["x"] for s in stars])
-                y = cy + f * v[:, 1] / v[:, 2] - np.array([s["y"] for s in stars])
-                return float(np.median(np.hypot(x, y)))
+            pixels = np.array([[s["x"], s["y"]] for s in stars])
 
             roll_diff = (roll_deg(truth) - t["roll_tetra3_deg"] + 180) % 360 - 180
             star_fit = angle_deg(fit, truth)
@@ -115,7 +118,7 @@ def main():
             if rec and rec.get("status") == "solved":
                 r = np.array(rec["rotation_matrix"])
                 ours = f"{angle_deg(r, truth):.3f}"
-                ours_px = f"{median_px(r):.2f}"
+                ours_px = f"{median_px(r, sky, pixels, f, cx, cy):.2f}"
                 ids = {m["hip"] for m in rec["matches"]}
                 same = [k for k, s in enumerate(stars) if s["hip"] in ids]
                 if len(same) >= 3:
@@ -123,7 +126,7 @@ def main():
             mark = "*" if max(abs(roll_diff), star_fit) > a.min_deg else ""
             name = f"{truth_file.parent.name}/{t['file']}"[:44]
             print(
-                f"{name:44} {len(stars):5} {roll_diff:9.3f} {star_fit:8.3f} {median_px(truth):8.2f} "
+                f"{name:44} {len(stars):5} {roll_diff:9.3f} {star_fit:8.3f} {median_px(truth, sky, pixels, f, cx, cy):8.2f} "
                 f"{ours:>6} {ours_fit:>8} {ours_px:>7} {mark}"
             )
 

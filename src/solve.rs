@@ -137,6 +137,16 @@ pub enum PassKind {
     Wide,
 }
 
+impl PassKind {
+    /// Relative spacing of this kind's focal lengths in a scale search.
+    fn scale_step(self) -> f64 {
+        match self {
+            PassKind::Wide => WIDE_SCALE_STEP,
+            _ => SCALE_STEP,
+        }
+    }
+}
+
 /// Voting stars of the first retry. Many false stars (satellites, debris, glints) can outshine
 /// most real ones, so that the brightest `vote_stars` hold too few stars to outvote chance:
 /// voting with more of the faint stars brings the real ones back. Not the default because the
@@ -255,7 +265,7 @@ impl Solver {
             Some((lo, hi)) => scale_hypotheses(lo, hi, step),
             None => vec![1.0],
         };
-        let (scales, wide_scales) = (scales_at(SCALE_STEP), scales_at(WIDE_SCALE_STEP));
+        let scales = scales_at(SCALE_STEP);
         let kinds = [
             PassKind::First,
             PassKind::MoreStars,
@@ -265,12 +275,9 @@ impl Solver {
         let passes = kinds[..if settings.retry { kinds.len() } else { 1 }]
             .iter()
             .flat_map(|&kind| {
-                let of_kind = if kind == PassKind::Wide {
-                    &wide_scales
-                } else {
-                    &scales
-                };
-                of_kind.iter().map(move |&scale| Pass { scale, kind })
+                scales_at(kind.scale_step())
+                    .into_iter()
+                    .map(move |scale| Pass { scale, kind })
             })
             .collect();
         // Pairs as far apart as the widest field tried (the shortest focal length).
@@ -330,11 +337,7 @@ impl Solver {
         if self.scales.len() > 1 {
             // Each hypothesis stands for half a step either side of its focal length, and
             // the refinement fits the scale.
-            let step = match pass.kind {
-                PassKind::Wide => WIDE_SCALE_STEP,
-                _ => SCALE_STEP,
-            };
-            s.scale_tol += step / 2.0;
+            s.scale_tol += pass.kind.scale_step() / 2.0;
             if rs.fit == refine::CameraFit::None {
                 rs.fit = refine::CameraFit::Scale;
             }

@@ -47,16 +47,14 @@ fn solve(retry: bool, set: &[(Frame, Truth)]) -> (usize, usize) {
 #[test]
 fn the_retry_solves_frames_with_pixel_centroid_noise() {
     let set = common::rendered(&sim(1.5), 12);
-    let (with, wrong_with) = solve(true, &set);
-    let (without, wrong_without) = solve(false, &set);
-    println!(
-        "1.5 px centroid noise, 12 frames: {with} solved with the wide retry, {without} without"
-    );
-    assert_eq!((wrong_with, wrong_without), (0, 0));
-    assert!(with >= 11, "{with}/12 solved with the wide retry");
-    assert!(
-        with >= without + 3,
-        "{without}/12 solved without it: the retry adds little"
+    let (with, without) = (solve(true, &set), solve(false, &set));
+    common::assert_retry_adds(
+        "1.5 px centroid noise",
+        "the retries",
+        12,
+        11,
+        with,
+        without,
     );
 }
 

@@ -247,3 +247,22 @@ pub fn solved_and_wrong(
     }
     (solved, wrong)
 }
+
+/// What a retry adds on a set of `n` frames, given (solved, wrong) with it and without it:
+/// no wrong answer either way, at least `min_with` solved with it, at least 3 more than without.
+pub fn assert_retry_adds(
+    case: &str,
+    retry: &str,
+    n: usize,
+    min_with: usize,
+    (with, wrong_with): (usize, usize),
+    (without, wrong_without): (usize, usize),
+) {
+    println!("{case}, {n} frames: {with} solved with {retry}, {without} without");
+    assert_eq!((wrong_with, wrong_without), (0, 0));
+    assert!(with >= min_with, "{with}/{n} solved with {retry}");
+    assert!(
+        with >= without + 3,
+        "{without}/{n} solved without it: {retry} adds little"
+    );
+}
