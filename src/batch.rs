@@ -113,7 +113,7 @@ impl Solvers {
         backend: &str,
     ) -> Record {
         let mut r = solver.record(&d.name, sol, timing, backend);
-        if let Err(e) = self.products.write(&d.path, &d.name, frame, solver, sol) {
+        if let Err(e) = self.products.write(&d.path, &d.name, frame, sol) {
             // The solution stands; the user learns which file is missing and why.
             tracing::warn!("{}: {e:#}", d.name);
             r.warnings.push(format!("{e:#}"));
@@ -312,7 +312,7 @@ impl GpuRunner {
             let prepared: Vec<(usize, Prepared)> = detections
                 .iter()
                 .enumerate()
-                .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(_)))
+                .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
                 .filter_map(|(i, d)| solver.prepare(d, h).map(|p| (i, p)))
                 .collect();
             if prepared.is_empty() {

@@ -6,7 +6,7 @@ use crate::annotate::{self, Annotation, Mark};
 use crate::attitude::pointing;
 use crate::frame::Frame;
 use crate::refine::stars_in_view;
-use crate::solve::{Outcome, Solution, Solver};
+use crate::solve::{Outcome, Solution};
 use anyhow::{Result, bail};
 use std::path::{Component, Path, PathBuf};
 
@@ -19,15 +19,8 @@ pub struct Products {
 
 impl Products {
     /// Write the products asked for of one frame (read from `input`, named `name`).
-    pub fn write(
-        &self,
-        input: &Path,
-        name: &str,
-        frame: &Frame,
-        solver: &Solver,
-        sol: &Solution,
-    ) -> Result<()> {
-        if let (Some(dir), Outcome::Solved(r)) = (&self.wcs_dir, &sol.outcome) {
+    pub fn write(&self, input: &Path, name: &str, frame: &Frame, sol: &Solution) -> Result<()> {
+        if let (Some(dir), Outcome::Solved(r, _)) = (&self.wcs_dir, &sol.outcome) {
             crate::wcs::write_wcs_file(&product_path(dir, name, "wcs"), &r.camera, &r.r)?;
         }
         if let Some(dir) = &self.annotate_dir {
@@ -39,7 +32,7 @@ impl Products {
                     input.display()
                 );
             }
-            annotate::write_png(&out, &annotation(frame, solver, sol))?;
+            annotate::write_png(&out, &annotation(frame, sol))?;
         }
         Ok(())
     }
@@ -67,7 +60,7 @@ fn same_file(a: &Path, b: &Path) -> bool {
 
 /// What the annotated image shows: identified detections with their HIP numbers, the other
 /// detections, and the catalog stars the solution puts in the frame that nothing matched.
-fn annotation<'a>(frame: &'a Frame, solver: &Solver, sol: &Solution) -> Annotation<'a> {
+fn annotation<'a>(frame: &'a Frame, sol: &Solution) -> Annotation<'a> {
     let mark = |x: f64, y: f64, area: u32| Mark {
         x,
         y,
@@ -77,16 +70,16 @@ fn annotation<'a>(frame: &'a Frame, solver: &Solver, sol: &Solution) -> Annotati
     let mut predicted = Vec::new();
     let mut matched = vec![false; sol.detections.len()];
     let caption = match &sol.outcome {
-        Outcome::Solved(r) => {
-            let mut star_matched = vec![false; solver.refs.len()];
+        Outcome::Solved(r, refs) => {
+            let mut star_matched = vec![false; refs.len()];
             for m in &r.matches {
                 let d = &sol.detections[m.det];
                 matched[m.det] = true;
                 star_matched[m.ref_id as usize] = true;
-                let hip = solver.refs.stars[m.ref_id as usize].hip;
+                let hip = refs.stars[m.ref_id as usize].hip;
                 identified.push((mark(d.x, d.y, d.area), hip));
             }
-            for (id, x, y) in stars_in_view(&r.r, &solver.refs, &r.camera) {
+            for (id, x, y) in stars_in_view(&r.r, refs, &r.camera) {
                 if !star_matched[id as usize] {
                     predicted.push(Mark {
                         x,

@@ -78,7 +78,7 @@ pub fn auto_mag_limit(catalog: &Catalog, camera: &Camera) -> f64 {
 pub struct Solver {
     pub camera: Camera,
     pub settings: Settings,
-    pub refs: RefCatalog,
+    pub refs: Arc<RefCatalog>,
     pub table: PairTable,
     pub table_origin: TableOrigin,
     /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
@@ -89,7 +89,20 @@ pub struct Solver {
     pub passes: Vec<Pass>,
     /// `refs` moved to the epochs of frames that carry their own date, by day.
     epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
+    /// When the scale is searched and the magnitude limit left to the solver: the catalog,
+    /// to check each solution against as deep a selection as its fitted field calls for.
+    deeper: Option<Deeper>,
 }
+
+/// The catalog, and the selections made from it for solutions' fields.
+struct Deeper {
+    catalog: Catalog,
+    selections: Mutex<HashMap<SelectionKey, Option<Arc<RefCatalog>>>>,
+}
+
+/// (magnitude limit in tenths, epoch in days) of a selection; its value None = the selection
+/// failed (too many stars for 16-bit ids).
+type SelectionKey = (i64, i64);
 
 /// Frames dated within this many years of the run's epoch use the run's star positions
 /// (about a day: proper motions move no star by a milliarcsecond in that time).
@@ -245,7 +258,8 @@ pub struct Solution {
 
 #[derive(Clone, Debug)]
 pub enum Outcome {
-    Solved(refine::Refined),
+    /// The refined solution, and the reference stars its matches' ids index.
+    Solved(refine::Refined, Arc<RefCatalog>),
     Unsolved(&'static str),
 }
 
@@ -291,26 +305,32 @@ impl Solver {
         Ok(Solver {
             camera,
             settings,
-            refs,
+            refs: Arc::new(refs),
             table,
             table_origin,
             scales,
             passes,
             epochs: Mutex::new(HashMap::new()),
+            deeper: (settings.scale_range.is_some() && settings.mag_limit.is_none()).then(|| {
+                Deeper {
+                    catalog: catalog.clone(),
+                    selections: Mutex::new(HashMap::new()),
+                }
+            }),
         })
     }
 
-    /// The reference stars at a frame's own epoch, when it has one that differs from the
-    /// run's; None = the run's (`self.refs`).
-    pub fn refs_at(&self, epoch: Option<f64>) -> Option<Arc<RefCatalog>> {
-        let e = epoch.filter(|e| (e - self.refs.selection.epoch).abs() > SAME_EPOCH_YEARS)?;
+    /// The reference stars at a frame's own epoch (`self.refs` when it has none, or the same).
+    pub fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
+        let Some(e) = epoch.filter(|e| (e - self.refs.selection.epoch).abs() > SAME_EPOCH_YEARS)
+        else {
+            return self.refs.clone();
+        };
         let day = (e * 365.25).round() as i64;
         let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
-        Some(
-            map.entry(day)
-                .or_insert_with(|| Arc::new(self.refs.at_epoch(e)))
-                .clone(),
-        )
+        map.entry(day)
+            .or_insert_with(|| Arc::new(self.refs.at_epoch(e)))
+            .clone()
     }
 
     /// What the vote needs from a detection list for pass `h` (an index into `passes`): the
@@ -381,7 +401,7 @@ impl Solver {
             };
             let voted = identify::vote_cpu(&self.table, &p.ranges, p.n_vote, self.refs.len(), p.k);
             outcome = self.finish(&detections, &p, &voted, epoch);
-            if matches!(outcome, Outcome::Solved(_)) {
+            if matches!(outcome, Outcome::Solved(..)) {
                 break;
             }
         }
@@ -402,24 +422,87 @@ impl Solver {
         voted: &identify::VoteResult,
         epoch: Option<f64>,
     ) -> Outcome {
-        let at_epoch = self.refs_at(epoch);
-        let refs = at_epoch.as_deref().unwrap_or(&self.refs);
-        let outcome = self.finish_vote(detections, p, voted, refs);
-        if matches!(outcome, Outcome::Solved(_)) || p.n_vote < 4 {
-            return outcome;
+        let refs = self.refs_at(epoch);
+        let accepted = match self.finish_vote(detections, p, voted, &refs) {
+            Ok(accepted) => accepted,
+            Err(reason) if p.n_vote < 4 => return Outcome::Unsolved(reason),
+            Err(reason) => match self.finish_triangles(detections, p, &refs) {
+                Some(accepted) => accepted,
+                None => return Outcome::Unsolved(reason),
+            },
+        };
+        let (refined, hypotheses, fixed) = accepted;
+        match self.deepen(&refined, detections, p, epoch, hypotheses, fixed) {
+            Some((deeper, deep_refs)) => Outcome::Solved(deeper, deep_refs),
+            None => Outcome::Solved(refined, refs),
         }
-        self.finish_triangles(detections, p, refs)
-            .map_or(outcome, Outcome::Solved)
     }
 
-    /// The vote's path: the consistent set of candidates, Wahba, refinement.
+    /// After a scale search the reference stars were chosen for the middle of the range, and
+    /// a frame that turns out narrower holds few of them (at 10° in a search over 5° to 40°,
+    /// about 8 instead of [`AUTO_STARS_IN_VIEW`]). The accepted attitude is refined again
+    /// against the selection its fitted field calls for, judged by the same false-match test
+    /// with the same hypotheses; None = nothing deeper to check against, or the deeper
+    /// refinement matched fewer stars or failed the test (the accepted one then stands).
+    fn deepen(
+        &self,
+        accepted: &Refined,
+        detections: &[Detection],
+        p: &Prepared,
+        epoch: Option<f64>,
+        hypotheses: u64,
+        fixed: usize,
+    ) -> Option<(Refined, Arc<RefCatalog>)> {
+        let deeper = self.deeper.as_ref()?;
+        let mag_limit = auto_mag_limit(&deeper.catalog, &accepted.camera);
+        if mag_limit <= self.refs.selection.mag_limit {
+            return None;
+        }
+        let epoch = epoch.unwrap_or(self.refs.selection.epoch);
+        let key = (
+            (mag_limit * 10.0).round() as i64,
+            (epoch * 365.25).round() as i64,
+        );
+        let refs = deeper
+            .selections
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .entry(key)
+            .or_insert_with(|| {
+                let selection = Selection {
+                    epoch,
+                    mag_limit,
+                    ..self.refs.selection
+                };
+                RefCatalog::select(&deeper.catalog, selection)
+                    .map(Arc::new)
+                    .ok()
+            })
+            .clone()?;
+        let refined = refine::refine(
+            accepted.r,
+            detections,
+            &refs,
+            &accepted.camera,
+            hypotheses,
+            fixed,
+            &p.refine,
+        )?;
+        (refined.matches.len() >= accepted.matches.len()
+            && refined.false_match_prob <= self.settings.refine.max_false_prob)
+            .then_some((refined, refs))
+    }
+
+    /// The vote's path: the consistent set of candidates, Wahba, refinement. The accepted
+    /// solution with the hypotheses and fixed stars its false-match test counted, or why
+    /// there is none.
     fn finish_vote(
         &self,
         detections: &[Detection],
         p: &Prepared,
         voted: &identify::VoteResult,
         refs: &RefCatalog,
-    ) -> Outcome {
+    ) -> Result<(Refined, u64, usize), &'static str> {
         let s = &self.settings;
         let vectors = &p.vectors;
         let n_vote = voted.candidates.len() / voted.k.max(1);
@@ -431,26 +514,21 @@ impl Solver {
             &p.identify,
         );
         if ids.len() < 2 {
-            return Outcome::Unsolved("no_consistent_match");
+            return Err("no_consistent_match");
         }
         let cam: Vec<_> = ids.iter().map(|m| vectors[m.star]).collect();
         let icrs: Vec<_> = ids
             .iter()
             .map(|m| refs.stars[m.ref_id as usize].v)
             .collect();
-        let Some(r0) = wahba(&cam, &icrs) else {
-            return Outcome::Unsolved("no_consistent_match");
-        };
+        let r0 = wahba(&cam, &icrs).ok_or("no_consistent_match")?;
         // Every pass tried multiplies the hypotheses a chance match could come from; the vote
         // has half the error budget (see `STAGES`).
         let hypotheses = voted
             .hypotheses
             .saturating_mul(STAGES * self.passes.len() as u64);
-        let Some(refined) =
-            refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
-        else {
-            return Outcome::Unsolved("no_consistent_match");
-        };
+        let refined = refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
+            .ok_or("no_consistent_match")?;
         if refined.false_match_prob > s.refine.max_false_prob {
             tracing::debug!(
                 "low confidence: {} of {} catalog stars in view matched, false-match \
@@ -460,9 +538,9 @@ impl Solver {
                 refined.false_match_prob,
                 p.camera.fx / self.camera.fx
             );
-            return Outcome::Unsolved("low_confidence");
+            return Err("low_confidence");
         }
-        Outcome::Solved(refined)
+        Ok((refined, hypotheses, 2))
     }
 
     /// The triangle fallback (see [`triangle`]): the first confirmed triangle, in brightness
@@ -474,7 +552,7 @@ impl Solver {
         detections: &[Detection],
         p: &Prepared,
         refs: &RefCatalog,
-    ) -> Option<Refined> {
+    ) -> Option<(Refined, u64, usize)> {
         let vectors = &p.vectors[..p.n_vote];
         let (hyps, matched) = triangle::triangles(
             &self.table,
@@ -489,7 +567,8 @@ impl Solver {
             let r0 = wahba(&cam, &icrs)?;
             let refined =
                 refine::refine(r0, detections, refs, &p.camera, hypotheses, 3, &p.refine)?;
-            (refined.false_match_prob <= self.settings.refine.max_false_prob).then_some(refined)
+            (refined.false_match_prob <= self.settings.refine.max_false_prob)
+                .then_some((refined, hypotheses, 3))
         })
     }
 
@@ -522,9 +601,7 @@ impl Solver {
                 rec.status = Status::Unsolved;
                 rec.reason = Some(reason.to_string());
             }
-            Outcome::Solved(r) => {
-                let at_epoch = self.refs_at(sol.epoch);
-                let refs = at_epoch.as_deref().unwrap_or(&self.refs);
+            Outcome::Solved(r, refs) => {
                 rec.epoch = Some(refs.selection.epoch);
                 let p = pointing(&r.r, &r.camera);
                 rec.status = Status::Solved;

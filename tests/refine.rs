@@ -1,7 +1,8 @@
 //! Refinement with a camera fit: frames from a camera with non-square pixels, an off-centre
 //! principal point, radial distortion and a mirror solve with their camera; with k1 unknown
 //! the fit recovers it; with the focal length uncertain the scale search finds it, and a
-//! range that excludes the true scale solves nothing (no wrong answers when the scale is free).
+//! range that excludes the true scale solves nothing (no wrong answers when the scale is free),
+//! and a solution found by the search is checked against the catalog for its fitted field.
 
 mod common;
 
@@ -48,7 +49,7 @@ fn solve_all(solver: &Solver, set: &[(Frame, Truth)]) -> Vec<Option<(f64, Camera
         .map(|(f, t)| {
             let (sol, _, _) = solver.solve_frame(f);
             match sol.outcome {
-                Outcome::Solved(r) => {
+                Outcome::Solved(r, _) => {
                     let truth = Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
                     let err = attitude_error(&r.r, &truth).to_degrees() * 3600.0;
                     Some((err, r.camera))
@@ -147,5 +148,74 @@ fn scale_search_finds_the_field_of_view_and_a_range_without_it_solves_nothing() 
     assert!(
         res.iter().all(|r| r.is_none()),
         "a frame solved at a scale outside the range: {res:?}"
+    );
+}
+
+/// The reference stars of a scale search are chosen for the camera given, and a frame that
+/// turns out narrower holds fewer of them. Its accepted attitude is refined again against the
+/// selection its fitted field calls for: 12° frames searched from a 16° camera identify as
+/// many stars as with the 12° camera known, where the 16° selection holds about half as many.
+#[test]
+fn a_scale_search_checks_the_solution_against_the_catalog_for_the_fitted_field() {
+    let truth_cam = Camera::from_fov(1024, 1024, 12.0).unwrap();
+    let set = common::rendered(
+        &SimSettings {
+            camera: Some(truth_cam.clone()),
+            mag_limit: 7.0,
+            seed: 7,
+            ..SimSettings::default()
+        },
+        4,
+    );
+    let catalog = Catalog::builtin();
+    let solve = |camera: &Camera, s: Settings| -> Vec<Option<(usize, f64, f64)>> {
+        let solver = Solver::new(&catalog, camera.clone(), s).unwrap();
+        set.iter()
+            .map(|(f, t)| match solver.solve_frame(f).0.outcome {
+                Outcome::Solved(r, refs) => {
+                    let truth = Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
+                    let err = attitude_error(&r.r, &truth).to_degrees() * 3600.0;
+                    Some((r.matches.len(), refs.selection.mag_limit, err))
+                }
+                Outcome::Unsolved(_) => None,
+            })
+            .collect()
+    };
+    let auto = Settings {
+        table_cache: false,
+        ..Settings::default()
+    };
+    // Focal lengths 1.30–1.36 times the 16° camera's: 12.3°–11.8°.
+    let believed = Camera::from_fov(1024, 1024, 16.0).unwrap();
+    let searched = Settings {
+        scale_range: Some((1.30, 1.36)),
+        ..auto
+    };
+    let nominal = gpustar::solve::auto_mag_limit(&catalog, &believed);
+    let known = solve(&truth_cam, auto);
+    let deep = solve(&believed, searched);
+    let shallow = solve(
+        &believed,
+        Settings {
+            mag_limit: Some(nominal),
+            ..searched
+        },
+    );
+    eprintln!(
+        "known 12°: {known:.1?}\nsearched: {deep:.1?}\nat the 16° limit {nominal}: {shallow:.1?}"
+    );
+    let (mut n_deep, mut n_shallow) = (0, 0);
+    for ((k, d), s) in known.iter().zip(&deep).zip(&shallow) {
+        let (Some(k), Some(d), Some(s)) = (k, d, s) else {
+            panic!("a frame did not solve: {k:?} {d:?} {s:?}");
+        };
+        assert!(d.1 > nominal, "searched at the 16° limit {nominal}: {d:?}");
+        assert!(d.0 + 2 >= k.0, "{} stars identified, {} known", d.0, k.0);
+        assert!(d.2 < 20.0, "attitude {:.1}″ off", d.2);
+        (n_deep, n_shallow) = (n_deep + d.0, n_shallow + s.0);
+    }
+    assert!(
+        n_shallow * 10 < n_deep * 7,
+        "{n_shallow} stars at the 16° limit, {n_deep} searched"
     );
 }

@@ -237,7 +237,7 @@ pub fn solved_and_wrong(
 ) -> (usize, usize) {
     let (mut solved, mut wrong) = (0, 0);
     for (f, t) in set {
-        if let gpustar::solve::Outcome::Solved(r) = solver.solve_frame(f).0.outcome {
+        if let gpustar::solve::Outcome::Solved(r, _) = solver.solve_frame(f).0.outcome {
             solved += 1;
             let truth = nalgebra::Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
             if gpustar::attitude::attitude_error(&r.r, &truth).to_degrees() > wrong_deg {
