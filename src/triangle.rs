@@ -62,6 +62,18 @@ impl Side {
             .map(|&(_, b)| b)
     }
 
+    /// [`Side::of`] for `a` rising from call to call: `cursor` (starting at 0) walks
+    /// `partners` once instead of searching it each time.
+    fn of_rising(&self, a: u32, cursor: &mut usize) -> impl Iterator<Item = u32> + '_ {
+        while self.partners.get(*cursor).is_some_and(|&(x, _)| x < a) {
+            *cursor += 1;
+        }
+        self.partners[*cursor..]
+            .iter()
+            .take_while(move |&&(x, _)| x == a)
+            .map(|&(_, b)| b)
+    }
+
     fn has(&self, a: u32, b: u32) -> bool {
         self.keys
             .binary_search(&(a.min(b) << 16 | a.max(b)))
@@ -111,32 +123,34 @@ pub fn triangles(
         };
         let handed = vectors[i].cross(&vectors[j]).dot(&vectors[k]) > 0.0;
         // Each pair both ways round, in sorted order: deterministic.
+        let mut cursor = 0;
         for &(p, q) in &ij.partners {
+            // Partners come sorted and once each.
+            for r in ik
+                .of_rising(p, &mut cursor)
+                .filter(|&r| r != q && jk.has(q, r))
             {
-                // Partners come sorted and once each (`of` walks the sorted pairs).
-                for r in ik.of(p).filter(|&r| r != q && jk.has(q, r)) {
-                    if (v(p).cross(&v(q)).dot(&v(r)) > 0.0) != handed {
-                        continue;
-                    }
-                    matched += 1;
-                    let confirmed = (0..n).filter(|l| ![i, j, k].contains(l)).any(|l| {
-                        let (Some(il), Some(jl), Some(kl)) = (side(i, l), side(j, l), side(k, l))
-                        else {
-                            return false;
-                        };
-                        il.of(p)
-                            .any(|s| s != q && s != r && jl.has(q, s) && kl.has(r, s))
-                    });
-                    if !confirmed {
-                        continue;
-                    }
-                    out.push(Triangle {
-                        stars: [i, j, k],
-                        refs: [p, q, r],
-                    });
-                    if out.len() == MAX_HYPOTHESES {
-                        return (out, matched);
-                    }
+                if (v(p).cross(&v(q)).dot(&v(r)) > 0.0) != handed {
+                    continue;
+                }
+                matched += 1;
+                let confirmed = (0..n).filter(|l| ![i, j, k].contains(l)).any(|l| {
+                    let (Some(il), Some(jl), Some(kl)) = (side(i, l), side(j, l), side(k, l))
+                    else {
+                        return false;
+                    };
+                    il.of(p)
+                        .any(|s| s != q && s != r && jl.has(q, s) && kl.has(r, s))
+                });
+                if !confirmed {
+                    continue;
+                }
+                out.push(Triangle {
+                    stars: [i, j, k],
+                    refs: [p, q, r],
+                });
+                if out.len() == MAX_HYPOTHESES {
+                    return (out, matched);
                 }
             }
         }
