@@ -83,7 +83,7 @@ fn main() {
         };
         let solver = Solver::new(&catalog, camera, solve_settings).unwrap();
         let p = detect::params(&distinct[0], &settings);
-        let n_ref = solver.refs.len();
+        let n_ref = solver.bands[0].refs.len();
         let jobs_of = |frames: &[&Frame]| -> Vec<VoteJob> {
             frames
                 .iter()
@@ -99,7 +99,7 @@ fn main() {
         };
         let gpu_table = gpu
             .as_ref()
-            .map(|g| g.upload_table(&solver.table, n_ref).unwrap());
+            .map(|g| g.upload_table(&solver.bands[0].table, n_ref).unwrap());
         for batch in list("BENCH_BATCHES", &[1, 8, 64]) {
             let frames: Vec<&Frame> = (0..batch).map(|k| &distinct[k % 8]).collect();
             let jobs = jobs_of(&frames);
@@ -164,7 +164,9 @@ fn main() {
                 per(median_ms(runs, || {
                     votes = jobs
                         .iter()
-                        .map(|j| cpu::vote::vote(&solver.table, &j.ranges, j.stars, n_ref).0)
+                        .map(|j| {
+                            cpu::vote::vote(&solver.bands[0].table, &j.ranges, j.stars, n_ref).0
+                        })
                         .collect();
                 })),
             ));

@@ -172,7 +172,8 @@ impl Solvers {
 /// The GPU side of a run: the context and the tables uploaded to it. It lives on one thread.
 pub struct GpuRunner {
     pub gpu: Gpu,
-    tables: HashMap<(u32, u32), std::result::Result<GpuTable, String>>,
+    /// By frame size and band of the solver for that size.
+    tables: HashMap<(u32, u32, usize), std::result::Result<GpuTable, String>>,
     /// Set once the GPU failed: the rest of the run is on the CPU.
     failed: bool,
 }
@@ -295,18 +296,6 @@ impl GpuRunner {
             .collect();
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
-        let size = (solver.camera.width, solver.camera.height);
-        if !self.tables.contains_key(&size) {
-            let t = self
-                .gpu
-                .upload_table(&solver.table, solver.refs.len())
-                .map_err(|e| format!("{e:#}"));
-            self.tables.insert(size, t);
-        }
-        let table = match &self.tables[&size] {
-            Ok(t) => t,
-            Err(e) => anyhow::bail!("{e}"),
-        };
         let mut outcomes: Vec<Outcome> = vec![Outcome::Unsolved("too_few_stars"); frames.len()];
         for h in 0..solver.passes.len() {
             let prepared: Vec<(usize, Prepared)> = detections
@@ -318,6 +307,23 @@ impl GpuRunner {
             if prepared.is_empty() {
                 continue;
             }
+            let key = (
+                solver.camera.width,
+                solver.camera.height,
+                solver.passes[h].band,
+            );
+            if !self.tables.contains_key(&key) {
+                let band = &solver.bands[key.2];
+                let t = self
+                    .gpu
+                    .upload_table(&band.table, band.refs.len())
+                    .map_err(|e| format!("{e:#}"));
+                self.tables.insert(key, t);
+            }
+            let table = match &self.tables[&key] {
+                Ok(t) => t,
+                Err(e) => anyhow::bail!("{e}"),
+            };
             let jobs: Vec<VoteJob> = prepared
                 .iter()
                 .map(|(_, p)| VoteJob {

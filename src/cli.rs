@@ -2,7 +2,7 @@
 
 use crate::batch::{Backend, BackendChoice, CameraSource, Solvers};
 use crate::camera::Camera;
-use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
+use crate::catalog::{Catalog, DoubleStars};
 use crate::dark::Darks;
 use crate::evaluate;
 use crate::inputs::{self, Input, Shard};
@@ -11,8 +11,7 @@ use crate::products::Products;
 use crate::refine::CameraFit;
 use crate::run::{self as stream, RunOptions};
 use crate::simulate::{self, SimSettings};
-use crate::solve::{Settings, auto_mag_limit};
-use crate::table;
+use crate::solve::{PassKind, Settings, Solver, scaled};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use std::io::Write;
@@ -61,7 +60,8 @@ pub enum Command {
         #[command(flatten)]
         opts: SolveOpts,
     },
-    /// Catalog summary and, for a camera, the reference stars and the distance table.
+    /// Catalog summary and, for a camera, the reference stars and the distance table (of each
+    /// band of a scale search).
     Info {
         #[command(flatten)]
         camera: CameraOpts,
@@ -735,7 +735,7 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
         )?;
         return print_all(&out);
     }
-    let (source, camera_mag, _) = camera_source(c)?;
+    let (source, camera_mag, scale_range) = camera_source(c)?;
     let camera = match source {
         CameraSource::Fixed(cam) => cam,
         CameraSource::Fov(fov) => {
@@ -743,10 +743,10 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
             Camera::from_fov(w, h, fov)?
         }
     };
-    let s = settings(o, camera_mag);
-    let mag_limit = s
-        .mag_limit
-        .unwrap_or_else(|| auto_mag_limit(&catalog, &camera));
+    let s = Settings {
+        scale_range,
+        ..settings(o, camera_mag)
+    };
     writeln!(
         out,
         "camera: {}x{} px, FOV {:.4} x {:.4} deg, diagonal {:.4} deg, {:.2} arcsec/px",
@@ -757,59 +757,63 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
         camera.diagonal_rad().to_degrees(),
         camera.ifov_rad().to_degrees() * 3600.0
     )?;
-    let refs = RefCatalog::select(
-        &catalog,
-        Selection {
-            epoch: s.epoch,
-            mag_limit,
-            double_stars: s.double_stars,
-            double_sep_rad: s.double_star_px * camera.ifov_rad(),
-        },
-    )?;
-    writeln!(
-        out,
-        "reference stars: {} with Hp <= {mag_limit}{}; double stars ({:?}, < {} px): {} removed",
-        refs.len(),
-        if s.mag_limit.is_none() {
-            " (chosen from the FOV)"
-        } else {
-            ""
-        },
-        s.double_stars,
-        s.double_star_px,
-        refs.doubles_removed
-    )?;
-    let (t, origin) = table::load_or_build(
-        &refs,
-        catalog.content_hash,
-        camera.diagonal_rad(),
-        s.table_cache,
-    );
-    writeln!(
-        out,
-        "distance table: {} rows, {} bytes (keys + pairs + k-vector of {} bins), pairs closer than {:.4} deg",
-        t.len(),
-        t.bytes(),
-        t.kvector.len() - 1,
-        t.max_sep_rad.to_degrees()
-    )?;
-    writeln!(
-        out,
-        "  {} in {:.1} ms{}",
-        if origin.built {
-            "built"
-        } else {
-            "read from cache"
-        },
-        origin.seconds * 1e3,
-        origin
-            .cache_file
-            .as_ref()
-            .map(|f| format!("; cache {}", f.display()))
-            .unwrap_or_default()
-    )?;
-    if let Some(n) = origin.cache_note {
-        writeln!(out, "  note: {n}")?;
+    // What a run with these options votes with: the solver's own selections and tables.
+    let solver = Solver::new(&catalog, camera.clone(), s)?;
+    for (k, band) in solver.bands.iter().enumerate() {
+        if scale_range.is_some() {
+            writeln!(
+                out,
+                "scale band: FOV {:.4} to {:.4} deg ({} scales tried)",
+                scaled(&camera, band.hi).fov_x_deg(),
+                scaled(&camera, band.lo).fov_x_deg(),
+                solver
+                    .passes
+                    .iter()
+                    .filter(|p| p.band == k && p.kind == PassKind::First)
+                    .count()
+            )?;
+        }
+        let (refs, t, origin) = (&band.refs, &band.table, &band.table_origin);
+        writeln!(
+            out,
+            "reference stars: {} with Hp <= {}{}; double stars ({:?}, < {} px): {} removed",
+            refs.len(),
+            refs.selection.mag_limit,
+            if s.mag_limit.is_none() {
+                " (chosen from the FOV)"
+            } else {
+                ""
+            },
+            s.double_stars,
+            s.double_star_px,
+            refs.doubles_removed
+        )?;
+        writeln!(
+            out,
+            "distance table: {} rows, {} bytes (keys + pairs + k-vector of {} bins), pairs closer than {:.4} deg",
+            t.len(),
+            t.bytes(),
+            t.kvector.len() - 1,
+            t.max_sep_rad.to_degrees()
+        )?;
+        writeln!(
+            out,
+            "  {} in {:.1} ms{}",
+            if origin.built {
+                "built"
+            } else {
+                "read from cache"
+            },
+            origin.seconds * 1e3,
+            origin
+                .cache_file
+                .as_ref()
+                .map(|f| format!("; cache {}", f.display()))
+                .unwrap_or_default()
+        )?;
+        if let Some(n) = &origin.cache_note {
+            writeln!(out, "  note: {n}")?;
+        }
     }
     print_all(&out)
 }

@@ -74,24 +74,102 @@ pub fn auto_mag_limit(catalog: &Catalog, camera: &Camera) -> f64 {
     ((mags[n - 1] * 10.0).round() / 10.0).max(5.0)
 }
 
-/// A camera with its catalog selection and distance table, ready to solve frames.
+/// A camera with its catalog selections and distance tables, ready to solve frames.
 pub struct Solver {
     pub camera: Camera,
     pub settings: Settings,
-    pub refs: Arc<RefCatalog>,
-    pub table: PairTable,
-    pub table_origin: TableOrigin,
+    /// One, unless a scale search spans more than [`BAND_RATIO`].
+    pub bands: Vec<Band>,
     /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
     pub scales: Vec<f64>,
     /// The hypotheses tried in turn until one solves: every scale with the settings, then
     /// (when `retry`) every scale with more voting stars, with voters spread over the frame,
     /// and with wide tolerances.
     pub passes: Vec<Pass>,
-    /// `refs` moved to the epochs of frames that carry their own date, by day.
-    epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
     /// When the scale is searched and the magnitude limit left to the solver: the catalog,
     /// to check each solution against as deep a selection as its fitted field calls for.
     deeper: Option<Deeper>,
+}
+
+/// Widest ratio of focal lengths one band of a scale search covers. A band's reference stars
+/// are those for its middle field (about [`AUTO_STARS_IN_VIEW`] in view there, from 27 to 60
+/// across a band of 1.5): one selection for a search over 5° to 40° would leave 8 in view of a
+/// 10° frame, too few to vote with. cedar-solve's 13 frames with `--fov-deg 5..40`: 9 solved
+/// with one band, 13 with bands.
+pub const BAND_RATIO: f64 = 1.5;
+
+/// The focal-length factors a scale search covers, in bands of at most [`BAND_RATIO`]
+/// (equal on a log scale), from the shortest; just (1, 1) for a known scale.
+pub fn scale_bands(range: Option<(f64, f64)>) -> Vec<(f64, f64)> {
+    let Some((lo, hi)) = range else {
+        return vec![(1.0, 1.0)];
+    };
+    let (lo, hi) = (lo.min(hi), lo.max(hi));
+    let n = ((hi / lo).ln() / BAND_RATIO.ln()).ceil().max(1.0) as i32;
+    let edge = |k: i32| lo * (hi / lo).powf(k as f64 / n as f64);
+    (0..n).map(|k| (edge(k), edge(k + 1))).collect()
+}
+
+/// The reference stars and distance table of the focal lengths `lo`..`hi` (relative to the
+/// solver's camera).
+pub struct Band {
+    pub lo: f64,
+    pub hi: f64,
+    pub refs: Arc<RefCatalog>,
+    pub table: PairTable,
+    pub table_origin: TableOrigin,
+    /// `refs` moved to the epochs of frames that carry their own date, by day.
+    epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
+}
+
+impl Band {
+    /// The stars for the field of focal-length factor `middle` (unless the settings fix the
+    /// magnitude limit), and their pairs out to the diagonal of the widest field, `lo`.
+    fn new(
+        catalog: &Catalog,
+        camera: &Camera,
+        settings: &Settings,
+        (lo, hi): (f64, f64),
+        middle: f64,
+    ) -> Result<Band> {
+        let middle = scaled(camera, middle);
+        let selection = Selection {
+            epoch: settings.epoch,
+            mag_limit: settings
+                .mag_limit
+                .unwrap_or_else(|| auto_mag_limit(catalog, &middle)),
+            double_stars: settings.double_stars,
+            double_sep_rad: settings.double_star_px * middle.ifov_rad(),
+        };
+        let refs = RefCatalog::select(catalog, selection)?;
+        let (table, table_origin) = table::load_or_build(
+            &refs,
+            catalog.content_hash,
+            scaled(camera, lo).diagonal_rad(),
+            settings.table_cache,
+        );
+        Ok(Band {
+            lo,
+            hi,
+            refs: Arc::new(refs),
+            table,
+            table_origin,
+            epochs: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// The reference stars at a frame's own epoch (`refs` when it has none, or the same).
+    pub fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
+        let Some(e) = epoch.filter(|e| (e - self.refs.selection.epoch).abs() > SAME_EPOCH_YEARS)
+        else {
+            return self.refs.clone();
+        };
+        let day = (e * 365.25).round() as i64;
+        let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
+        map.entry(day)
+            .or_insert_with(|| Arc::new(self.refs.at_epoch(e)))
+            .clone()
+    }
 }
 
 /// The catalog, and the selections made from it for solutions' fields.
@@ -114,8 +192,8 @@ pub const SCALE_STEP: f64 = 0.001;
 
 /// The wide retry's scale step: its pair tolerance is ten times the default's, and so is its
 /// step, which then takes the same share of a pair's range (finer, neighbouring scales would
-/// test nearly the same hypotheses again). A frame that cannot solve spends 0.57 of the time:
-/// 26 s instead of 45 s with `--fov-deg 10..30`, 6.5 s instead of 11.5 s with `16..20`.
+/// test nearly the same hypotheses again). When it came in, a frame that cannot solve took 0.57
+/// of the time: 26 s instead of 45 s with `--fov-deg 10..30`, 6.5 s instead of 11.5 s with `16..20`.
 pub const WIDE_SCALE_STEP: f64 = 0.01;
 
 /// The focal-length factors covering [lo, hi] at most `step` apart (relative), from the one
@@ -130,10 +208,12 @@ pub fn scale_hypotheses(lo: f64, hi: f64, step: f64) -> Vec<f64> {
     v
 }
 
-/// One way of trying a frame: a focal-length factor and what the vote is given.
+/// One way of trying a frame: a focal-length factor, the band it falls in, and what the vote
+/// is given.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pass {
     pub scale: f64,
+    pub band: usize,
     pub kind: PassKind,
 }
 
@@ -231,6 +311,8 @@ pub fn spread_order(detections: &[Detection], width: u32, height: u32) -> Vec<us
 pub struct Prepared {
     /// The camera at the scale tried.
     pub camera: Camera,
+    /// The band of that scale (an index into `Solver::bands`): its table votes.
+    pub band: usize,
     /// Camera-frame direction of every detection, in the pass's voting order (brightness,
     /// or spread over the frame): the first `n_vote` vote.
     pub vectors: Vec<Vector3<f64>>,
@@ -265,16 +347,29 @@ pub enum Outcome {
 
 impl Solver {
     pub fn new(catalog: &Catalog, camera: Camera, settings: Settings) -> Result<Solver> {
-        let mag_limit = settings
-            .mag_limit
-            .unwrap_or_else(|| auto_mag_limit(catalog, &camera));
-        let selection = Selection {
-            epoch: settings.epoch,
-            mag_limit,
-            double_stars: settings.double_stars,
-            double_sep_rad: settings.double_star_px * camera.ifov_rad(),
+        let mut edges = scale_bands(settings.scale_range);
+        if settings.mag_limit.is_some() {
+            // The magnitude limit given holds for every scale: one band.
+            edges = vec![(edges[0].0, edges[edges.len() - 1].1)];
+        }
+        // One band takes the camera given as its middle; more take their own.
+        let middle = |(lo, hi): (f64, f64)| {
+            if edges.len() == 1 {
+                1.0
+            } else {
+                (lo * hi).sqrt()
+            }
         };
-        let refs = RefCatalog::select(catalog, selection)?;
+        let bands = edges
+            .iter()
+            .map(|&e| Band::new(catalog, &camera, &settings, e, middle(e)))
+            .collect::<Result<Vec<Band>>>()?;
+        let band_of = |scale: f64| {
+            bands
+                .iter()
+                .position(|b| scale <= b.hi * (1.0 + 1e-12))
+                .unwrap_or(bands.len() - 1)
+        };
         let scales_at = |step| match settings.scale_range {
             Some((lo, hi)) => scale_hypotheses(lo, hi, step),
             None => vec![1.0],
@@ -291,26 +386,19 @@ impl Solver {
             .flat_map(|&kind| {
                 scales_at(kind.scale_step())
                     .into_iter()
-                    .map(move |scale| Pass { scale, kind })
+                    .map(move |scale| Pass {
+                        scale,
+                        band: band_of(scale),
+                        kind,
+                    })
             })
             .collect();
-        // Pairs as far apart as the widest field tried (the shortest focal length).
-        let shortest = scales.iter().copied().fold(f64::MAX, f64::min);
-        let (table, table_origin) = table::load_or_build(
-            &refs,
-            catalog.content_hash,
-            scaled(&camera, shortest).diagonal_rad(),
-            settings.table_cache,
-        );
         Ok(Solver {
             camera,
             settings,
-            refs: Arc::new(refs),
-            table,
-            table_origin,
+            bands,
             scales,
             passes,
-            epochs: Mutex::new(HashMap::new()),
             deeper: (settings.scale_range.is_some() && settings.mag_limit.is_none()).then(|| {
                 Deeper {
                     catalog: catalog.clone(),
@@ -318,19 +406,6 @@ impl Solver {
                 }
             }),
         })
-    }
-
-    /// The reference stars at a frame's own epoch (`self.refs` when it has none, or the same).
-    pub fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
-        let Some(e) = epoch.filter(|e| (e - self.refs.selection.epoch).abs() > SAME_EPOCH_YEARS)
-        else {
-            return self.refs.clone();
-        };
-        let day = (e * 365.25).round() as i64;
-        let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
-        map.entry(day)
-            .or_insert_with(|| Arc::new(self.refs.at_epoch(e)))
-            .clone()
     }
 
     /// What the vote needs from a detection list for pass `h` (an index into `passes`): the
@@ -386,6 +461,7 @@ impl Solver {
             .min(n_vote),
             vectors,
             camera,
+            band: pass.band,
             identify: s,
             refine: rs,
         })
@@ -399,7 +475,8 @@ impl Solver {
             let Some(p) = self.prepare(&detections, h) else {
                 continue;
             };
-            let voted = identify::vote_cpu(&self.table, &p.ranges, p.n_vote, self.refs.len(), p.k);
+            let band = &self.bands[p.band];
+            let voted = identify::vote_cpu(&band.table, &p.ranges, p.n_vote, band.refs.len(), p.k);
             outcome = self.finish(&detections, &p, &voted, epoch);
             if matches!(outcome, Outcome::Solved(..)) {
                 break;
@@ -422,7 +499,7 @@ impl Solver {
         voted: &identify::VoteResult,
         epoch: Option<f64>,
     ) -> Outcome {
-        let refs = self.refs_at(epoch);
+        let refs = self.bands[p.band].refs_at(epoch);
         let accepted = match self.finish_vote(detections, p, voted, &refs) {
             Ok(accepted) => accepted,
             Err(reason) if p.n_vote < 4 => return Outcome::Unsolved(reason),
@@ -455,10 +532,11 @@ impl Solver {
     ) -> Option<(Refined, Arc<RefCatalog>)> {
         let deeper = self.deeper.as_ref()?;
         let mag_limit = auto_mag_limit(&deeper.catalog, &accepted.camera);
-        if mag_limit <= self.refs.selection.mag_limit {
+        let voted_with = self.bands[p.band].refs.selection;
+        if mag_limit <= voted_with.mag_limit {
             return None;
         }
-        let epoch = epoch.unwrap_or(self.refs.selection.epoch);
+        let epoch = epoch.unwrap_or(voted_with.epoch);
         let key = (
             (mag_limit * 10.0).round() as i64,
             (epoch * 365.25).round() as i64,
@@ -472,7 +550,7 @@ impl Solver {
                 let selection = Selection {
                     epoch,
                     mag_limit,
-                    ..self.refs.selection
+                    ..voted_with
                 };
                 RefCatalog::select(&deeper.catalog, selection)
                     .map(Arc::new)
@@ -509,7 +587,7 @@ impl Solver {
         let ids = identify::verify(
             voted,
             &vectors[..n_vote],
-            &self.refs,
+            &self.bands[p.band].refs,
             &p.camera,
             &p.identify,
         );
@@ -554,11 +632,12 @@ impl Solver {
         refs: &RefCatalog,
     ) -> Option<(Refined, u64, usize)> {
         let vectors = &p.vectors[..p.n_vote];
+        let band = &self.bands[p.band];
         let (hyps, matched) = triangle::triangles(
-            &self.table,
+            &band.table,
             &p.ranges,
             &vectors[..p.triangle_stars],
-            &self.refs,
+            &band.refs,
         );
         let hypotheses = matched.saturating_mul(STAGES * self.passes.len() as u64);
         hyps.iter().find_map(|t| {

@@ -219,3 +219,61 @@ fn a_scale_search_checks_the_solution_against_the_catalog_for_the_fitted_field()
         "{n_shallow} stars at the 16° limit, {n_deep} searched"
     );
 }
+
+/// A scale search over more than `BAND_RATIO` votes in bands, each with the stars for its own
+/// middle field: the narrow end of a wide search gets as many stars in view as the wide end.
+/// A magnitude limit given holds for all scales: then one band.
+#[test]
+fn a_wide_scale_search_votes_in_bands_with_the_stars_of_their_own_fields() {
+    use gpustar::solve::{BAND_RATIO, auto_mag_limit, scaled};
+    let catalog = Catalog::builtin();
+    let camera = Camera::from_fov(1024, 1024, 16.0).unwrap();
+    let s = Settings {
+        // Focal lengths 0.6–1.45 times the camera's: 25.5° down to 11.1°.
+        scale_range: Some((0.6, 1.45)),
+        table_cache: false,
+        ..Settings::default()
+    };
+    let solver = Solver::new(&catalog, camera.clone(), s).unwrap();
+    let b = &solver.bands;
+    let mags: Vec<f64> = b.iter().map(|b| b.refs.selection.mag_limit).collect();
+    eprintln!(
+        "bands {:.3?}, magnitude limits {mags:?}",
+        b.iter().map(|b| (b.lo, b.hi)).collect::<Vec<_>>()
+    );
+    assert_eq!(b.len(), 3);
+    assert!((b[0].lo - 0.6).abs() < 1e-12 && (b[2].hi - 1.45).abs() < 1e-12);
+    for w in b.windows(2) {
+        assert!((w[0].hi - w[1].lo).abs() < 1e-12, "bands not contiguous");
+    }
+    for band in b {
+        assert!(band.hi / band.lo <= BAND_RATIO + 1e-9);
+        let middle = scaled(&camera, (band.lo * band.hi).sqrt());
+        assert_eq!(
+            band.refs.selection.mag_limit,
+            auto_mag_limit(&catalog, &middle)
+        );
+    }
+    assert!(
+        mags[2] > mags[0],
+        "the narrowest band is not the deepest: {mags:?}"
+    );
+    for pass in &solver.passes {
+        let band = &b[pass.band];
+        assert!(
+            pass.scale >= band.lo * (1.0 - 1e-12) && pass.scale <= band.hi * (1.0 + 1e-12),
+            "{pass:?} outside its band"
+        );
+    }
+    let one = Solver::new(
+        &catalog,
+        camera,
+        Settings {
+            mag_limit: Some(6.0),
+            ..s
+        },
+    )
+    .unwrap();
+    assert_eq!(one.bands.len(), 1);
+    assert_eq!((one.bands[0].lo, one.bands[0].hi), (0.6, 1.45));
+}
