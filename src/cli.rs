@@ -209,8 +209,8 @@ pub struct CatalogOpts {
     #[arg(long, default_value_t = 2000.0)]
     pub epoch: f64,
     /// Faintest catalog magnitude used [default: the camera file's mag_limit, else chosen from
-    /// the field of view so that about 40 catalog stars are in view; in a scale search, the
-    /// middle of the range's for the vote, the fitted field's for the final refinement].
+    /// the field of view so that about 40 catalog stars are in view; in a scale search, each
+    /// band's middle field's for the vote, the fitted field's for the final refinement].
     #[arg(long)]
     pub mag_limit: Option<f64>,
     /// Stars the camera cannot separate: merge them into one at their photocentre, drop

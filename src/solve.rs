@@ -515,12 +515,13 @@ impl Solver {
         }
     }
 
-    /// After a scale search the reference stars were chosen for the middle of the range, and
-    /// a frame that turns out narrower holds few of them (at 10° in a search over 5° to 40°,
-    /// about 8 instead of [`AUTO_STARS_IN_VIEW`]). The accepted attitude is refined again
-    /// against the selection its fitted field calls for, judged by the same false-match test
-    /// with the same hypotheses; None = nothing deeper to check against, or the deeper
-    /// refinement matched fewer stars or failed the test (the accepted one then stands).
+    /// After a scale search the reference stars were chosen for the middle of a band, and a
+    /// frame at its narrow end holds fewer of them (27 instead of [`AUTO_STARS_IN_VIEW`] for a
+    /// band of [`BAND_RATIO`]; 8 at 10° with one selection for 5° to 40°). The accepted
+    /// attitude is refined again against the selection its fitted field calls for, judged by
+    /// the same false-match test with the same hypotheses; None = nothing deeper to check
+    /// against, or the deeper refinement matched fewer stars or failed the test (the accepted
+    /// one then stands).
     fn deepen(
         &self,
         accepted: &Refined,
