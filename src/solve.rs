@@ -321,7 +321,8 @@ pub struct Prepared {
     pub n_vote: usize,
     /// Candidates kept per star.
     pub k: usize,
-    /// The first this many of `vectors` form the triangle fallback's triangles.
+    /// The first this many of `vectors` form the triangle fallback's triangles (fewer than 4:
+    /// no fallback).
     pub triangle_stars: usize,
     /// The identification settings of this pass (tolerances).
     pub identify: IdentifySettings,
@@ -456,6 +457,9 @@ impl Solver {
             k: s.candidates_per_star(n_vote),
             triangle_stars: match pass.kind {
                 PassKind::Spread => SPREAD_TRIANGLE_STARS,
+                // The same brightest stars with the same tolerances as the first pass at this
+                // scale: the same triangles, already refused.
+                PassKind::MoreStars => 0,
                 _ => triangle::TRIANGLE_STARS,
             }
             .min(n_vote),
@@ -502,7 +506,7 @@ impl Solver {
         let refs = self.bands[p.band].refs_at(epoch);
         let accepted = match self.finish_vote(detections, p, voted, &refs) {
             Ok(accepted) => accepted,
-            Err(reason) if p.n_vote < 4 => return Outcome::Unsolved(reason),
+            Err(reason) if p.triangle_stars < 4 => return Outcome::Unsolved(reason),
             Err(reason) => match self.finish_triangles(detections, p, &refs) {
                 Some(accepted) => accepted,
                 None => return Outcome::Unsolved(reason),
