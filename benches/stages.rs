@@ -83,6 +83,8 @@ fn main() {
         };
         let solver = Solver::new(&catalog, camera, solve_settings).unwrap();
         let p = detect::params(&distinct[0], &settings);
+        // A known scale: one band.
+        let table = &solver.bands[0].table;
         let n_ref = solver.bands[0].refs.len();
         let jobs_of = |frames: &[&Frame]| -> Vec<VoteJob> {
             frames
@@ -97,9 +99,7 @@ fn main() {
                 })
                 .collect()
         };
-        let gpu_table = gpu
-            .as_ref()
-            .map(|g| g.upload_table(&solver.bands[0].table, n_ref).unwrap());
+        let gpu_table = gpu.as_ref().map(|g| g.upload_table(table, n_ref).unwrap());
         for batch in list("BENCH_BATCHES", &[1, 8, 64]) {
             let frames: Vec<&Frame> = (0..batch).map(|k| &distinct[k % 8]).collect();
             let jobs = jobs_of(&frames);
@@ -164,9 +164,7 @@ fn main() {
                 per(median_ms(runs, || {
                     votes = jobs
                         .iter()
-                        .map(|j| {
-                            cpu::vote::vote(&solver.bands[0].table, &j.ranges, j.stars, n_ref).0
-                        })
+                        .map(|j| cpu::vote::vote(table, &j.ranges, j.stars, n_ref).0)
                         .collect();
                 })),
             ));

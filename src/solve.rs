@@ -164,9 +164,8 @@ impl Band {
         else {
             return self.refs.clone();
         };
-        let day = (e * 365.25).round() as i64;
         let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
-        map.entry(day)
+        map.entry(epoch_day(e))
             .or_insert_with(|| Arc::new(self.refs.at_epoch(e)))
             .clone()
     }
@@ -185,6 +184,11 @@ type SelectionKey = (i64, i64);
 /// Frames dated within this many years of the run's epoch use the run's star positions
 /// (about a day: proper motions move no star by a milliarcsecond in that time).
 const SAME_EPOCH_YEARS: f64 = 0.003;
+
+/// The day of an epoch (Julian year): what star positions are cached by.
+fn epoch_day(epoch: f64) -> i64 {
+    (epoch * 365.25).round() as i64
+}
 
 /// Relative spacing of the focal-length factors of a scale search: each covers ±0.05 %, which
 /// the pair tolerance absorbs.
@@ -542,10 +546,7 @@ impl Solver {
             return None;
         }
         let epoch = epoch.unwrap_or(voted_with.epoch);
-        let key = (
-            (mag_limit * 10.0).round() as i64,
-            (epoch * 365.25).round() as i64,
-        );
+        let key = ((mag_limit * 10.0).round() as i64, epoch_day(epoch));
         let refs = deeper
             .selections
             .lock()

@@ -85,8 +85,9 @@ impl Side {
 /// spread retry's first stars), first triangles first (by the sum of the stars' places in
 /// `vectors`, then lexicographically), each confirmed by a fourth star whose three distances
 /// to the triangle's catalog stars match too (Mortari's pyramid): chance rarely passes that,
-/// so few hypotheses reach refinement. At most `MAX_HYPOTHESES`. `ranges` are the vote's pair ranges; `vectors` the stars' camera-frame
-/// directions; handedness must agree with the catalog's (a proper rotation keeps it).
+/// so few hypotheses reach refinement. At most `MAX_HYPOTHESES`. `ranges` are the vote's pair
+/// ranges; `vectors` the stars' camera-frame directions; handedness must agree with the
+/// catalog's (a proper rotation keeps it).
 /// Returns also how many catalog triangles matched before confirmation: the hypotheses a
 /// chance match could have come from.
 pub fn triangles(

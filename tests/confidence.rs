@@ -28,10 +28,11 @@ fn detection(x: f64, y: f64, flux: f64) -> Detection {
 fn six_stars_among_the_brightest_are_accepted_and_among_the_faintest_not() {
     let solver = common::solver(10.0, (1024, 1024));
     let r = Rotation3::from_euler_angles(0.3, -0.2, 1.1).into_inner();
-    let mut view = stars_in_view(&r, &solver.bands[0].refs, &solver.camera);
+    let refs = &solver.bands[0].refs;
+    let mut view = stars_in_view(&r, refs, &solver.camera);
     assert!(view.len() >= 10, "{} stars in view", view.len());
     view.sort_by(|a, b| {
-        let mag = |id: u32| solver.bands[0].refs.stars[id as usize].mag;
+        let mag = |id: u32| refs.stars[id as usize].mag;
         mag(a.0).total_cmp(&mag(b.0))
     });
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
@@ -49,16 +50,7 @@ fn six_stars_among_the_brightest_are_accepted_and_among_the_faintest_not() {
         .collect();
     let prob = |dets: &[Detection]| {
         let s = RefineSettings::default();
-        let refined = refine(
-            r,
-            dets,
-            &solver.bands[0].refs,
-            &solver.camera,
-            1_000_000,
-            3,
-            &s,
-        )
-        .unwrap();
+        let refined = refine(r, dets, refs, &solver.camera, 1_000_000, 3, &s).unwrap();
         assert_eq!(refined.matches.len(), 6);
         refined.false_match_prob
     };

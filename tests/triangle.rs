@@ -16,13 +16,14 @@ use rand::{Rng, SeedableRng};
 fn confirmed_triangles_find_the_true_stars_among_false_ones() {
     let solver = common::solver(10.0, (1024, 1024));
     let cam = &solver.camera;
+    let band = &solver.bands[0];
     let s = solver.settings.identify;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     let mut found = 0;
     let mut frames = 0;
     while frames < 10 {
         let r = random_rotation(&mut rng);
-        let view = stars_in_view(&r, &solver.bands[0].refs, cam);
+        let view = stars_in_view(&r, &band.refs, cam);
         if view.len() < 6 {
             continue;
         }
@@ -42,19 +43,14 @@ fn confirmed_triangles_find_the_true_stars_among_false_ones() {
             ids.push(id);
         }
         let ranges = pair_ranges(&vectors, cam, &s);
-        let (tris, matched) = triangles(
-            &solver.bands[0].table,
-            &ranges,
-            &vectors,
-            &solver.bands[0].refs,
-        );
+        let (tris, matched) = triangles(&band.table, &ranges, &vectors, &band.refs);
         assert!(matched >= tris.len() as u64);
         for t in &tris {
             for (a, b) in [(0, 1), (0, 2), (1, 2)] {
                 let d_img = angle(&vectors[t.stars[a]], &vectors[t.stars[b]]);
                 let d_cat = angle(
-                    &solver.bands[0].refs.stars[t.refs[a] as usize].v,
-                    &solver.bands[0].refs.stars[t.refs[b] as usize].v,
+                    &band.refs.stars[t.refs[a] as usize].v,
+                    &band.refs.stars[t.refs[b] as usize].v,
                 );
                 let e = s.tolerance(cam, d_img) + 1e-9;
                 assert!((d_img - d_cat).abs() <= e * 1.001, "side {a}{b} off: {t:?}");
@@ -71,12 +67,7 @@ fn confirmed_triangles_find_the_true_stars_among_false_ones() {
             .iter()
             .map(|v| Vector3::new(-v.x, v.y, v.z))
             .collect();
-        let (tris_m, _) = triangles(
-            &solver.bands[0].table,
-            &ranges,
-            &mirrored,
-            &solver.bands[0].refs,
-        );
+        let (tris_m, _) = triangles(&band.table, &ranges, &mirrored, &band.refs);
         assert!(!tris_m.iter().any(truth), "a mirrored triangle matched");
     }
     assert_eq!(

@@ -191,22 +191,14 @@ pub fn assert_votes_equal(
     solver: &gpustar::solve::Solver,
     jobs: &[gpustar::gpu::vote::VoteJob],
 ) {
-    let table = g
-        .upload_table(&solver.bands[0].table, solver.bands[0].refs.len())
-        .unwrap();
+    let band = &solver.bands[0];
+    let n_ref = band.refs.len();
+    let table = g.upload_table(&band.table, n_ref).unwrap();
     let (results, votes) = g.vote_inspect(&table, jobs).unwrap();
     for (f, job) in jobs.iter().enumerate() {
-        let n_ref = solver.bands[0].refs.len();
-        let (cpu_votes, hyp) =
-            gpustar::cpu::vote::vote(&solver.bands[0].table, &job.ranges, job.stars, n_ref);
+        let (cpu_votes, hyp) = gpustar::cpu::vote::vote(&band.table, &job.ranges, job.stars, n_ref);
         assert!(cpu_votes == votes[f], "job {f}: vote counters differ");
-        let cpu = gpustar::identify::vote_cpu(
-            &solver.bands[0].table,
-            &job.ranges,
-            job.stars,
-            n_ref,
-            job.k,
-        );
+        let cpu = gpustar::identify::vote_cpu(&band.table, &job.ranges, job.stars, n_ref, job.k);
         assert_eq!(results[f].hypotheses, hyp, "job {f}: hypotheses");
         assert_eq!(results[f].k, cpu.k);
         assert!(
