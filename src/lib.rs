@@ -31,6 +31,7 @@ pub mod refine;
 pub mod run;
 pub mod simulate;
 pub mod solve;
+pub mod streaks;
 pub mod table;
 pub mod triangle;
 pub mod wcs;

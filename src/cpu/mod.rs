@@ -4,5 +4,6 @@
 pub mod centroid;
 pub mod components;
 pub mod select;
+pub mod streak_filter;
 pub mod threshold;
 pub mod vote;

@@ -5,6 +5,7 @@
 use super::{Gpu, dispatch_strided};
 use crate::cpu::centroid::Blob;
 use crate::cpu::components::NO_LABEL;
+use crate::cpu::streak_filter::StreakParams;
 use crate::cpu::threshold::{DetectParams, TileStats};
 use crate::frame::Frame;
 use anyhow::{Result, bail};
@@ -30,6 +31,24 @@ pub struct BatchParams {
 pub struct DetectUniform {
     pub p: DetectParams,
     pub b: BatchParams,
+}
+
+/// The streak kernels' uniform. Keep in sync with `shaders/shared/streak.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct StreakUniform {
+    pub p: DetectParams,
+    pub b: BatchParams,
+    pub s: StreakParams,
+}
+
+/// What the streak kernels leave for the CPU's streak fits, per frame.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct StreakPixels {
+    /// The tile statistics (background and noise) of detection.
+    pub tiles: Vec<TileStats>,
+    /// The streak mask, words of 32 pixels in raster order (`cpu::streak_filter`).
+    pub mask: Vec<u32>,
 }
 
 /// Components per frame the blob buffer holds at first; a frame with more is rerun with room
@@ -69,6 +88,9 @@ const BLOCK: u32 = 256;
 /// Workgroups per frame of the kernels that walk the set list.
 const LIST_GROUPS: u32 = 64;
 
+/// A chunk's blobs, the room it needed, what inspection read back, and the streak masks.
+type ChunkOut = (Vec<Vec<Blob>>, Room, DetectInspect, Vec<StreakPixels>);
+
 /// Room per frame in the buffers whose contents cannot be sized in advance.
 #[derive(Clone, Copy, Debug)]
 struct Room {
@@ -79,13 +101,29 @@ struct Room {
 impl Gpu {
     /// The blobs of each frame (label order), as `cpu::centroid` gives them.
     pub fn detect(&self, frames: &[&Frame], p: &DetectParams) -> Result<Vec<Vec<Blob>>> {
-        Ok(self.detect_with(frames, p, false, DETECT_KERNELS.len())?.0)
+        Ok(self
+            .detect_with(frames, p, false, DETECT_KERNELS.len(), None)?
+            .0)
+    }
+
+    /// As [`Gpu::detect`], and in the same submission the streak mask of each frame
+    /// (`streak_rows` → `streak_filter`) with the tiles it was made from.
+    pub fn detect_streaks(
+        &self,
+        frames: &[&Frame],
+        p: &DetectParams,
+        sp: &StreakParams,
+    ) -> Result<(Vec<Vec<Blob>>, Vec<StreakPixels>)> {
+        let (blobs, _, streaks) =
+            self.detect_with(frames, p, false, DETECT_KERNELS.len(), Some(sp))?;
+        Ok((blobs, streaks))
     }
 
     /// For benchmarks: run only the first `kernels` of [`DETECT_KERNELS`] (the results are
     /// then meaningless; the time is what counts).
     pub fn detect_prefix(&self, frames: &[&Frame], p: &DetectParams, kernels: usize) -> Result<()> {
-        self.detect_with(frames, p, false, kernels).map(|_| ())
+        self.detect_with(frames, p, false, kernels, None)
+            .map(|_| ())
     }
 
     /// As [`Gpu::detect`], with every stage's output read back.
@@ -94,7 +132,8 @@ impl Gpu {
         frames: &[&Frame],
         p: &DetectParams,
     ) -> Result<(Vec<Vec<Blob>>, DetectInspect)> {
-        self.detect_with(frames, p, true, DETECT_KERNELS.len())
+        self.detect_with(frames, p, true, DETECT_KERNELS.len(), None)
+            .map(|(b, i, _)| (b, i))
     }
 
     /// Frames per submission so that every buffer fits a binding.
@@ -109,7 +148,8 @@ impl Gpu {
         p: &DetectParams,
         inspect: bool,
         kernels: usize,
-    ) -> Result<(Vec<Vec<Blob>>, DetectInspect)> {
+        streaks: Option<&StreakParams>,
+    ) -> Result<(Vec<Vec<Blob>>, DetectInspect, Vec<StreakPixels>)> {
         for f in frames {
             if (f.width, f.height) != (p.width, p.height) {
                 bail!("a GPU batch holds frames of one size");
@@ -117,15 +157,18 @@ impl Gpu {
         }
         let mut blobs = Vec::with_capacity(frames.len());
         let mut all = DetectInspect::default();
+        let mut streak_out = Vec::new();
         for chunk in frames.chunks(self.detect_chunk_len(p)) {
             let mut room = Room {
                 blobs: INITIAL_MAX_BLOBS,
                 set: initial_max_set(p.width * p.height),
             };
             loop {
-                let (b, need, ins) = self.detect_chunk(chunk, p, room, inspect, kernels)?;
+                let (b, need, ins, st) =
+                    self.detect_chunk(chunk, p, room, inspect, kernels, streaks)?;
                 if need.blobs <= room.blobs && need.set <= room.set {
                     blobs.extend(b);
+                    streak_out.extend(st);
                     all.tiles.extend(ins.tiles);
                     all.mask.extend(ins.mask);
                     all.labels.extend(ins.labels);
@@ -139,7 +182,7 @@ impl Gpu {
                     .max(need.set.next_power_of_two().min(p.width * p.height));
             }
         }
-        Ok((blobs, all))
+        Ok((blobs, all, streak_out))
     }
 
     fn detect_chunk(
@@ -149,7 +192,8 @@ impl Gpu {
         room: Room,
         inspect: bool,
         kernels: usize,
-    ) -> Result<(Vec<Vec<Blob>>, Room, DetectInspect)> {
+        streaks: Option<&StreakParams>,
+    ) -> Result<ChunkOut> {
         let run = |k: usize| k < kernels;
         let max_blobs = room.blobs;
         let n = frames.len() as u32;
@@ -222,11 +266,22 @@ impl Gpu {
             ],
         );
 
+        // The streak mask: two more kernels over the pixels and tiles already uploaded.
+        let streak = streaks.map(|sp| {
+            let su = self.uniform("streak params", &StreakUniform { p: *p, b, s: *sp });
+            let rows = self.storage("streak rows", 4 * pixels_per_image as u64 * n as u64);
+            let smask = self.storage("streak mask", 4 * (mask_words * n) as u64);
+            let bg_rows = self.bind_group(&pl.streak_rows, &[&su, &pixels, &tiles, &rows]);
+            let bg_filter = self.bind_group(&pl.streak_filter, &[&su, &rows, &tiles, &smask]);
+            (smask, bg_rows, bg_filter)
+        });
         let tile_bytes = 8 * (tiles_per_image * n) as u64;
-        let stage_tiles = inspect.then(|| self.staging("tiles out", tile_bytes));
+        let stage_tiles =
+            (inspect || streaks.is_some()).then(|| self.staging("tiles out", tile_bytes));
         let label_bytes = 4 * pixels_per_image as u64 * n as u64;
         let mask_bytes = 4 * (mask_words * n) as u64;
         let stage_mask = inspect.then(|| self.staging("mask out", mask_bytes));
+        let stage_streak = streaks.map(|_| self.staging("streak mask out", mask_bytes));
         let stage_labels = inspect.then(|| self.staging("labels out", label_bytes));
         let stage_counts = self.staging("blob counts out", 4 * n as u64);
         let stage_set_count = self.staging("set count out", 4 * n as u64);
@@ -246,10 +301,19 @@ impl Gpu {
             if run(1) {
                 dispatch_strided(&mut pass, &pl.threshold, &bg_threshold, mask_words, n);
             }
+            if let Some((_, bg_rows, bg_filter)) = &streak {
+                dispatch_strided(&mut pass, &pl.streak_rows, bg_rows, pixels_per_image, n);
+                dispatch_strided(&mut pass, &pl.streak_filter, bg_filter, mask_words, n);
+            }
         }
-        if let (Some(st), Some(sm)) = (&stage_tiles, &stage_mask) {
+        if let Some(st) = &stage_tiles {
             enc.copy_buffer_to_buffer(&tiles, 0, st, 0, tile_bytes);
+        }
+        if let Some(sm) = &stage_mask {
             enc.copy_buffer_to_buffer(&mask, 0, sm, 0, mask_bytes);
+        }
+        if let (Some(ss), Some((smask, _, _))) = (&stage_streak, &streak) {
+            enc.copy_buffer_to_buffer(smask, 0, ss, 0, mask_bytes);
         }
         // The list kernels stride over at most `max_set` entries per frame.
         let list_items = room.set.min(LIST_GROUPS * 256);
@@ -295,8 +359,14 @@ impl Gpu {
             (&stage_blobs, blob_bytes),
             (&stage_set_count, 4 * n as u64),
         ];
-        if let (Some(t), Some(m), Some(l)) = (&stage_tiles, &stage_mask, &stage_labels) {
-            staged.extend([(t, tile_bytes), (m, mask_bytes), (l, label_bytes)]);
+        if let (Some(m), Some(l)) = (&stage_mask, &stage_labels) {
+            staged.extend([(m, mask_bytes), (l, label_bytes)]);
+        }
+        if let Some(t) = &stage_tiles {
+            staged.push((t, tile_bytes));
+        }
+        if let Some(ss) = &stage_streak {
+            staged.push((ss, mask_bytes));
         }
         let bytes = self.read_all(&staged)?;
         let counts: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[0]);
@@ -316,24 +386,40 @@ impl Gpu {
                 all[start..start + c.min(max_blobs) as usize].to_vec()
             })
             .collect();
+        let per_frame_tiles = |b: &[u8]| -> Vec<Vec<TileStats>> {
+            let t: Vec<TileStats> = bytemuck::pod_collect_to_vec(b);
+            t.chunks(tiles_per_image as usize)
+                .map(|c| c.to_vec())
+                .collect()
+        };
+        // Staged after the inspection buffers: tiles, then the streak mask.
+        let tiles_at = if inspect { 5 } else { 3 };
+        let mut streak_out = Vec::new();
+        if streaks.is_some() {
+            let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[tiles_at + 1]);
+            streak_out = per_frame_tiles(&bytes[tiles_at])
+                .into_iter()
+                .zip(words.chunks(mask_words as usize))
+                .map(|(tiles, m)| StreakPixels {
+                    tiles,
+                    mask: m.to_vec(),
+                })
+                .collect();
+        }
         let mut ins = DetectInspect::default();
         if inspect {
             let split = |b: &[u8], per: usize| -> Vec<Vec<u32>> {
                 let v: Vec<u32> = bytemuck::pod_collect_to_vec(b);
                 v.chunks(per).map(|c| c.to_vec()).collect()
             };
-            let t: Vec<TileStats> = bytemuck::pod_collect_to_vec(&bytes[3]);
-            ins.tiles = t
-                .chunks(tiles_per_image as usize)
-                .map(|c| c.to_vec())
-                .collect();
+            ins.tiles = per_frame_tiles(&bytes[tiles_at]);
             let px = pixels_per_image as usize;
-            ins.mask = split(&bytes[4], mask_words as usize)
+            ins.mask = split(&bytes[3], mask_words as usize)
                 .into_iter()
                 .map(|words| (0..px).map(|i| words[i / 32] >> (i % 32) & 1).collect())
                 .collect();
             // Labels are only written at set pixels.
-            ins.labels = split(&bytes[5], px)
+            ins.labels = split(&bytes[4], px)
                 .into_iter()
                 .zip(&ins.mask)
                 .map(|(l, m)| {
@@ -344,6 +430,6 @@ impl Gpu {
                 })
                 .collect();
         }
-        Ok((blobs_out, need, ins))
+        Ok((blobs_out, need, ins, streak_out))
     }
 }

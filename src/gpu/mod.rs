@@ -15,6 +15,12 @@ use std::sync::Arc;
 
 /// WGSL shared by the detection kernels.
 const SHARED_DETECT: &str = include_str!("../../shaders/shared/detect.wgsl");
+/// WGSL shared by the streak kernels (after the detection prelude, whose structs they use).
+const SHARED_STREAK: &str = concat!(
+    include_str!("../../shaders/shared/detect.wgsl"),
+    "\n",
+    include_str!("../../shaders/shared/streak.wgsl")
+);
 /// WGSL shared by the identification kernels.
 const SHARED_VOTE: &str = include_str!("../../shaders/shared/vote.wgsl");
 
@@ -54,6 +60,16 @@ pub const KERNELS: &[(&str, &str, &str)] = &[
         "centroid",
         SHARED_DETECT,
         include_str!("../../shaders/centroid.wgsl"),
+    ),
+    (
+        "streak_rows",
+        SHARED_STREAK,
+        include_str!("../../shaders/streak_rows.wgsl"),
+    ),
+    (
+        "streak_filter",
+        SHARED_STREAK,
+        include_str!("../../shaders/streak_filter.wgsl"),
     ),
     ("vote", SHARED_VOTE, include_str!("../../shaders/vote.wgsl")),
     (
@@ -112,6 +128,8 @@ struct Pipelines {
     centroid_count: wgpu::ComputePipeline,
     centroid_scan: wgpu::ComputePipeline,
     centroid: wgpu::ComputePipeline,
+    streak_rows: wgpu::ComputePipeline,
+    streak_filter: wgpu::ComputePipeline,
     vote: wgpu::ComputePipeline,
     select: wgpu::ComputePipeline,
 }
@@ -216,6 +234,8 @@ impl Gpu {
             centroid_count: pipeline(&device, "centroid_count"),
             centroid_scan: pipeline(&device, "centroid_scan"),
             centroid: pipeline(&device, "centroid"),
+            streak_rows: pipeline(&device, "streak_rows"),
+            streak_filter: pipeline(&device, "streak_filter"),
             vote: pipeline(&device, "vote"),
             select: pipeline(&device, "select"),
         };

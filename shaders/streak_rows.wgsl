@@ -1,0 +1,49 @@
+// Stage streak_filter, kernel 1 of 2 (CPU twin: src/cpu/streak_filter.rs streak_rows): per
+// pixel, Σ_i b_i · (pixel − background) over the row neighbours x − 2 … x + 2 (clamped at the
+// frame's edges), b = 1 4 6 4 1; the background is the tiles' bilinear interpolation rounded
+// to an integer, as threshold.rs background_at. One invocation per pixel, striding;
+// dispatch (pixels, images).
+
+@group(0) @binding(0) var<uniform> u: StreakUniform;
+@group(0) @binding(1) var<storage, read> pixels: array<u32>;
+@group(0) @binding(2) var<storage, read> tiles: array<TileStats>;
+@group(0) @binding(3) var<storage, read_write> rows: array<i32>;
+
+fn pixel(img: u32, i: u32) -> u32 {
+    let w = pixels[img * u.b.words_per_image + i / 2u];
+    return (w >> ((i & 1u) * 16u)) & 0xFFFFu;
+}
+
+fn background(img: u32, tx: u32, ty: u32) -> u32 {
+    return tiles[img * u.b.tiles_per_image + ty * u.p.tiles_x + tx].background;
+}
+
+// pixel − background at (x, y), in integers.
+fn residual(img: u32, x: u32, y: u32) -> i32 {
+    let p = u.p;
+    let s = 2u * p.tile;
+    let ax = axis_weight(x, p.tile, p.tiles_x);
+    let ay = axis_weight(y, p.tile, p.tiles_y);
+    let tx1 = min(ax.x + 1u, p.tiles_x - 1u);
+    let ty1 = min(ay.x + 1u, p.tiles_y - 1u);
+    let v = bilinear(background(img, ax.x, ay.x), background(img, tx1, ay.x),
+                     background(img, ax.x, ty1), background(img, tx1, ty1), ax.y, ay.y, s);
+    let bg = (v + s * s / 2u) / (s * s);
+    return i32(pixel(img, y * p.width + x)) - i32(bg);
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let img = gid.y;
+    let w = u.p.width;
+    for (var i = gid.x; i < u.b.pixels_per_image; i += nwg.x * 256u) {
+        let x = i % w;
+        let y = i / w;
+        let xm2 = u32(max(i32(x) - 2, 0));
+        let xm1 = u32(max(i32(x) - 1, 0));
+        let xp1 = min(x + 1u, w - 1u);
+        let xp2 = min(x + 2u, w - 1u);
+        rows[img * u.b.pixels_per_image + i] = residual(img, xm2, y) + 4 * residual(img, xm1, y)
+            + 6 * residual(img, x, y) + 4 * residual(img, xp1, y) + residual(img, xp2, y);
+    }
+}

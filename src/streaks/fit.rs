@@ -1,0 +1,400 @@
+//! Sub-pixel streak geometry: a least-squares fit (Levenberg–Marquardt, f64) of the image of
+//! a point moving uniformly along a segment, seen through a Gaussian PSF:
+//!
+//! m(x, y) = B + A · exp(−δ²/2σ²) · ½[erf((t − t0)/√2σ) − erf((t − t1)/√2σ)]
+//!
+//! with δ the distance from the line and t the position along it. The ends t0, t1 are where
+//! the along-track profile falls to half: for any symmetric PSF that is where the object was
+//! at the exposure's start and end, not the last pixel above a threshold, which is a PSF
+//! width beyond a bright streak's end and inside a faint one's. Pixels far off the model
+//! (stars on the track, cosmic rays) are left out after a first fit and the fit is redone.
+
+use super::segments::Segment;
+use nalgebra::{SMatrix, SVector};
+
+/// The fitted streak, in pixels (x = column, y = row, 0-based pixel centres).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StreakFit {
+    /// The two ends; an edge end is where the line leaves the frame.
+    pub ends: [(f64, f64); 2],
+    pub edge: [bool; 2],
+    /// Gaussian σ of the profile across the track (pixels).
+    pub sigma_px: f64,
+    /// Peak amplitude above the background (ADU) and the noise of a pixel (ADU).
+    pub amplitude: f64,
+    pub noise: f64,
+    /// Integrated flux of the part in the frame (ADU).
+    pub flux: f64,
+    /// Matched-filter signal-to-noise ratio of the part in the frame.
+    pub snr: f64,
+    /// RMS distance of the track's local centroids (4 px bins) from the fitted line (pixels).
+    pub fit_rms_px: f64,
+    /// Fraction of the track, in bins of 4 px where the fit expects a clear signal, where the
+    /// data show less than a third of it: chains of stars have gaps, streaks do not.
+    pub gap_fraction: f64,
+    /// Direction of the line (unit) and its angle from the frame's axes (degrees, 0–45).
+    pub dir: (f64, f64),
+    pub axis_angle_deg: f64,
+}
+
+/// Parameters: ρ (offset of the line along its normal), θ, t0, t1, A, σ, B.
+type P = SVector<f64, 7>;
+
+/// The pixels the fit sees: background-subtracted values around the segment.
+struct Region {
+    px: Vec<(f64, f64, f64)>,
+    keep: Vec<bool>,
+}
+
+/// Fit the segment's streak in `d(x, y)` (pixel − background) of a `w`×`h` frame.
+pub fn fit(d: &dyn Fn(u32, u32) -> f64, w: u32, h: u32, seg: &Segment) -> Option<StreakFit> {
+    let (cx, cy) = seg.point(0.5 * (seg.t_min + seg.t_max));
+    let th0 = seg.uy.atan2(seg.ux);
+    let half = 0.5 * seg.length();
+    let region = Region::around(d, w, h, (cx, cy), th0, -half - 15.0, half + 15.0, 8.0);
+    if region.px.len() < 20 {
+        return None;
+    }
+    let model = Model { c: (cx, cy), w, h };
+    // Start: the mask's extent, the median of the pixels on the line as amplitude.
+    let mut on: Vec<f64> = region
+        .px
+        .iter()
+        .filter(|p| {
+            let (dd, t) = model.coords(p.0, p.1, 0.0, th0);
+            dd.abs() <= 0.7 && t.abs() <= half
+        })
+        .map(|p| p.2)
+        .collect();
+    if on.is_empty() {
+        return None;
+    }
+    on.sort_by(f64::total_cmp);
+    let a0 = on[on.len() / 2].max(1.0);
+    let mut q = P::from_column_slice(&[0.0, th0, -half, half, a0, 1.2, 0.0]);
+    let mut region = region;
+    for round in 0..3 {
+        q = model.levenberg_marquardt(&region, q, if round == 0 { 30 } else { 15 })?;
+        // Leave out what the model cannot be (stars on the track, cosmic rays), then refit.
+        let r: Vec<f64> = region
+            .px
+            .iter()
+            .map(|p| p.2 - model.value(p.0, p.1, &q))
+            .collect();
+        let noise = robust_sigma(&r)?;
+        let keep: Vec<bool> = r.iter().map(|v| v.abs() <= 4.0 * noise).collect();
+        if keep == region.keep {
+            break;
+        }
+        region.keep = keep;
+    }
+    model.result(&region, &q, d)
+}
+
+impl Region {
+    /// Pixels with |δ| ≤ `r` and t in [t_lo, t_hi] of the line through `c` at angle `th`.
+    #[allow(clippy::too_many_arguments)]
+    fn around(
+        d: &dyn Fn(u32, u32) -> f64,
+        w: u32,
+        h: u32,
+        c: (f64, f64),
+        th: f64,
+        t_lo: f64,
+        t_hi: f64,
+        r: f64,
+    ) -> Region {
+        let (ux, uy) = (th.cos(), th.sin());
+        let corners = [(t_lo, -r), (t_lo, r), (t_hi, -r), (t_hi, r)]
+            .map(|(t, n)| (c.0 + t * ux - n * uy, c.1 + t * uy + n * ux));
+        let y0 = corners
+            .iter()
+            .map(|p| p.1)
+            .fold(f64::MAX, f64::min)
+            .floor()
+            .max(0.0) as u32;
+        let y1 = corners
+            .iter()
+            .map(|p| p.1)
+            .fold(f64::MIN, f64::max)
+            .ceil()
+            .min(h as f64 - 1.0);
+        let mut px = Vec::new();
+        if y1 < 0.0 {
+            return Region { px, keep: vec![] };
+        }
+        for y in y0..=y1 as u32 {
+            // The x interval of this row inside the rotated rectangle: two slabs, each linear
+            // in x (|δ| ≤ r and t_lo ≤ t ≤ t_hi).
+            let (mut lo, mut hi) = (0.0f64, w as f64 - 1.0);
+            let dy = y as f64 - c.1;
+            for (a, b, min, max) in [(-uy, dy * ux, -r, r), (ux, dy * uy, t_lo, t_hi)] {
+                // a·(x − cx) + b in [min, max]
+                if a.abs() < 1e-12 {
+                    if b < min || b > max {
+                        hi = -1.0;
+                    }
+                    continue;
+                }
+                let (e0, e1) = ((min - b) / a + c.0, (max - b) / a + c.0);
+                lo = lo.max(e0.min(e1));
+                hi = hi.min(e0.max(e1));
+            }
+            if hi < lo {
+                continue;
+            }
+            for x in lo.ceil() as u32..=hi.floor() as u32 {
+                px.push((x as f64, y as f64, d(x, y)));
+            }
+        }
+        let keep = vec![true; px.len()];
+        Region { px, keep }
+    }
+}
+
+struct Model {
+    /// Reference point of the parametrisation.
+    c: (f64, f64),
+    w: u32,
+    h: u32,
+}
+
+const SQRT_2PI: f64 = 2.506_628_274_631_000_7;
+
+impl Model {
+    /// (δ, t) of a pixel for the line (ρ, θ).
+    fn coords(&self, x: f64, y: f64, rho: f64, th: f64) -> (f64, f64) {
+        let (dx, dy) = (x - self.c.0, y - self.c.1);
+        let (s, c) = th.sin_cos();
+        (-dx * s + dy * c - rho, dx * c + dy * s)
+    }
+
+    fn value(&self, x: f64, y: f64, q: &P) -> f64 {
+        let (dd, t) = self.coords(x, y, q[0], q[1]);
+        let (a, sg, b) = (q[4], q[5], q[6]);
+        let g = (-dd * dd / (2.0 * sg * sg)).exp();
+        b + a * g * along(t, q[2], q[3], sg)
+    }
+
+    /// Value and gradient with respect to the parameters.
+    fn gradient(&self, x: f64, y: f64, q: &P) -> (f64, P) {
+        let (dd, t) = self.coords(x, y, q[0], q[1]);
+        let (t0, t1, a, sg, b) = (q[2], q[3], q[4], q[5], q[6]);
+        let g = (-dd * dd / (2.0 * sg * sg)).exp();
+        let e = along(t, t0, t1, sg);
+        let k = 1.0 / (SQRT_2PI * sg);
+        let e0 = (-(t - t0).powi(2) / (2.0 * sg * sg)).exp();
+        let e1 = (-(t - t1).powi(2) / (2.0 * sg * sg)).exp();
+        let de_dt = k * (e0 - e1);
+        let dg_dd = -dd / (sg * sg) * g;
+        let dg_ds = dd * dd / (sg * sg * sg) * g;
+        let de_ds = -k / sg * ((t - t0) * e0 - (t - t1) * e1);
+        // dδ/dρ = −1, dδ/dθ = −t, dt/dθ = δ + ρ.
+        let grad = P::from_column_slice(&[
+            -a * e * dg_dd,
+            a * (e * dg_dd * -t + g * de_dt * (dd + q[0])),
+            -a * g * k * e0,
+            a * g * k * e1,
+            g * e,
+            a * (e * dg_ds + g * de_ds),
+            1.0,
+        ]);
+        (b + a * g * e, grad)
+    }
+
+    /// Where the line (ρ, θ) enters and leaves the frame's pixel-centre box, as t.
+    fn frame_span(&self, q: &P) -> Option<(f64, f64)> {
+        let (s, c) = q[1].sin_cos();
+        let p0 = (self.c.0 - q[0] * s, self.c.1 + q[0] * c);
+        let (mut lo, mut hi) = (f64::MIN, f64::MAX);
+        for (p, u, max) in [
+            (p0.0, c, self.w as f64 - 1.0),
+            (p0.1, s, self.h as f64 - 1.0),
+        ] {
+            if u.abs() < 1e-12 {
+                if p < 0.0 || p > max {
+                    return None;
+                }
+                continue;
+            }
+            let (a, b) = ((0.0 - p) / u, (max - p) / u);
+            lo = lo.max(a.min(b));
+            hi = hi.min(a.max(b));
+        }
+        (hi > lo).then_some((lo, hi))
+    }
+
+    fn point(&self, q: &P, t: f64) -> (f64, f64) {
+        let (s, c) = q[1].sin_cos();
+        (self.c.0 - q[0] * s + t * c, self.c.1 + q[0] * c + t * s)
+    }
+
+    /// Keep the parameters where the model means something: σ in [0.3, 15] px, the ends in
+    /// order and no more than 4σ outside the frame (beyond, no pixel tells where they are).
+    fn clamp(&self, q: &mut P) {
+        q[5] = q[5].clamp(0.3, 15.0);
+        if let Some((lo, hi)) = self.frame_span(q) {
+            let m = 4.0 * q[5];
+            q[2] = q[2].clamp(lo - m, hi + m - 1.0);
+            q[3] = q[3].clamp(q[2] + 1.0, hi + m);
+        }
+    }
+
+    fn cost(&self, r: &Region, q: &P) -> f64 {
+        r.px.iter()
+            .zip(&r.keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| (p.2 - self.value(p.0, p.1, q)).powi(2))
+            .sum()
+    }
+
+    fn levenberg_marquardt(&self, r: &Region, mut q: P, iterations: usize) -> Option<P> {
+        let mut cost = self.cost(r, &q);
+        let mut lambda = 1e-3;
+        for _ in 0..iterations {
+            let mut jtj = SMatrix::<f64, 7, 7>::zeros();
+            let mut jtr = P::zeros();
+            for (p, _) in r.px.iter().zip(&r.keep).filter(|(_, k)| **k) {
+                let (m, g) = self.gradient(p.0, p.1, &q);
+                jtj += g * g.transpose();
+                jtr += g * (p.2 - m);
+            }
+            let mut improved = false;
+            while lambda < 1e10 {
+                let mut a = jtj;
+                let scale = (0..7).map(|i| jtj[(i, i)]).fold(0.0, f64::max) * 1e-12;
+                for i in 0..7 {
+                    a[(i, i)] += lambda * jtj[(i, i)] + scale + 1e-30;
+                }
+                let step = a.cholesky().map(|c| c.solve(&jtr));
+                if let Some(step) = step {
+                    let mut next = q + step;
+                    self.clamp(&mut next);
+                    let c = self.cost(r, &next);
+                    if c.is_finite() && c <= cost {
+                        let small = (cost - c) <= 1e-10 * cost;
+                        q = next;
+                        cost = c;
+                        lambda = (lambda * 0.3).max(1e-9);
+                        improved = true;
+                        if small {
+                            return Some(q);
+                        }
+                        break;
+                    }
+                }
+                lambda *= 10.0;
+            }
+            if !improved {
+                break;
+            }
+        }
+        q.iter().all(|v| v.is_finite()).then_some(q)
+    }
+
+    fn result(&self, r: &Region, q: &P, d: &dyn Fn(u32, u32) -> f64) -> Option<StreakFit> {
+        let (t0, t1, a, sg) = (q[2], q[3], q[4], q[5]);
+        if a <= 0.0 {
+            return None;
+        }
+        let (lo, hi) = self.frame_span(q)?;
+        // An end the fit puts at or beyond the frame's last pixel is where the streak leaves.
+        let edge = [t0 <= lo + 1.0, t1 >= hi - 1.0];
+        let (v0, v1) = (if edge[0] { lo } else { t0 }, if edge[1] { hi } else { t1 });
+        if v1 <= v0 {
+            return None;
+        }
+        let resid: Vec<f64> =
+            r.px.iter()
+                .zip(&r.keep)
+                .filter(|(_, k)| **k)
+                .map(|(p, _)| p.2 - self.value(p.0, p.1, q))
+                .collect();
+        let noise = robust_sigma(&resid)?;
+        let g2: f64 =
+            r.px.iter()
+                .map(|p| ((self.value(p.0, p.1, q) - q[6]) / a).powi(2))
+                .sum();
+        // Local centroids across the track, and how often the data fall short of the model.
+        let (s, c) = q[1].sin_cos();
+        let (mut dev2, mut bins) = (0.0, 0usize);
+        let (mut clear, mut gaps) = (0usize, 0usize);
+        let half_width = (2.5 * sg).max(2.0);
+        let mut t = v0 + 2.0 * sg;
+        while t + 4.0 <= v1 - 2.0 * sg {
+            let (mut sw, mut swd, mut sm, mut sd, mut n) = (0.0, 0.0, 0.0, 0.0, 0usize);
+            let mut u = t;
+            while u < t + 4.0 {
+                let mut off = -half_width;
+                while off <= half_width {
+                    let (x, y) = self.point(q, u);
+                    let (x, y) = (x - off * s, y + off * c);
+                    let (xi, yi) = (x.round(), y.round());
+                    if xi >= 0.0 && yi >= 0.0 && xi < self.w as f64 && yi < self.h as f64 {
+                        let v = d(xi as u32, yi as u32) - q[6];
+                        let (dd, _) = self.coords(xi, yi, q[0], q[1]);
+                        sw += v;
+                        swd += v * dd;
+                        sm += self.value(xi, yi, q) - q[6];
+                        sd += v;
+                        n += 1;
+                    }
+                    off += 1.0;
+                }
+                u += 1.0;
+            }
+            let bin_noise = noise * (n as f64).sqrt();
+            if sm > 4.0 * bin_noise {
+                clear += 1;
+                if sd < sm / 3.0 {
+                    gaps += 1;
+                }
+            }
+            if sw > 3.0 * bin_noise {
+                let cent = swd / sw;
+                dev2 += cent * cent;
+                bins += 1;
+            }
+            t += 4.0;
+        }
+        let axis = s.abs().min(c.abs()).asin().to_degrees();
+        Some(StreakFit {
+            ends: [self.point(q, v0), self.point(q, v1)],
+            edge,
+            sigma_px: sg,
+            amplitude: a,
+            noise,
+            flux: a * SQRT_2PI * sg * (v1 - v0),
+            snr: a * g2.sqrt() / noise,
+            fit_rms_px: if bins > 0 {
+                (dev2 / bins as f64).sqrt()
+            } else {
+                0.0
+            },
+            gap_fraction: if clear > 0 {
+                gaps as f64 / clear as f64
+            } else {
+                0.0
+            },
+            dir: (c, s),
+            axis_angle_deg: axis,
+        })
+    }
+}
+
+/// The along-track factor: a unit step at t0 down again at t1, blurred by σ.
+fn along(t: f64, t0: f64, t1: f64, sg: f64) -> f64 {
+    let k = 1.0 / (std::f64::consts::SQRT_2 * sg);
+    0.5 * (libm::erf((t - t0) * k) - libm::erf((t - t1) * k))
+}
+
+/// 1.4826 · median |v|: the noise of residuals that are mostly noise.
+fn robust_sigma(v: &[f64]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let mut a: Vec<f64> = v.iter().map(|x| x.abs()).collect();
+    let mid = a.len() / 2;
+    let m = *a.select_nth_unstable_by(mid, f64::total_cmp).1;
+    Some((1.4826 * m).max(1e-6))
+}

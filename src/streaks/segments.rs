@@ -1,0 +1,270 @@
+//! From the streak mask to line segments: connected components of the mask, lines found in
+//! each large component by a coarse Hough vote over its pixels (so a streak that crosses a
+//! star or another streak still gives its own line), and collinear pieces of one faint streak
+//! joined. Everything here is deterministic (fixed orders, first maximum wins).
+
+use crate::cpu::components::components;
+use crate::cpu::threshold::Run;
+
+/// A straight piece of the mask: a point on the line, its direction (unit), and the extent of
+/// its pixels along the line from that point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Segment {
+    pub cx: f64,
+    pub cy: f64,
+    pub ux: f64,
+    pub uy: f64,
+    pub t_min: f64,
+    pub t_max: f64,
+    /// Mask pixels on it.
+    pub pixels: usize,
+}
+
+impl Segment {
+    pub fn length(&self) -> f64 {
+        self.t_max - self.t_min
+    }
+
+    /// Signed distance of (x, y) from the line (along the normal (−uy, ux)).
+    pub fn across(&self, x: f64, y: f64) -> f64 {
+        -(x - self.cx) * self.uy + (y - self.cy) * self.ux
+    }
+
+    /// Position of (x, y) along the line.
+    pub fn along(&self, x: f64, y: f64) -> f64 {
+        (x - self.cx) * self.ux + (y - self.cy) * self.uy
+    }
+
+    pub fn point(&self, t: f64) -> (f64, f64) {
+        (self.cx + t * self.ux, self.cy + t * self.uy)
+    }
+}
+
+/// Settings of segment extraction.
+#[derive(Clone, Copy, Debug)]
+pub struct SegmentSettings {
+    /// Shortest piece kept (pixels along the line).
+    pub min_piece_px: f64,
+    /// Pixels within this distance of a line belong to it.
+    pub band_px: f64,
+    /// Largest gap along the line inside one piece.
+    pub max_gap_px: f64,
+}
+
+impl Default for SegmentSettings {
+    fn default() -> Self {
+        SegmentSettings {
+            min_piece_px: 12.0,
+            band_px: 3.0,
+            max_gap_px: 6.0,
+        }
+    }
+}
+
+/// Lines per component at most (a train of streaks seldom crosses in one component).
+const MAX_LINES_PER_COMPONENT: usize = 4;
+
+/// The segments of a streak mask (runs in raster order).
+pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Segment> {
+    let labels = components(runs, width);
+    // Runs of each component, in label order (labels are first pixels in raster order).
+    let mut order: Vec<usize> = (0..runs.len()).collect();
+    order.sort_by_key(|&i| (labels[i], i));
+    let mut pieces = Vec::new();
+    let mut start = 0;
+    while start < order.len() {
+        let label = labels[order[start]];
+        let mut end = start;
+        while end < order.len() && labels[order[end]] == label {
+            end += 1;
+        }
+        let comp: Vec<Run> = order[start..end].iter().map(|&i| runs[i]).collect();
+        start = end;
+        let (x0, x1) = comp
+            .iter()
+            .fold((u32::MAX, 0), |(a, b), r| (a.min(r.x0), b.max(r.x1)));
+        let (y0, y1) = (comp[0].y, comp[comp.len() - 1].y + 1);
+        let diag = (((x1 - x0) as f64).powi(2) + ((y1 - y0) as f64).powi(2)).sqrt();
+        if diag < s.min_piece_px {
+            continue; // stars, noise, hot pixels
+        }
+        let mut px: Vec<(f64, f64)> = comp
+            .iter()
+            .flat_map(|r| (r.x0..r.x1).map(move |x| (x as f64, r.y as f64)))
+            .collect();
+        for _ in 0..MAX_LINES_PER_COMPONENT {
+            match strongest_line(&px, s) {
+                Some((seg, used)) => {
+                    pieces.push(seg);
+                    let mut k = 0;
+                    px.retain(|_| {
+                        k += 1;
+                        !used[k - 1]
+                    });
+                }
+                None => break,
+            }
+            if px.len() < s.min_piece_px as usize {
+                break;
+            }
+        }
+    }
+    join_collinear(pieces)
+}
+
+/// The strongest line through a component's pixels, and which pixels it took, or None when
+/// no line holds a piece long and full enough.
+fn strongest_line(px: &[(f64, f64)], s: &SegmentSettings) -> Option<(Segment, Vec<bool>)> {
+    // Coarse Hough: 1° steps, 2 px bins of ρ around the pixels' mean.
+    let n = px.len() as f64;
+    let (mx, my) = px
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let r_max = px
+        .iter()
+        .map(|p| ((p.0 - mx).powi(2) + (p.1 - my).powi(2)).sqrt())
+        .fold(0.0, f64::max);
+    let bins = (r_max / 2.0).ceil() as usize * 2 + 2;
+    let mut best = (0u32, 0usize, 0usize);
+    let mut acc = vec![0u32; bins];
+    for a in 0..180 {
+        let th = (a as f64).to_radians();
+        let (nx, ny) = (-th.sin(), th.cos());
+        acc.fill(0);
+        for p in px {
+            let rho = (p.0 - mx) * nx + (p.1 - my) * ny;
+            acc[((rho / 2.0).floor() as isize + (bins / 2) as isize) as usize] += 1;
+        }
+        for (b, &c) in acc.iter().enumerate() {
+            if c > best.0 {
+                best = (c, a, b);
+            }
+        }
+    }
+    let th = (best.1 as f64).to_radians();
+    let rho = ((best.2 as isize - (bins / 2) as isize) as f64 + 0.5) * 2.0;
+    let mut seg = Segment {
+        cx: mx - rho * th.sin(),
+        cy: my + rho * th.cos(),
+        ux: th.cos(),
+        uy: th.sin(),
+        t_min: 0.0,
+        t_max: 0.0,
+        pixels: 0,
+    };
+    // Refine by principal axes of the pixels near the line: wide first (the coarse angle
+    // drifts 0.5° off at most), then within the band.
+    for band in [s.band_px + 0.0087 * r_max, s.band_px] {
+        let near: Vec<(f64, f64)> = px
+            .iter()
+            .copied()
+            .filter(|p| seg.across(p.0, p.1).abs() <= band)
+            .collect();
+        if near.len() < 3 {
+            return None;
+        }
+        seg = principal_axis(&near);
+    }
+    // The longest run of band pixels along the line without a gap.
+    let mut ts: Vec<(f64, usize)> = px
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| seg.across(p.0, p.1).abs() <= s.band_px)
+        .map(|(i, p)| (seg.along(p.0, p.1), i))
+        .collect();
+    ts.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let (mut lo, mut best_run) = (0usize, (0usize, 0usize));
+    for k in 1..=ts.len() {
+        if k == ts.len() || ts[k].0 - ts[k - 1].0 > s.max_gap_px {
+            if ts[k - 1].0 - ts[lo].0 > ts[best_run.1].0 - ts[best_run.0].0 {
+                best_run = (lo, k - 1);
+            }
+            lo = k;
+        }
+    }
+    let (a, b) = best_run;
+    seg.t_min = ts.get(a)?.0;
+    seg.t_max = ts[b].0;
+    seg.pixels = b + 1 - a;
+    // A line piece, not a blob: long enough, and its pixels along it rather than beside it
+    // (a bright star's disc also fills the band's shoulders, out to three times its width).
+    let len = seg.length();
+    let width = seg.pixels as f64 / len.max(1.0);
+    let shoulder = px
+        .iter()
+        .filter(|p| {
+            let (d, t) = (seg.across(p.0, p.1).abs(), seg.along(p.0, p.1));
+            d > s.band_px && d <= 3.0 * s.band_px && t >= seg.t_min && t <= seg.t_max
+        })
+        .count();
+    if len < s.min_piece_px || width > len / 3.0 || 2 * shoulder > seg.pixels {
+        return None;
+    }
+    let mut used = vec![false; px.len()];
+    for &(_, i) in &ts[a..=b] {
+        used[i] = true;
+    }
+    Some((seg, used))
+}
+
+/// The line of least squares through points (their principal axis), extent unset.
+fn principal_axis(p: &[(f64, f64)]) -> Segment {
+    let n = p.len() as f64;
+    let (mx, my) = p
+        .iter()
+        .fold((0.0, 0.0), |(a, b), q| (a + q.0 / n, b + q.1 / n));
+    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    for q in p {
+        let (dx, dy) = (q.0 - mx, q.1 - my);
+        sxx += dx * dx;
+        syy += dy * dy;
+        sxy += dx * dy;
+    }
+    let th = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    Segment {
+        cx: mx,
+        cy: my,
+        ux: th.cos(),
+        uy: th.sin(),
+        t_min: 0.0,
+        t_max: 0.0,
+        pixels: p.len(),
+    }
+}
+
+/// Join pieces that lie on one line (a faint streak breaks up; a long one crosses stars):
+/// directions within 2°, each one's ends within 3 px of the other's line, and a gap along
+/// the line shorter than the two pieces together (or 40 px). Pieces are joined in a fixed
+/// order, so the result does not depend on which piece came first.
+fn join_collinear(mut pieces: Vec<Segment>) -> Vec<Segment> {
+    pieces.sort_by(|a, b| b.length().total_cmp(&a.length()));
+    let mut out: Vec<Segment> = Vec::new();
+    for p in pieces {
+        let joined = out.iter_mut().find(|q| collinear(q, &p)).map(|q| {
+            // Extend q by p's extent; keep q's line (the longer piece's, the better fixed).
+            let (a, b) = (q.along(p.cx, p.cy), p.ux * q.ux + p.uy * q.uy);
+            let (t0, t1) = (a + b * p.t_min, a + b * p.t_max);
+            q.t_min = q.t_min.min(t0.min(t1));
+            q.t_max = q.t_max.max(t0.max(t1));
+            q.pixels += p.pixels;
+        });
+        if joined.is_none() {
+            out.push(p);
+        }
+    }
+    out
+}
+
+fn collinear(q: &Segment, p: &Segment) -> bool {
+    let cos = (p.ux * q.ux + p.uy * q.uy).abs();
+    if cos < 2f64.to_radians().cos() {
+        return false;
+    }
+    let ends = [p.point(p.t_min), p.point(p.t_max)];
+    if ends.iter().any(|e| q.across(e.0, e.1).abs() > 3.0) {
+        return false;
+    }
+    let (ta, tb) = (q.along(ends[0].0, ends[0].1), q.along(ends[1].0, ends[1].1));
+    let gap = (ta.min(tb) - q.t_max).max(q.t_min - ta.max(tb)).max(0.0);
+    gap <= (q.length() + p.length()).max(40.0)
+}
