@@ -12,6 +12,7 @@ use crate::gpu::vote::{GpuTable, VoteJob};
 use crate::products::Products;
 use crate::record::{Record, Timing};
 use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
+use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use anyhow::Result;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -61,6 +62,8 @@ pub struct Solvers {
     pub darks: Darks,
     /// Per-frame files written beside the records (WCS headers, annotated PNGs).
     pub products: Products,
+    /// `--streaks`: find satellite streaks, keep them out of star detection, reduce them.
+    pub streaks: Option<StreakOptions>,
     map: Mutex<HashMap<(u32, u32), SharedSolver>>,
 }
 
@@ -70,6 +73,8 @@ pub struct Decoded {
     pub path: PathBuf,
     /// The frame's own observation epoch (FITS DATE-OBS), if the file has one.
     pub epoch: Option<f64>,
+    /// The file's FITS header keywords (times and station of streak frames).
+    pub keywords: std::collections::BTreeMap<String, String>,
     pub frame: std::result::Result<Frame, String>,
     pub decode_ms: f64,
 }
@@ -82,6 +87,7 @@ impl Solvers {
             camera,
             darks: Darks::None,
             products: Products::default(),
+            streaks: None,
             map: Mutex::new(HashMap::new()),
         }
     }
@@ -89,14 +95,15 @@ impl Solvers {
     /// Read and decode one file, and remove its fixed pattern when asked.
     pub fn decode(&self, path: &Path, name: &str) -> Decoded {
         let t0 = Instant::now();
-        let (frame, epoch) = match Frame::read_dated(path) {
-            Ok((f, epoch)) => (self.darks.apply(path, f), epoch),
-            Err(e) => (Err(format!("{e:#}")), None),
+        let (frame, info) = match Frame::read_info(path) {
+            Ok((f, info)) => (self.darks.apply(path, f), info),
+            Err(e) => (Err(format!("{e:#}")), Default::default()),
         };
         Decoded {
             name: name.to_string(),
             path: path.to_path_buf(),
-            epoch,
+            epoch: info.epoch,
+            keywords: info.keywords,
             frame,
             decode_ms: t0.elapsed().as_secs_f64() * 1e3,
         }
@@ -119,6 +126,24 @@ impl Solvers {
             r.warnings.push(format!("{e:#}"));
         }
         r
+    }
+
+    /// With `--streaks`, the frame's streaks reduced into its record (and their warnings).
+    fn add_streaks(
+        &self,
+        r: &mut Record,
+        d: &Decoded,
+        sol: &Solution,
+        found: Option<&[StreakFit]>,
+    ) {
+        if let (Some(opts), Some(found)) = (&self.streaks, found) {
+            let (records, warnings) = streaks::reduce::records(found, sol, &d.keywords, opts);
+            for w in &warnings {
+                tracing::warn!("{}: {w}", d.name);
+            }
+            r.warnings.extend(warnings);
+            r.streaks = Some(records);
+        }
     }
 
     /// The solver for frames of this size, or why there is none (built once per size).
@@ -246,22 +271,25 @@ impl GpuRunner {
     ) -> Vec<Record> {
         let frames: Vec<&Frame> = group.iter().map(|(_, d)| decoded_frame(d)).collect();
         let epochs: Vec<Option<f64>> = group.iter().map(|(_, d)| d.epoch).collect();
-        match self.gpu_group(solver, &frames, &epochs) {
-            Ok((solutions, detect_ms, identify_ms)) => {
+        match self.gpu_group(solver, &frames, &epochs, solvers.streaks.as_ref()) {
+            Ok((solutions, found, detect_ms, identify_ms)) => {
                 let backend = self.gpu.backend_name();
                 let n = group.len() as f64;
                 group
                     .iter()
                     .zip(solutions)
+                    .zip(found)
                     .zip(&frames)
-                    .map(|(((_, d), sol), frame)| {
+                    .map(|((((_, d), sol), found), frame)| {
                         let timing = Timing {
                             decode: d.decode_ms,
                             detect: detect_ms / n,
                             identify: identify_ms / n,
                             total: d.decode_ms + (detect_ms + identify_ms) / n,
                         };
-                        solvers.record(solver, d, frame, &sol, timing, &backend)
+                        let mut r = solvers.record(solver, d, frame, &sol, timing, &backend);
+                        solvers.add_streaks(&mut r, d, &sol, found.as_deref());
+                        r
                     })
                     .collect()
             }
@@ -276,20 +304,36 @@ impl GpuRunner {
         }
     }
 
-    /// One batch on the GPU: detection in one submission, then for each scale tried (one,
-    /// unless the scale is searched) a vote of the frames not solved yet in one submission;
-    /// verification and refinement on the CPU. Returns the solutions and the batch's detection
-    /// and identification times (ms).
+    /// One batch on the GPU: detection (with the streak mask, when asked) in one submission,
+    /// then for each scale tried (one, unless the scale is searched) a vote of the frames not
+    /// solved yet in one submission; streak fits, verification and refinement on the CPU.
+    /// Returns the solutions, the streaks, and the batch's detection and identification times
+    /// (ms).
     fn gpu_group(
         &mut self,
         solver: &Solver,
         frames: &[&Frame],
         epochs: &[Option<f64>],
-    ) -> Result<(Vec<Solution>, f64, f64)> {
+        streak_opts: Option<&StreakOptions>,
+    ) -> Result<GroupOut> {
         let settings = &solver.settings.detect;
         let t0 = Instant::now();
         let p = detect::params(frames[0], settings);
-        let blobs = self.gpu.detect(frames, &p)?;
+        let (blobs, found) = match streak_opts {
+            None => (self.gpu.detect(frames, &p)?, vec![None; frames.len()]),
+            Some(o) => {
+                let sp = o.settings.params(settings.k_sigma);
+                let (blobs, pixels) = self.gpu.detect_streaks(frames, &p, &sp)?;
+                let mut kept = Vec::with_capacity(blobs.len());
+                let mut found = Vec::with_capacity(blobs.len());
+                for ((b, px), f) in blobs.iter().zip(&pixels).zip(frames) {
+                    let s = streaks::measure(f, &px.tiles, &px.mask, &p, &o.settings);
+                    kept.push(streaks::off_streaks(b, &s));
+                    found.push(Some(s));
+                }
+                (kept, found)
+            }
+        };
         let detections: Vec<Vec<Detection>> = blobs
             .iter()
             .map(|b| detect::star_list(b, settings))
@@ -347,20 +391,47 @@ impl GpuRunner {
                 epoch,
             })
             .collect();
-        Ok((solutions, detect_ms, t1.elapsed().as_secs_f64() * 1e3))
+        Ok((
+            solutions,
+            found,
+            detect_ms,
+            t1.elapsed().as_secs_f64() * 1e3,
+        ))
     }
 }
 
+/// What a GPU batch gives: solutions, streaks (with `--streaks`), detection and
+/// identification times (ms).
+type GroupOut = (Vec<Solution>, Vec<Option<Vec<StreakFit>>>, f64, f64);
+
 /// Solve a decoded frame with a known solver on the CPU.
 fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) -> Record {
-    let (sol, detect_ms, identify_ms) = solver.solve_frame_at(frame, d.epoch);
+    let (sol, found, detect_ms, identify_ms) = match &solvers.streaks {
+        None => {
+            let (sol, detect_ms, identify_ms) = solver.solve_frame_at(frame, d.epoch);
+            (sol, None, detect_ms, identify_ms)
+        }
+        Some(o) => {
+            let t0 = Instant::now();
+            let s = &solver.settings.detect;
+            let p = detect::params(frame, s);
+            let (blobs, found) = streaks::detect_cpu(frame, &p, &o.settings, s.k_sigma);
+            let dets = detect::star_list(&blobs, s);
+            let t1 = Instant::now();
+            let sol = solver.identify(dets, d.epoch);
+            let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+            (sol, Some(found), ms(t0, t1), ms(t1, Instant::now()))
+        }
+    };
     let timing = Timing {
         decode: d.decode_ms,
         detect: detect_ms,
         identify: identify_ms,
         total: d.decode_ms + detect_ms + identify_ms,
     };
-    solvers.record(solver, d, frame, &sol, timing, BACKEND_CPU)
+    let mut r = solvers.record(solver, d, frame, &sol, timing, BACKEND_CPU);
+    solvers.add_streaks(&mut r, d, &sol, found.as_deref());
+    r
 }
 
 /// The frame of a decoded input that was grouped for solving (only decoded ones are).

@@ -12,6 +12,9 @@ use crate::refine::CameraFit;
 use crate::run::{self as stream, RunOptions};
 use crate::simulate::{self, SimSettings};
 use crate::solve::{PassKind, Settings, Solver, scaled};
+use crate::streaks::reduce::Astrometry;
+use crate::streaks::sky::{Station, parse_station};
+use crate::streaks::{StreakOptions, StreakSettings, export::Exports};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use std::io::Write;
@@ -288,6 +291,65 @@ pub struct SolveOpts {
     /// No progress bar, warnings or summary on stderr.
     #[arg(short, long)]
     pub quiet: bool,
+    #[command(flatten)]
+    pub streaks: StreakOpts,
+}
+
+/// Satellite streaks (optical-tracking frames).
+#[derive(Args, Debug, Clone)]
+pub struct StreakOpts {
+    /// Find satellite streaks: sub-pixel ends (edge-flagged where they leave the frame),
+    /// width, flux, SNR, RA/Dec and Az/El of the ends; streak pixels are kept out of star
+    /// detection. Records get a "streaks" list.
+    #[arg(long, help_heading = "Streaks")]
+    pub streaks: bool,
+    /// The station for Az/El (geodetic WGS-84, east longitude positive) [default: each FITS
+    /// header's OBSGEO-B/L/H, OBSGEO-X/Y/Z or SITELAT/SITELONG/SITEELEV].
+    #[arg(long, value_name = "LAT,LON,HEIGHT_M", value_parser = parse_station_arg,
+          requires = "streaks", help_heading = "Streaks")]
+    pub station: Option<Station>,
+    /// Where the RA/Dec of streak ends come from: gpustar's solution, the FITS header's
+    /// TAN/TAN-SIP WCS, or the solution when the frame solves and else the header (auto).
+    #[arg(long, value_enum, default_value_t = Astrometry::Auto, help_heading = "Streaks")]
+    pub astrometry: Astrometry,
+    /// UT1 − UTC in seconds for Az/El [default: interpolated in the bundled IERS table
+    /// (catalog/eop.csv); beyond its end its last value, with a warning].
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        allow_negative_numbers = true,
+        requires = "streaks",
+        help_heading = "Streaks"
+    )]
+    pub dut1: Option<f64>,
+    /// Streak mask threshold, noise sigmas of the smoothed frame.
+    #[arg(long, default_value_t = 3.5, help_heading = "Streaks")]
+    pub streak_sigma: f32,
+    /// Write the streaks' midpoints at mid-exposure as a CCSDS TDM (KVN): RADEC, and AZEL
+    /// when the station is known.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "streaks",
+        help_heading = "Streaks"
+    )]
+    pub tdm: Option<PathBuf>,
+    /// Write the streaks' midpoints at mid-exposure as IOD lines (angle format 2, J2000).
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "streaks",
+        help_heading = "Streaks"
+    )]
+    pub iod: Option<PathBuf>,
+    /// COSPAR station number for the IOD lines.
+    #[arg(long, default_value_t = 9999, value_parser = clap::value_parser!(u16).range(0..=9999),
+          help_heading = "Streaks")]
+    pub iod_station: u16,
+}
+
+fn parse_station_arg(s: &str) -> std::result::Result<Station, String> {
+    parse_station(s)
 }
 
 #[derive(Args, Debug)]
@@ -581,6 +643,26 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         wcs_dir: o.wcs_dir.clone(),
         annotate_dir: o.annotate_dir.clone(),
     };
+    let so = &o.streaks;
+    solvers.streaks = so.streaks.then_some(StreakOptions {
+        settings: StreakSettings {
+            k_sigma: so.streak_sigma,
+            ..StreakSettings::default()
+        },
+        station: so.station,
+        dut1_s: so.dut1,
+        astrometry: so.astrometry,
+    });
+    let mut exports = Exports {
+        tdm: so.tdm.clone(),
+        iod: so.iod.clone(),
+        iod_station: so.iod_station,
+        station_name: so.station.map_or_else(
+            || "STATION".to_string(),
+            |s| format!("{:.5},{:.5},{:.1}", s.lat_deg, s.lon_deg, s.height_m),
+        ),
+        ..Exports::default()
+    };
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
     let bar = progress_bar(inputs.len() as u64, o.quiet);
@@ -600,6 +682,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         opts,
         stop,
         |r, c| {
+            exports.add(r);
             bar.inc(1);
             bar.set_message(format!(
                 "{} solved, {} unsolved, {} errors",
@@ -609,6 +692,12 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         },
     )?;
     bar.finish_and_clear();
+    if exports.wanted() {
+        let said = exports.finish(&crate::streaks::sky::now_utc_iso())?;
+        if !o.quiet {
+            eprintln!("gpustar: wrote {said}");
+        }
+    }
     let c = summary.counts;
     if !o.quiet {
         eprintln!(

@@ -42,6 +42,10 @@ pub struct FitsFrame {
     pub saturation: u16,
     /// Observation epoch as a Julian year (e.g. 2019.57), from DATE-OBS when present and parseable.
     pub epoch: Option<f64>,
+    /// Every keyword with a value, as text: strings without their quotes and trailing blanks,
+    /// numbers as written back by Rust, logicals as T or F. The image's own header wins over
+    /// the primary header of a multi-extension file.
+    pub keywords: BTreeMap<String, String>,
 }
 
 /// Is this (lower-case) file extension a FITS file? Tile-compressed `.fz` files are not:
@@ -141,7 +145,26 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
         // The image's own header first; DATE-OBS often sits only in the primary header of
         // multi-extension files.
         epoch: epoch(headers.iter().rev()),
+        keywords: keywords(&headers),
     })
+}
+
+/// The keywords of the headers used, later headers over earlier ones.
+fn keywords(headers: &[Header<Image>]) -> BTreeMap<String, String> {
+    let mut out = BTreeMap::new();
+    for h in headers {
+        for key in h.keywords() {
+            let text = match h.get(key) {
+                Some(Value::Integer { value, .. }) => value.to_string(),
+                Some(Value::Float { value, .. }) => value.to_string(),
+                Some(Value::Logical { value, .. }) => if *value { "T" } else { "F" }.to_string(),
+                Some(Value::String { value, .. }) => value.trim_end().to_string(),
+                Some(Value::Invalid(_) | Value::Undefined) | None => continue,
+            };
+            out.insert(key.clone(), text);
+        }
+    }
+    out
 }
 
 /// Julian year of an ISO-8601 DATE-OBS value ("2019-07-29T20:47:26.5", "2019-07-29", old "29/07/19" form -> None is fine)

@@ -16,6 +16,15 @@ pub struct Frame {
     pub saturation: u16,
 }
 
+/// What a file says about itself beside its pixels.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FileInfo {
+    /// The observation epoch (Julian year), from FITS DATE-OBS or MJD-OBS.
+    pub epoch: Option<f64>,
+    /// FITS header keywords and their values as text (empty for other formats).
+    pub keywords: std::collections::BTreeMap<String, String>,
+}
+
 /// File extensions `batch` treats as images (lower case).
 pub const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff", "fits", "fit", "fts"];
 
@@ -47,6 +56,11 @@ impl Frame {
     /// (FITS `DATE-OBS` or `MJD-OBS`). FITS files are recognised by their first card, whatever
     /// their name.
     pub fn read_dated(path: &Path) -> Result<(Frame, Option<f64>)> {
+        Frame::read_info(path).map(|(f, info)| (f, info.epoch))
+    }
+
+    /// Decode an image file, with what its header says ([`FileInfo`]).
+    pub fn read_info(path: &Path) -> Result<(Frame, FileInfo)> {
         let shown = path.display().to_string();
         // Follows links: a dangling or looping one fails here, with where it leads.
         let meta = std::fs::metadata(path).map_err(|e| match std::fs::read_link(path) {
@@ -75,7 +89,7 @@ impl Frame {
             .with_context(|| format!("cannot read {shown}"))?;
         if reader.format() == Some(ImageFormat::Png) {
             if let Some(frame) = read_grey_png(path, &shown, meta.len())? {
-                return Ok((frame, None));
+                return Ok((frame, FileInfo::default()));
             }
         }
         let img = if reader.format() == Some(ImageFormat::Jpeg) {
@@ -94,7 +108,7 @@ impl Frame {
         } else {
             decode(reader, &shown)?
         };
-        Ok((Frame::from_image(img)?, None))
+        Ok((Frame::from_image(img)?, FileInfo::default()))
     }
 
     /// Convert a decoded image (grey or colour, 8 or 16 bits) into a frame.
@@ -135,7 +149,7 @@ fn is_fits(path: &Path) -> Result<bool> {
 }
 
 /// A FITS file's primary image (or first image extension), with its DATE-OBS.
-fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, Option<f64>)> {
+fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, FileInfo)> {
     if file_len > MAX_ALLOC {
         bail!("cannot decode {shown}: the FITS file is larger than gpustar reads (2 GiB)");
     }
@@ -150,7 +164,10 @@ fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, Option<f
             pixels: f.pixels,
             saturation: f.saturation,
         },
-        f.epoch,
+        FileInfo {
+            epoch: f.epoch,
+            keywords: f.keywords,
+        },
     ))
 }
 

@@ -16,7 +16,7 @@ pub enum Format {
     Csv,
 }
 
-pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1";
+pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1,streaks";
 
 /// Writes records as whole lines: lines are collected and handed to the file in one write
 /// per flush, so a crash leaves at most one incomplete last line (which `--resume` drops).
@@ -104,6 +104,13 @@ fn csv_row(r: &Record) -> String {
         r.timing_ms.total.to_string(),
         csv_field(&r.backend),
         num(r.distortion_k1),
+        // The streaks as their JSON array (empty without --streaks).
+        csv_field(
+            &r.streaks
+                .as_ref()
+                .map(|s| serde_json::to_string(s).expect("streaks serialise"))
+                .unwrap_or_default(),
+        ),
     ]
     .join(",")
 }

@@ -25,6 +25,47 @@ pub struct MatchRecord {
     pub residual_arcsec: f64,
 }
 
+/// One end (or the midpoint) of a streak (spec/INTERFACE.md, "Streaks").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StreakEnd {
+    pub x: f64,
+    pub y: f64,
+    /// ICRS direction through the plate solution ("as a star"); null without one.
+    pub ra_deg: Option<f64>,
+    pub dec_deg: Option<f64>,
+    /// This end is where the streak leaves the frame, not where the object was at a known
+    /// time: its time, Az and El are null. Absent on the midpoint.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge: Option<bool>,
+    /// Exposure start or end for an end inside the frame, mid-exposure for the midpoint.
+    pub time_utc: Option<String>,
+    /// Topocentric azimuth (from north through east) and elevation, airless; null without a
+    /// station, a time or RA/Dec.
+    pub az_deg: Option<f64>,
+    pub el_deg: Option<f64>,
+}
+
+/// A satellite streak.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StreakRecord {
+    /// The two ends; without `direction_known` their order is arbitrary (the first takes
+    /// the exposure start).
+    pub ends: [StreakEnd; 2],
+    pub direction_known: bool,
+    /// The midpoint at mid-exposure; null unless both ends are inside the frame.
+    pub mid: Option<StreakEnd>,
+    /// Between the two ends, in the frame.
+    pub length_px: f64,
+    /// FWHM of the profile across the track.
+    pub width_px: f64,
+    /// Background-subtracted flux of the part in the frame (ADU).
+    pub flux: f64,
+    /// Matched-filter signal-to-noise ratio of the part in the frame.
+    pub snr: f64,
+    /// RMS distance of the track's local centroids from the fitted line.
+    pub fit_rms_px: f64,
+}
+
 /// Milliseconds spent per stage.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Timing {
@@ -73,6 +114,10 @@ pub struct Record {
     /// written); absent when there were none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// With `--streaks`: the frame's satellite streaks (an empty list when none); absent
+    /// otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub streaks: Option<Vec<StreakRecord>>,
 }
 
 impl Record {
@@ -101,6 +146,7 @@ impl Record {
             distortion_k1: None,
             epoch: None,
             warnings: Vec::new(),
+            streaks: None,
         }
     }
 

@@ -102,6 +102,7 @@ pub fn run(
                                 name: input.name.clone(),
                                 path: input.path.clone(),
                                 epoch: None,
+                                keywords: Default::default(),
                                 frame: Err(panic_message(&p)),
                                 decode_ms: 0.0,
                             });

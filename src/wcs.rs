@@ -913,3 +913,117 @@ mod tests {
         }
     }
 }
+
+/// A FITS header's celestial WCS, read for frames gpustar does not solve (streak frames of
+/// fields too narrow for the shipped catalog): TAN, with SIP distortion (`-TAN-SIP`) when the
+/// header has it. Linear terms from CD, else PC × CDELT, else CDELT with CROTA2.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeaderWcs {
+    /// FITS reference pixel (1-based).
+    crpix: (f64, f64),
+    /// RA, Dec of the reference point (radians).
+    crval: (f64, f64),
+    /// Intermediate world coordinates per pixel offset (degrees).
+    cd: [[f64; 2]; 2],
+    /// SIP forward terms (p, q, coefficient) of u and v.
+    sip_a: Vec<(i32, i32, f64)>,
+    sip_b: Vec<(i32, i32, f64)>,
+}
+
+impl HeaderWcs {
+    /// The WCS of these keywords; None when they hold no celestial WCS, an error when they
+    /// hold one gpustar does not read (another projection, missing or singular terms).
+    pub fn from_keywords(
+        k: &std::collections::BTreeMap<String, String>,
+    ) -> std::result::Result<Option<HeaderWcs>, String> {
+        let (Some(c1), Some(c2)) = (k.get("CTYPE1"), k.get("CTYPE2")) else {
+            return Ok(None);
+        };
+        let (c1, c2) = (c1.trim(), c2.trim());
+        let sip = c1.ends_with("-SIP") && c2.ends_with("-SIP");
+        let tan = |c: &str, axis: &str| c.starts_with(axis) && c[4..].starts_with("-TAN");
+        if !(c1.len() >= 8 && c2.len() >= 8 && tan(c1, "RA--") && tan(c2, "DEC-")) {
+            return Err(format!(
+                "CTYPE1 = '{c1}', CTYPE2 = '{c2}': gpustar reads RA---TAN / DEC--TAN (and -SIP)"
+            ));
+        }
+        let num = |key: &str| -> std::result::Result<Option<f64>, String> {
+            match k.get(key) {
+                None => Ok(None),
+                Some(v) => v
+                    .trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|x| x.is_finite())
+                    .map(Some)
+                    .ok_or_else(|| format!("{key} = '{v}' is not a number")),
+            }
+        };
+        let need = |key: &str| num(key)?.ok_or_else(|| format!("{key} is missing"));
+        let crpix = (need("CRPIX1")?, need("CRPIX2")?);
+        let crval = (need("CRVAL1")?.to_radians(), need("CRVAL2")?.to_radians());
+        let cd = if num("CD1_1")?.is_some() || num("CD2_2")?.is_some() {
+            let at = |i, j| num(&format!("CD{i}_{j}")).map(|v| v.unwrap_or(0.0));
+            [[at(1, 1)?, at(1, 2)?], [at(2, 1)?, at(2, 2)?]]
+        } else {
+            let (d1, d2) = (need("CDELT1")?, need("CDELT2")?);
+            let pc = |i, j| {
+                num(&format!("PC{i}_{j}")).map(|v| v.unwrap_or(if i == j { 1.0 } else { 0.0 }))
+            };
+            let has_pc = ["PC1_1", "PC1_2", "PC2_1", "PC2_2"]
+                .iter()
+                .any(|key| k.contains_key(*key));
+            let m = if has_pc {
+                [[pc(1, 1)?, pc(1, 2)?], [pc(2, 1)?, pc(2, 2)?]]
+            } else {
+                let rho = num("CROTA2")?.unwrap_or(0.0).to_radians();
+                [[rho.cos(), -rho.sin()], [rho.sin(), rho.cos()]]
+            };
+            [[d1 * m[0][0], d1 * m[0][1]], [d2 * m[1][0], d2 * m[1][1]]]
+        };
+        let det = cd[0][0] * cd[1][1] - cd[0][1] * cd[1][0];
+        if det.abs() < 1e-20 {
+            return Err("the WCS's linear terms are singular".into());
+        }
+        let terms = |name: &str| -> std::result::Result<Vec<(i32, i32, f64)>, String> {
+            if !sip {
+                return Ok(Vec::new());
+            }
+            let order = num(&format!("{name}_ORDER"))?.unwrap_or(0.0) as i32;
+            let mut t = Vec::new();
+            for p in 0..=order.clamp(0, 9) {
+                for q in 0..=(order - p) {
+                    if let Some(c) = num(&format!("{name}_{p}_{q}"))? {
+                        t.push((p, q, c));
+                    }
+                }
+            }
+            Ok(t)
+        };
+        Ok(Some(HeaderWcs {
+            crpix,
+            crval,
+            cd,
+            sip_a: terms("A")?,
+            sip_b: terms("B")?,
+        }))
+    }
+
+    /// RA, Dec (degrees) of gpustar pixel (x, y) (0-based; FITS pixel x + 1, y + 1).
+    pub fn pixel_to_radec(&self, x: f64, y: f64) -> Option<(f64, f64)> {
+        let (u, v) = (x + 1.0 - self.crpix.0, y + 1.0 - self.crpix.1);
+        let poly = |t: &[(i32, i32, f64)]| -> f64 {
+            t.iter().map(|&(p, q, c)| c * u.powi(p) * v.powi(q)).sum()
+        };
+        let (u, v) = (u + poly(&self.sip_a), v + poly(&self.sip_b));
+        let xi = (self.cd[0][0] * u + self.cd[0][1] * v).to_radians();
+        let eta = (self.cd[1][0] * u + self.cd[1][1] * v).to_radians();
+        // The gnomonic projection inverted (LONPOLE 180, the TAN default).
+        let (a0, d0) = self.crval;
+        let den = d0.cos() - eta * d0.sin();
+        let ra = a0 + xi.atan2(den);
+        let dec = (d0.sin() + eta * d0.cos()).atan2((xi * xi + den * den).sqrt());
+        dec.is_finite()
+            .then(|| (ra.to_degrees().rem_euclid(360.0), dec.to_degrees()))
+    }
+}

@@ -9,8 +9,12 @@
 //! stars, hot or bleeding columns and noise out → [`sky`] (times, station, Az/El) and
 //! [`formats`] (CCSDS TDM, IOD).
 
+pub mod export;
 pub mod fit;
+pub mod formats;
+pub mod reduce;
 pub mod segments;
+pub mod sky;
 
 use crate::cpu::centroid::Blob;
 use crate::cpu::streak_filter::{StreakParams, mask_runs, streak_filter, streak_rows};
@@ -31,9 +35,14 @@ pub struct StreakSettings {
     /// Narrowest profile (Gaussian σ, pixels) taken for a streak: a defective column is a
     /// pixel wide (σ ≈ 0.3), anything the optics drew is as wide as the PSF.
     pub min_sigma_px: f64,
+    /// Widest profile (Gaussian σ, pixels): a fit this wide has found no line but a patch.
+    pub max_sigma_px: f64,
     /// Largest share of a track's clear 4 px bins that may fall short of the fit (chains of
     /// stars have gaps between the stars, streaks none).
     pub max_gap_fraction: f64,
+    /// Largest modulation of the along-track profile (its excess scatter over the mean): a
+    /// chain of stars rises and falls from star to star, a streak stays level.
+    pub max_modulation: f64,
 }
 
 impl Default for StreakSettings {
@@ -43,7 +52,9 @@ impl Default for StreakSettings {
             min_length_px: 25.0,
             min_snr: 10.0,
             min_sigma_px: 0.5,
+            max_sigma_px: 8.0,
             max_gap_fraction: 0.25,
+            max_modulation: 0.3,
         }
     }
 }
@@ -53,6 +64,17 @@ impl StreakSettings {
     pub fn params(&self, k_detect: f32) -> StreakParams {
         StreakParams::new(self.k_sigma, k_detect)
     }
+}
+
+/// What `--streaks` asks for: detection settings and how the ends are reduced.
+#[derive(Clone, Copy, Debug)]
+pub struct StreakOptions {
+    pub settings: StreakSettings,
+    /// `--station`; else each frame's header says.
+    pub station: Option<sky::Station>,
+    /// `--dut1`: UT1 − UTC (s) instead of the bundled table's.
+    pub dut1_s: Option<f64>,
+    pub astrometry: reduce::Astrometry,
 }
 
 /// Lines closer to a frame axis than this (degrees) are suspects: bad columns and rows, and
@@ -66,10 +88,26 @@ pub fn find_cpu(
     s: &StreakSettings,
     k_detect: f32,
 ) -> Vec<StreakFit> {
+    detect_cpu(frame, p, s, k_detect).1
+}
+
+/// Star detection and streaks of a frame on the CPU, from one set of tiles: the blobs of
+/// star detection that are not on a streak, and the streaks.
+pub fn detect_cpu(
+    frame: &Frame,
+    p: &DetectParams,
+    s: &StreakSettings,
+    k_detect: f32,
+) -> (Vec<Blob>, Vec<StreakFit>) {
+    use crate::cpu::{centroid, components, threshold};
     let tiles = tile_stats(&frame.pixels, p);
+    let runs = threshold::threshold(&frame.pixels, &tiles, p);
+    let labels = components::components(&runs, p.width);
+    let blobs = centroid::centroid(&frame.pixels, &runs, &labels, &tiles, p);
     let rows = streak_rows(&frame.pixels, &tiles, p);
     let mask = streak_filter(&rows, &tiles, p, &s.params(k_detect));
-    measure(frame, &tiles, &mask, p, s)
+    let streaks = measure(frame, &tiles, &mask, p, s);
+    (off_streaks(&blobs, &streaks), streaks)
 }
 
 /// From a streak mask (words, as `streak_filter` writes them, on the CPU or the GPU) to the
@@ -84,17 +122,37 @@ pub fn measure(
 ) -> Vec<StreakFit> {
     let runs = mask_runs(mask, p.width, p.height);
     let segs = segments(&runs, p.width, &SegmentSettings::default());
+    // Saturated pixels tell nothing of the profile: the fit leaves them out (NaN).
     let d = |x: u32, y: u32| {
-        frame.pixels[(y * p.width + x) as usize] as f64 - background_at(tiles, p, x, y) as f64
+        let v = frame.pixels[(y * p.width + x) as usize];
+        if v >= frame.saturation {
+            f64::NAN
+        } else {
+            v as f64 - background_at(tiles, p, x, y) as f64
+        }
+    };
+    let try_fit = |seg: &segments::Segment| -> Option<StreakFit> {
+        let Some(f) = fit::fit(&d, p.width, p.height, seg) else {
+            tracing::debug!("streak candidate {seg:?}: the fit failed");
+            return None;
+        };
+        match accept(&f, frame, s) {
+            Ok(()) => Some(f),
+            Err(why) => {
+                tracing::debug!("streak candidate {:?}: {why}", f.ends);
+                None
+            }
+        }
     };
     let mut out: Vec<StreakFit> = Vec::new();
-    for seg in &segs {
-        let Some(f) = fit::fit(&d, p.width, p.height, seg) else {
-            continue;
-        };
-        if !accept(&f, frame, s) {
-            continue;
-        }
+    for j in &segs {
+        // The joined line, else (a chance alignment along it) its longest piece that is one.
+        let found = try_fit(&j.line).or_else(|| {
+            (j.pieces.len() > 1)
+                .then(|| j.pieces.iter().find_map(try_fit))
+                .flatten()
+        });
+        let Some(f) = found else { continue };
         // One streak is one fit: pieces that were not joined can converge on the same line.
         if out.iter().any(|g| same_line(g, &f)) {
             continue;
@@ -110,23 +168,33 @@ pub fn measure(
     out
 }
 
-/// Is this fit a streak, and not a star, a chain of stars, a defect or noise?
-fn accept(f: &StreakFit, frame: &Frame, s: &StreakSettings) -> bool {
+/// Is this fit a streak, and not a star, a chain of stars, a defect or noise? If not, why.
+fn accept(f: &StreakFit, frame: &Frame, s: &StreakSettings) -> Result<(), String> {
     let len = length(f);
-    if len < s.min_length_px || f.snr < s.min_snr || f.sigma_px < s.min_sigma_px {
-        return false;
+    if len < s.min_length_px {
+        return Err(format!("{len:.1} px long"));
+    }
+    if f.snr < s.min_snr {
+        return Err(format!("SNR {:.1}", f.snr));
+    }
+    if f.sigma_px < s.min_sigma_px || f.sigma_px > s.max_sigma_px {
+        return Err(format!("profile sigma {:.2} px", f.sigma_px));
     }
     if f.gap_fraction > s.max_gap_fraction {
-        return false;
+        return Err(format!(
+            "gaps in {:.0} % of the track",
+            100.0 * f.gap_fraction
+        ));
     }
-    if f.axis_angle_deg < AXIS_DEG {
-        // Along a frame axis: a defective column or row is narrow; a bleed trail holds
-        // saturated pixels.
-        if f.sigma_px < 0.7 || touches_saturation(f, frame) {
-            return false;
-        }
+    if f.modulation > s.max_modulation {
+        return Err(format!("modulation {:.2} along the track", f.modulation));
     }
-    true
+    // Along a frame axis: a defective column or row is narrow; a bleed trail holds saturated
+    // pixels.
+    if f.axis_angle_deg < AXIS_DEG && (f.sigma_px < 0.7 || touches_saturation(f, frame)) {
+        return Err("a defective or bleeding column or row".into());
+    }
+    Ok(())
 }
 
 /// The length between the ends in the frame (pixels).

@@ -64,8 +64,16 @@ impl Default for SegmentSettings {
 /// Lines per component at most (a train of streaks seldom crosses in one component).
 const MAX_LINES_PER_COMPONENT: usize = 4;
 
+/// A line of joined pieces, and the pieces (longest first): when the whole is no streak (a
+/// chance alignment with a star pair far along the line), a piece may still be one.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Joined {
+    pub line: Segment,
+    pub pieces: Vec<Segment>,
+}
+
 /// The segments of a streak mask (runs in raster order).
-pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Segment> {
+pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Joined> {
     let labels = components(runs, width);
     // Runs of each component, in label order (labels are first pixels in raster order).
     let mut order: Vec<usize> = (0..runs.len()).collect();
@@ -186,24 +194,31 @@ fn strongest_line(px: &[(f64, f64)], s: &SegmentSettings) -> Option<(Segment, Ve
     seg.t_min = ts.get(a)?.0;
     seg.t_max = ts[b].0;
     seg.pixels = b + 1 - a;
-    // A line piece, not a blob: long enough, and its pixels along it rather than beside it
-    // (a bright star's disc also fills the band's shoulders, out to three times its width).
+    // A line piece, not a blob: several times longer than it is wide. Its half width is
+    // where the count of its pixels per pixel of distance from the line drops below a quarter
+    // of the count on the line (a bright streak's mask is wide; a star's is as wide as long; a
+    // streak crossing this one adds only a few pixels to each distance).
     let len = seg.length();
-    let width = seg.pixels as f64 / len.max(1.0);
-    let shoulder = px
-        .iter()
-        .filter(|p| {
-            let (d, t) = (seg.across(p.0, p.1).abs(), seg.along(p.0, p.1));
-            d > s.band_px && d <= 3.0 * s.band_px && t >= seg.t_min && t <= seg.t_max
-        })
-        .count();
-    if len < s.min_piece_px || width > len / 3.0 || 2 * shoulder > seg.pixels {
+    let mut counts = [0usize; 64];
+    for p in px {
+        let (d, t) = (seg.across(p.0, p.1).abs(), seg.along(p.0, p.1));
+        if t >= seg.t_min && t <= seg.t_max && d < 64.0 {
+            counts[d as usize] += 1;
+        }
+    }
+    let peak = counts[0].max(counts[1]);
+    let half = counts.iter().position(|&c| 4 * c < peak).unwrap_or(64) as f64;
+    if len < s.min_piece_px || len < 3.0 * (2.0 * half + 1.0) {
         return None;
     }
-    let mut used = vec![false; px.len()];
-    for &(_, i) in &ts[a..=b] {
-        used[i] = true;
-    }
+    let band = s.band_px.max(half + 1.0);
+    let used = px
+        .iter()
+        .map(|p| {
+            let (d, t) = (seg.across(p.0, p.1).abs(), seg.along(p.0, p.1));
+            d <= band && t >= seg.t_min - 2.0 && t <= seg.t_max + 2.0
+        })
+        .collect();
     Some((seg, used))
 }
 
@@ -236,11 +251,13 @@ fn principal_axis(p: &[(f64, f64)]) -> Segment {
 /// directions within 2°, each one's ends within 3 px of the other's line, and a gap along
 /// the line shorter than the two pieces together (or 40 px). Pieces are joined in a fixed
 /// order, so the result does not depend on which piece came first.
-fn join_collinear(mut pieces: Vec<Segment>) -> Vec<Segment> {
+fn join_collinear(mut pieces: Vec<Segment>) -> Vec<Joined> {
     pieces.sort_by(|a, b| b.length().total_cmp(&a.length()));
-    let mut out: Vec<Segment> = Vec::new();
+    let mut out: Vec<Joined> = Vec::new();
     for p in pieces {
-        let joined = out.iter_mut().find(|q| collinear(q, &p)).map(|q| {
+        let joined = out.iter_mut().find(|j| collinear(&j.line, &p)).map(|j| {
+            j.pieces.push(p);
+            let q = &mut j.line;
             // Extend q by p's extent; keep q's line (the longer piece's, the better fixed).
             let (a, b) = (q.along(p.cx, p.cy), p.ux * q.ux + p.uy * q.uy);
             let (t0, t1) = (a + b * p.t_min, a + b * p.t_max);
@@ -249,7 +266,10 @@ fn join_collinear(mut pieces: Vec<Segment>) -> Vec<Segment> {
             q.pixels += p.pixels;
         });
         if joined.is_none() {
-            out.push(p);
+            out.push(Joined {
+                line: p,
+                pieces: vec![p],
+            });
         }
     }
     out

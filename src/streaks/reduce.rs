@@ -1,0 +1,170 @@
+//! From fitted streaks to records: RA/Dec of the ends through the plate solution (gpustar's
+//! own attitude and camera, or the FITS header's TAN/TAN-SIP WCS), their times from the
+//! header's time keywords, and topocentric Az/El for the station.
+
+use super::fit::StreakFit;
+use super::sky::{self, Exposure, Utc};
+use super::{StreakOptions, length};
+use crate::catalog::vector_to_radec;
+use crate::record::{StreakEnd, StreakRecord};
+use crate::solve::{Outcome, Solution};
+use std::collections::BTreeMap;
+
+/// Where the RA/Dec of streak ends come from (`--astrometry`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Astrometry {
+    /// gpustar's solution, else the header's WCS when it has one.
+    Auto,
+    /// gpustar's solution only.
+    Solve,
+    /// The FITS header's celestial WCS only (TAN or TAN-SIP), for fields too narrow for the
+    /// catalog.
+    Header,
+}
+
+/// FWHM of a Gaussian in units of its σ.
+const FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
+
+/// The records of a frame's streaks, and the warnings a person should see (no plate
+/// solution, no time, no station), each said once per frame.
+pub fn records(
+    found: &[StreakFit],
+    sol: &Solution,
+    keywords: &BTreeMap<String, String>,
+    opts: &StreakOptions,
+) -> (Vec<StreakRecord>, Vec<String>) {
+    let mut warnings = Vec::new();
+    if found.is_empty() {
+        return (Vec::new(), warnings);
+    }
+    let get = |k: &str| keywords.get(k).cloned();
+    let plate = plate(sol, keywords, opts.astrometry, &mut warnings);
+    let (exposure, w) = sky::exposure_from_header(&get);
+    warnings.extend(w);
+    let station = match opts.station {
+        Some(s) => Some(s),
+        None => {
+            let (s, w) = sky::station_from_header(&get);
+            warnings.extend(w);
+            s
+        }
+    };
+    if exposure.is_none() {
+        warnings.push("no exposure time in the header: streak ends have no time, Az or El".into());
+    }
+    let mut eop_warned = false;
+    let mut end = |x: f64, y: f64, edge: Option<bool>, t: Option<Utc>| {
+        let radec = plate.as_ref().and_then(|p| p.radec(x, y));
+        let t = t.filter(|_| edge != Some(true));
+        let azel = match (radec, t, station) {
+            (Some((ra, dec)), Some(t), Some(st)) => {
+                let (table_dut1, xp, yp, w) = sky::earth_orientation(&t);
+                if let (Some(w), None, false) = (w, opts.dut1_s, eop_warned) {
+                    warnings.push(w);
+                    eop_warned = true;
+                }
+                let dut1 = opts.dut1_s.unwrap_or(table_dut1);
+                match sky::az_el(ra, dec, &t, &st, dut1, xp, yp) {
+                    Ok(v) => Some(v),
+                    Err(e) => {
+                        warnings.push(format!("no Az/El at ({x:.1}, {y:.1}): {e}"));
+                        None
+                    }
+                }
+            }
+            _ => None,
+        };
+        StreakEnd {
+            x,
+            y,
+            ra_deg: radec.map(|r| r.0),
+            dec_deg: radec.map(|r| r.1),
+            edge,
+            time_utc: t.map(|t| t.iso()),
+            az_deg: azel.map(|a| a.0),
+            el_deg: azel.map(|a| a.1),
+        }
+    };
+    let times = |e: &Exposure| [e.start, e.end];
+    let out = found
+        .iter()
+        .map(|f| {
+            let t = exposure.as_ref().map(times);
+            let ends = [0, 1].map(|k| {
+                let (x, y) = f.ends[k];
+                end(x, y, Some(f.edge[k]), t.map(|t| t[k]))
+            });
+            let mid = (!f.edge[0] && !f.edge[1]).then(|| {
+                let (x, y) = (
+                    0.5 * (f.ends[0].0 + f.ends[1].0),
+                    0.5 * (f.ends[0].1 + f.ends[1].1),
+                );
+                end(x, y, None, exposure.as_ref().map(Exposure::mid))
+            });
+            StreakRecord {
+                ends,
+                direction_known: false,
+                mid,
+                length_px: length(f),
+                width_px: f.sigma_px * FWHM_PER_SIGMA,
+                flux: f.flux,
+                snr: f.snr,
+                fit_rms_px: f.fit_rms_px,
+            }
+        })
+        .collect();
+    (out, warnings)
+}
+
+/// A map from pixels to ICRS.
+enum Plate {
+    /// gpustar's solution: the fitted camera, then the attitude.
+    Solved(Box<crate::refine::Refined>),
+    Header(crate::wcs::HeaderWcs),
+}
+
+impl Plate {
+    fn radec(&self, x: f64, y: f64) -> Option<(f64, f64)> {
+        match self {
+            Plate::Solved(r) => {
+                let v = r.r.transpose() * r.camera.pixel_to_vector(x, y);
+                Some(vector_to_radec(&v))
+            }
+            Plate::Header(w) => w.pixel_to_radec(x, y),
+        }
+    }
+}
+
+fn plate(
+    sol: &Solution,
+    keywords: &BTreeMap<String, String>,
+    mode: Astrometry,
+    warnings: &mut Vec<String>,
+) -> Option<Plate> {
+    if mode != Astrometry::Header {
+        if let Outcome::Solved(r, _) = &sol.outcome {
+            return Some(Plate::Solved(Box::new(r.clone())));
+        }
+    }
+    if mode == Astrometry::Solve {
+        warnings.push("the frame is not solved: streak ends have no RA/Dec, Az or El".into());
+        return None;
+    }
+    match crate::wcs::HeaderWcs::from_keywords(keywords) {
+        Ok(Some(w)) => Some(Plate::Header(w)),
+        Ok(None) => {
+            warnings.push(
+                "the frame is not solved and its header has no celestial WCS: streak ends \
+                 have no RA/Dec, Az or El"
+                    .into(),
+            );
+            None
+        }
+        Err(e) => {
+            warnings.push(format!(
+                "the header's WCS cannot be used ({e}): streak ends have no RA/Dec, Az or El"
+            ));
+            None
+        }
+    }
+}
