@@ -407,6 +407,36 @@ pub struct SimulateArgs {
     /// principal point, distortion, mirror) instead of --size and --fov-deg.
     #[arg(long, conflicts_with_all = ["size", "fov_deg"])]
     pub camera: Option<PathBuf>,
+    /// Satellite streaks of known ends: 16-bit FITS frames with DATE-BEG, DATE-END, EXPTIME
+    /// and the station (OBSGEO-B/L/H) in the header; truth.jsonl adds each streak's ends.
+    /// Every fifth frame has none, the others one or two, many crossing the frame's edge.
+    #[arg(long, conflicts_with = "camera", help_heading = "Streaks")]
+    pub streaks: bool,
+    /// Exposure start of the first frame (UTC); each next frame starts a minute later.
+    #[arg(long, default_value = "2024-03-15T20:00:00", help_heading = "Streaks")]
+    pub start_utc: String,
+    /// Exposure time, seconds.
+    #[arg(long, default_value_t = 5.0, help_heading = "Streaks")]
+    pub exposure: f64,
+    /// The station written into the headers: LAT,LON,HEIGHT_M.
+    #[arg(long, default_value = "35.7,51.4,1200", value_parser = parse_station_arg,
+          help_heading = "Streaks")]
+    pub station: Station,
+    /// Peak SNR per pixel of the streaks, LOW..HIGH (drawn uniformly).
+    #[arg(long, default_value = "4..25", value_parser = parse_range, help_heading = "Streaks")]
+    pub streak_snr: (f64, f64),
+}
+
+/// `LOW..HIGH`, two positive numbers.
+fn parse_range(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("expected LOW..HIGH, got {s:?}"))?;
+    let num = |v: &str| v.trim().parse::<f64>().ok().filter(|x| *x > 0.0);
+    match (num(a), num(b)) {
+        (Some(a), Some(b)) if a < b => Ok((a, b)),
+        _ => Err(format!("expected LOW..HIGH with 0 < LOW < HIGH, got {s:?}")),
+    }
 }
 
 fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
@@ -940,6 +970,32 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         ..SimSettings::default()
     };
     let t0 = Instant::now();
+    if a.streaks {
+        let start = crate::streaks::sky::Utc::parse(&a.start_utc)
+            .map_err(|e| anyhow::anyhow!("--start-utc: {e}"))?;
+        let st = crate::streaks::simulate::StreakSim {
+            start,
+            cadence_s: 60.0,
+            exposure_s: a.exposure,
+            station: a.station,
+            snr: a.streak_snr,
+            length_px: (40.0, 1.5 * f64::from(a.size.0.max(a.size.1))),
+        };
+        // The stars where they are on the frames' date.
+        let s = SimSettings {
+            bits: 16,
+            epoch: crate::fits::julian_year(&a.start_utc).unwrap_or(a.epoch),
+            ..s
+        };
+        crate::streaks::simulate::write_set(&catalog, &s, &st, &a.out)?;
+        eprintln!(
+            "gpustar: wrote {} FITS frames with streaks, truth.jsonl and camera.toml to {} in {:.1} s",
+            a.frames,
+            a.out.display(),
+            t0.elapsed().as_secs_f64()
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     simulate::write_set(&catalog, &s, &a.out, threads, |_| {})?;
     eprintln!(

@@ -48,6 +48,48 @@ pub struct FitsFrame {
     pub keywords: BTreeMap<String, String>,
 }
 
+/// A FITS header card `KEYWORD = value` (value as FITS text: a string quoted, e.g.
+/// `'2024-03-15T20:00:00.000'`, or a number), 80 columns.
+pub fn card(key: &str, value: &str) -> String {
+    format!("{:<80.80}", format!("{key:<8}= {value:>20}"))
+}
+
+/// A FITS file of one 16-bit image (BITPIX 16 with BZERO 32768, so the values are u16) with
+/// these 80-column cards after the structural ones (cards of SIMPLE, BITPIX, NAXIS…, EXTEND,
+/// BZERO, BSCALE and END among them are left out: this function writes its own).
+pub fn encode_u16(width: u32, height: u32, pixels: &[u16], cards: &[String]) -> Vec<u8> {
+    let mut head = vec![
+        card("SIMPLE", "T"),
+        card("BITPIX", "16"),
+        card("NAXIS", "2"),
+        card("NAXIS1", &width.to_string()),
+        card("NAXIS2", &height.to_string()),
+        card("BZERO", "32768"),
+        card("BSCALE", "1"),
+    ];
+    let structural = |c: &str| {
+        let key = c.get(..8).unwrap_or(c).trim_end();
+        matches!(
+            key,
+            "SIMPLE" | "BITPIX" | "EXTEND" | "BZERO" | "BSCALE" | "END"
+        ) || key.starts_with("NAXIS")
+    };
+    head.extend(
+        cards
+            .iter()
+            .filter(|c| !structural(c))
+            .map(|c| format!("{c:<80.80}")),
+    );
+    head.push(format!("{:<80}", "END"));
+    let mut out: Vec<u8> = head.iter().flat_map(|c| c.bytes()).collect();
+    out.resize(out.len().div_ceil(BLOCK) * BLOCK, b' ');
+    for &v in pixels {
+        out.extend_from_slice(&((v as i32 - 32768) as i16).to_be_bytes());
+    }
+    out.resize(out.len().div_ceil(BLOCK) * BLOCK, 0);
+    out
+}
+
 /// Is this (lower-case) file extension a FITS file? Tile-compressed `.fz` files are not:
 /// gpustar does not decompress them.
 pub fn is_fits_extension(ext_lowercase: &str) -> bool {

@@ -4,7 +4,9 @@
 
 mod common;
 
-use gpustar::cpu::streak_filter::{StreakParams, mask_runs, streak_filter, streak_rows};
+use gpustar::cpu::streak_filter::{
+    StreakParams, mask_runs, streak_filter, streak_mask, streak_rows,
+};
 use gpustar::cpu::threshold::{DetectParams, background_at, tile_stats};
 use gpustar::frame::Frame;
 use gpustar::streaks::{self, StreakSettings, fit::StreakFit};
@@ -268,4 +270,69 @@ fn parallel_and_crossing_streaks_are_each_found() {
     );
     let found = find(&train);
     assert_eq!(found.len(), 3, "{found:?}");
+}
+
+#[test]
+fn the_cpu_backend_s_fused_mask_is_the_two_kernels_mask() {
+    let f = frame(
+        300,
+        200,
+        &[
+            Thing::Streak(-20.0, 30.0, 320.0, 170.0, 5.0),
+            Thing::Star(40.0, 150.0, 80.0),
+        ],
+        60,
+    );
+    let p = params(&f);
+    let tiles = tile_stats(&f.pixels, &p);
+    let sp = StreakParams::new(3.5, 5.0);
+    let two = streak_filter(&streak_rows(&f.pixels, &tiles, &p), &tiles, &p, &sp);
+    assert_eq!(streak_mask(&f.pixels, &tiles, &p, &sp), two);
+    assert!(two.iter().map(|w| w.count_ones()).sum::<u32>() > 1000);
+}
+
+#[test]
+fn streak_mask_gpu_equals_cpu() {
+    let Some(gpu) = common::gpu("streak_mask_gpu_equals_cpu") else {
+        return;
+    };
+    // A batch of frames of one size with streaks, stars, a bad column; odd sizes so that
+    // rows do not fill whole mask words, and 8-bit frames too.
+    let things = [
+        Thing::Streak(-20.0, 30.0, 340.0, 150.0, 6.0),
+        Thing::Streak(50.0, 190.0, 120.0, 120.0, 3.5),
+        Thing::Star(40.0, 150.0, 80.0),
+        Thing::Column(200, 0, 100, 90.0),
+    ];
+    for (w, h, bits8) in [(333, 211, false), (256, 256, true)] {
+        let frames: Vec<Frame> = (0..3u64)
+            .map(|k| {
+                let mut f = frame(w, h, &things, 70 + k);
+                if bits8 {
+                    for v in &mut f.pixels {
+                        *v = (*v / 8).min(255);
+                    }
+                    f.saturation = 255;
+                }
+                f
+            })
+            .collect();
+        let refs: Vec<&Frame> = frames.iter().collect();
+        let p = params(&frames[0]);
+        let sp = StreakParams::new(3.5, 5.0);
+        let (blobs, pixels) = gpu.detect_streaks(&refs, &p, &sp).unwrap();
+        for (k, f) in frames.iter().enumerate() {
+            let tiles = tile_stats(&f.pixels, &p);
+            assert_eq!(pixels[k].tiles, tiles, "{w}x{h} frame {k}: tiles");
+            let cpu = streak_mask(&f.pixels, &tiles, &p, &sp);
+            assert_eq!(pixels[k].mask, cpu, "{w}x{h} frame {k}: streak mask");
+            // And the rest of detection is what it is without streaks.
+            assert_eq!(blobs[k], gpustar::detect::blobs_cpu(f, &p));
+            let s = StreakSettings::default();
+            assert_eq!(
+                streaks::measure(f, &pixels[k].tiles, &pixels[k].mask, &p, &s),
+                find(f)
+            );
+        }
+    }
 }

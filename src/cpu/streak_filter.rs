@@ -57,40 +57,115 @@ impl StreakParams {
 /// Kernel `streak_rows`: per pixel, Σ_i b_i · (pixel − background) over the row neighbours
 /// x − 2 … x + 2 (clamped at the frame's edges).
 pub fn streak_rows(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<i32> {
-    let (w, h) = (p.width as usize, p.height as usize);
-    let s = 2 * p.tile;
-    let s2 = s * s;
-    // Background per pixel, separably: between tile rows once per tile column, then between
-    // columns per pixel. The products distribute exactly, so these are background_at's values.
-    let xs: Vec<(usize, usize, u32)> = (0..p.width)
-        .map(|x| {
-            let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
-            (tx as usize, (tx + 1).min(p.tiles_x - 1) as usize, wx)
-        })
-        .collect();
-    let mut col = vec![0u32; p.tiles_x as usize];
-    let mut d = vec![0i32; w];
-    let mut rows = vec![0i32; w * h];
-    for y in 0..p.height {
+    let w = p.width as usize;
+    let mut r = RowSums::new(tiles, p);
+    let mut rows = vec![0i32; w * p.height as usize];
+    for (y, out) in rows.chunks_mut(w).enumerate() {
+        r.row(pixels, y as u32, out);
+    }
+    rows
+}
+
+/// The row sums of `streak_rows`, one row at a time.
+struct RowSums<'a> {
+    tiles: &'a [TileStats],
+    p: &'a DetectParams,
+    /// Per column: lower and upper tile column and the weight of the upper.
+    xs: Vec<(usize, usize, u32)>,
+    /// The rounding division by s² as a shift, for the usual power-of-two tiles.
+    shift: Option<u32>,
+    col: Vec<u32>,
+    /// A row's residuals with two clamped copies of the edge pixels on each side.
+    d: Vec<i32>,
+}
+
+impl<'a> RowSums<'a> {
+    fn new(tiles: &'a [TileStats], p: &'a DetectParams) -> Self {
+        let s2 = 4 * p.tile * p.tile;
+        RowSums {
+            tiles,
+            p,
+            xs: (0..p.width)
+                .map(|x| {
+                    let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
+                    (tx as usize, (tx + 1).min(p.tiles_x - 1) as usize, wx)
+                })
+                .collect(),
+            shift: s2.is_power_of_two().then(|| s2.trailing_zeros()),
+            col: vec![0; p.tiles_x as usize],
+            d: vec![0; p.width as usize + 4],
+        }
+    }
+
+    /// Row y's sums into `out`. The background per pixel is found separably: between tile
+    /// rows once per tile column, then between columns per pixel; the products distribute
+    /// exactly, so these are `background_at`'s values.
+    fn row(&mut self, pixels: &[u16], y: u32, out: &mut [i32]) {
+        let (p, w) = (self.p, self.p.width as usize);
+        let s = 2 * p.tile;
+        let s2 = s * s;
         let (ty, wy) = axis_weight(y, p.tile, p.tiles_y);
         let ty1 = (ty + 1).min(p.tiles_y - 1);
-        for (tx, c) in col.iter_mut().enumerate() {
-            let a = tiles[(ty * p.tiles_x) as usize + tx].background;
-            let b = tiles[(ty1 * p.tiles_x) as usize + tx].background;
+        for (tx, c) in self.col.iter_mut().enumerate() {
+            let a = self.tiles[(ty * p.tiles_x) as usize + tx].background;
+            let b = self.tiles[(ty1 * p.tiles_x) as usize + tx].background;
             *c = (s - wy) * a + wy * b;
         }
         let row = &pixels[y as usize * w..][..w];
-        for (x, &(t0, t1, wx)) in xs.iter().enumerate() {
-            let bg = ((s - wx) * col[t0] + wx * col[t1] + s2 / 2) / s2;
-            d[x] = row[x] as i32 - bg as i32;
+        let d = &mut self.d;
+        for (x, &(t0, t1, wx)) in self.xs.iter().enumerate() {
+            let v = (s - wx) * self.col[t0] + wx * self.col[t1] + s2 / 2;
+            let bg = match self.shift {
+                Some(k) => v >> k,
+                None => v / s2,
+            };
+            d[x + 2] = row[x] as i32 - bg as i32;
         }
-        let out = &mut rows[y as usize * w..][..w];
+        (d[0], d[1]) = (d[2], d[2]);
+        (d[w + 2], d[w + 3]) = (d[w + 1], d[w + 1]);
         for (x, o) in out.iter_mut().enumerate() {
-            let at = |k: isize| d[(x as isize + k).clamp(0, w as isize - 1) as usize];
-            *o = at(-2) + 4 * at(-1) + 6 * at(0) + 4 * at(1) + at(2);
+            let k = &d[x..x + 5];
+            *o = k[0] + 4 * k[1] + 6 * k[2] + 4 * k[3] + k[4];
         }
     }
-    rows
+}
+
+/// Both kernels at once, as the CPU backend runs them: the row sums are kept for five rows
+/// only (a frame's worth would be written and read back once for nothing). The same mask as
+/// `streak_filter(streak_rows(..))`.
+pub fn streak_mask(
+    pixels: &[u16],
+    tiles: &[TileStats],
+    p: &DetectParams,
+    sp: &StreakParams,
+) -> Vec<u32> {
+    let (w, h) = (p.width as usize, p.height as usize);
+    let mut sums = RowSums::new(tiles, p);
+    let mut ring = vec![0i32; 5 * w];
+    let mut words = vec![0u32; (w * h).div_ceil(32)];
+    let mut filled: Option<usize> = None;
+    for y in 0..h {
+        // Rows y − 2 … y + 2 (clamped) in the ring, at slot row % 5.
+        let want = (y + 2).min(h - 1);
+        let from = filled.map_or(0, |f| f + 1);
+        for r in from..=want {
+            sums.row(pixels, r as u32, &mut ring[(r % 5) * w..][..w]);
+        }
+        filled = Some(want);
+        let at = |k: isize| {
+            let r = (y as isize + k).clamp(0, h as isize - 1) as usize;
+            &ring[(r % 5) * w..][..w]
+        };
+        filter_row(
+            y,
+            [at(-2), at(-1), at(0), at(1), at(2)],
+            tiles,
+            p,
+            sp,
+            &mut words,
+        );
+    }
+    words
 }
 
 /// Kernel `streak_filter`: the mask as words of 32 pixels in raster order (bit i of word k is
@@ -106,18 +181,39 @@ pub fn streak_filter(
     let mut words = vec![0u32; (w * h).div_ceil(32)];
     for y in 0..h {
         let r = |k: isize| &rows[(y as isize + k).clamp(0, h as isize - 1) as usize * w..][..w];
-        let (r0, r1, r2, r3, r4) = (r(-2), r(-1), r(0), r(1), r(2));
-        let tile_row = (y as u32 / p.tile * p.tiles_x) as usize;
-        for x in 0..w {
-            let sum = r0[x] + 4 * r1[x] + 6 * r2[x] + 4 * r3[x] + r4[x];
-            let level = sp.level(tiles[tile_row + x / p.tile as usize].offset);
+        filter_row(
+            y,
+            [r(-2), r(-1), r(0), r(1), r(2)],
+            tiles,
+            p,
+            sp,
+            &mut words,
+        );
+    }
+    words
+}
+
+/// Row y of the mask from the row sums of rows y − 2 … y + 2.
+fn filter_row(
+    y: usize,
+    r: [&[i32]; 5],
+    tiles: &[TileStats],
+    p: &DetectParams,
+    sp: &StreakParams,
+    words: &mut [u32],
+) {
+    let (w, tile) = (p.width as usize, p.tile as usize);
+    let tile_row = (y / tile) * p.tiles_x as usize;
+    for (tx, x0) in (0..w).step_by(tile).enumerate() {
+        let level = sp.level(tiles[tile_row + tx].offset);
+        for x in x0..(x0 + tile).min(w) {
+            let sum = r[0][x] + 4 * r[1][x] + 6 * r[2][x] + 4 * r[3][x] + r[4][x];
             if sum > level {
                 let i = y * w + x;
                 words[i / 32] |= 1 << (i % 32);
             }
         }
     }
-    words
 }
 
 /// The mask words as runs in raster order, as `components` takes them.
@@ -126,8 +222,14 @@ pub fn mask_runs(words: &[u32], width: u32, height: u32) -> Vec<Run> {
     let w = width as usize;
     for y in 0..height as usize {
         let mut start: Option<u32> = None;
-        for x in 0..w {
+        let mut x = 0;
+        while x < w {
             let i = y * w + x;
+            // Most of the frame is empty: step over whole empty words.
+            if start.is_none() && i % 32 == 0 && words[i / 32] == 0 {
+                x += 32;
+                continue;
+            }
             let set = words[i / 32] >> (i % 32) & 1 == 1;
             match (set, start) {
                 (true, None) => start = Some(x as u32),
@@ -141,6 +243,7 @@ pub fn mask_runs(words: &[u32], width: u32, height: u32) -> Vec<Run> {
                 }
                 _ => {}
             }
+            x += 1;
         }
         if let Some(x0) = start {
             runs.push(Run {

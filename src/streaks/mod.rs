@@ -14,10 +14,11 @@ pub mod fit;
 pub mod formats;
 pub mod reduce;
 pub mod segments;
+pub mod simulate;
 pub mod sky;
 
 use crate::cpu::centroid::Blob;
-use crate::cpu::streak_filter::{StreakParams, mask_runs, streak_filter, streak_rows};
+use crate::cpu::streak_filter::{StreakParams, mask_runs, streak_mask};
 use crate::cpu::threshold::{DetectParams, TileStats, background_at, tile_stats};
 use crate::frame::Frame;
 use fit::StreakFit;
@@ -104,8 +105,7 @@ pub fn detect_cpu(
     let runs = threshold::threshold(&frame.pixels, &tiles, p);
     let labels = components::components(&runs, p.width);
     let blobs = centroid::centroid(&frame.pixels, &runs, &labels, &tiles, p);
-    let rows = streak_rows(&frame.pixels, &tiles, p);
-    let mask = streak_filter(&rows, &tiles, p, &s.params(k_detect));
+    let mask = streak_mask(&frame.pixels, &tiles, p, &s.params(k_detect));
     let streaks = measure(frame, &tiles, &mask, p, s);
     (off_streaks(&blobs, &streaks), streaks)
 }

@@ -49,6 +49,13 @@ impl Utc {
         Ok(Utc { jd1, jd2 })
     }
 
+    /// An ISO 8601 UTC time, "YYYY-MM-DDThh:mm:ss[.fff]" (a date alone is 0h).
+    pub fn parse(s: &str) -> Result<Utc, String> {
+        let ((y, mo, d), hms) = parse_iso(s.trim())?;
+        let (h, mi, sec) = hms.unwrap_or((0, 0, 0.0));
+        Utc::from_calendar(y, mo, d, h, mi, sec)
+    }
+
     /// "YYYY-MM-DDThh:mm:ss.sss", rounded to the millisecond (23:59:60.xxx in a leap second).
     pub fn iso(&self) -> String {
         match ts::d2dtf("UTC", 3, self.jd1, self.jd2) {
