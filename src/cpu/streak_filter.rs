@@ -206,10 +206,16 @@ fn filter_row(
     let tile_row = (y / tile) * p.tiles_x as usize;
     for (tx, x0) in (0..w).step_by(tile).enumerate() {
         let level = sp.level(tiles[tile_row + tx].offset);
-        for x in x0..(x0 + tile).min(w) {
-            let sum = r[0][x] + 4 * r[1][x] + 6 * r[2][x] + 4 * r[3][x] + r[4][x];
-            if sum > level {
-                let i = y * w + x;
+        let x1 = (x0 + tile).min(w);
+        let cols = r[0][x0..x1]
+            .iter()
+            .zip(&r[1][x0..x1])
+            .zip(&r[2][x0..x1])
+            .zip(&r[3][x0..x1])
+            .zip(&r[4][x0..x1]);
+        for (k, ((((a, b), c), d), e)) in cols.enumerate() {
+            if a + 4 * b + 6 * c + 4 * d + e > level {
+                let i = y * w + x0 + k;
                 words[i / 32] |= 1 << (i % 32);
             }
         }
@@ -226,7 +232,7 @@ pub fn mask_runs(words: &[u32], width: u32, height: u32) -> Vec<Run> {
         while x < w {
             let i = y * w + x;
             // Most of the frame is empty: step over whole empty words.
-            if start.is_none() && i % 32 == 0 && words[i / 32] == 0 {
+            if start.is_none() && i.is_multiple_of(32) && words[i / 32] == 0 {
                 x += 32;
                 continue;
             }
