@@ -46,6 +46,9 @@ pub struct Annotation<'a> {
     pub unmatched: Vec<Mark>,
     /// Catalog stars projected in the frame with no detection.
     pub predicted: Vec<Mark>,
+    /// Satellite streaks: their two ends, and which are edge ends (where the streak leaves
+    /// the frame). Drawn as two lines beside the track, a ring at each end inside the frame.
+    pub streaks: Vec<([(f64, f64); 2], [bool; 2])>,
     /// One ASCII line, shown in upper case (the font has no lower case) and
     /// wrapped at word boundaries when wider than the frame.
     pub caption: String,
@@ -54,6 +57,7 @@ pub struct Annotation<'a> {
 const IDENTIFIED: Rgb<u8> = Rgb([0, 255, 0]);
 const UNMATCHED: Rgb<u8> = Rgb([255, 96, 0]);
 const PREDICTED: Rgb<u8> = Rgb([0, 200, 255]);
+const STREAK: Rgb<u8> = Rgb([255, 0, 255]);
 const TEXT: Rgb<u8> = Rgb([255, 255, 255]);
 const OUTLINE: Rgb<u8> = Rgb([0, 0, 0]);
 
@@ -92,6 +96,9 @@ pub fn render(a: &Annotation) -> RgbImage {
     // Dim the text bands first so marks under them keep their full colour.
     for &(band, _) in caption.iter().chain([&legend]) {
         darken_rect(&mut img, band);
+    }
+    for (ends, edge) in &a.streaks {
+        draw_streak(&mut img, *ends, *edge, 6.0 * scale as f64, thick);
     }
     for m in a.predicted.iter().filter_map(usable) {
         let arm = (m.radius_px * 2.0).clamp(4.0 * scale as f64, 12.0 * scale as f64);
@@ -334,6 +341,40 @@ fn draw_square(img: &mut RgbImage, cx: f64, cy: f64, half: f64, thick: u32, c: R
 }
 
 /// Plus-shaped cross through the pixel nearest (cx, cy), including that pixel.
+/// Two lines `gap` pixels either side of the streak, so the track itself stays visible,
+/// and a ring at each end that is inside the frame.
+fn draw_streak(img: &mut RgbImage, ends: [(f64, f64); 2], edge: [bool; 2], gap: f64, thick: u32) {
+    let [(x0, y0), (x1, y1)] = ends;
+    let len = (x1 - x0).hypot(y1 - y0);
+    if !(len.is_finite() && len > 0.0 && len < COORD_LIMIT) {
+        return;
+    }
+    let (nx, ny) = (-(y1 - y0) / len, (x1 - x0) / len);
+    let steps = (2.0 * len).ceil() as usize;
+    for side in [-1.0, 1.0] {
+        for k in 0..=steps {
+            let t = k as f64 / steps as f64;
+            let (x, y) = (
+                x0 + t * (x1 - x0) + side * gap * nx,
+                y0 + t * (y1 - y0) + side * gap * ny,
+            );
+            fill_rect(
+                img,
+                x.round() as i64,
+                y.round() as i64,
+                x.round() as i64 + thick as i64 - 1,
+                y.round() as i64 + thick as i64 - 1,
+                STREAK,
+            );
+        }
+    }
+    for ((x, y), e) in ends.into_iter().zip(edge) {
+        if !e {
+            draw_ring(img, x, y, gap, thick, STREAK);
+        }
+    }
+}
+
 fn draw_cross(img: &mut RgbImage, cx: f64, cy: f64, arm: f64, thick: u32, c: Rgb<u8>) {
     let (x, y) = (cx.round() as i64, cy.round() as i64);
     let arm = arm.round() as i64;
@@ -698,8 +739,27 @@ mod tests {
             identified: vec![(mark(60.0, 60.0, 2.0), 27989)],
             unmatched: vec![mark(140.0, 40.0, 2.0)],
             predicted: vec![mark(120.0, 100.0, 2.0)],
+            streaks: vec![],
             caption: "solved RA 83.82 Dec -5.39".into(),
         }
+    }
+
+    #[test]
+    fn streaks_are_drawn_beside_their_track_with_rings_at_inside_ends() {
+        let pixels = vec![0u16; (W * H) as usize];
+        let mut a = annotation(&pixels);
+        a.identified.clear();
+        a.unmatched.clear();
+        a.predicted.clear();
+        a.streaks = vec![([(40.0, 70.0), (160.0, 70.0)], [false, true])];
+        let img = render(&a);
+        let gap = 6 * font_scale(W, H);
+        assert_ne!(px(&img, 100, 70), STREAK, "the track itself is left to see");
+        assert_eq!(px(&img, 100, 70 - gap), STREAK);
+        assert_eq!(px(&img, 100, 70 + gap), STREAK);
+        // A ring around the inside end (left of it), none beyond the edge end.
+        assert_eq!(px(&img, 40 - gap, 70), STREAK);
+        assert_ne!(px(&img, 160 + gap, 70), STREAK);
     }
 
     fn px(img: &RgbImage, x: u32, y: u32) -> Rgb<u8> {
@@ -889,6 +949,7 @@ mod tests {
             identified: vec![(mark(1.0, 1.0, 1.0), 1)],
             unmatched: vec![],
             predicted: vec![],
+            streaks: vec![],
             caption: "x".into(),
         };
         assert_eq!(render(&empty).dimensions(), (1, 1));

@@ -109,18 +109,23 @@ impl Solvers {
         }
     }
 
-    /// The record of a solved or unsolved frame, and its products when asked for.
+    /// The record of a solved or unsolved frame (with its streaks under `--streaks`), and its
+    /// products when asked for.
+    #[allow(clippy::too_many_arguments)]
     fn record(
         &self,
         solver: &Solver,
         d: &Decoded,
         frame: &Frame,
         sol: &Solution,
+        found: Option<&[StreakFit]>,
         timing: Timing,
         backend: &str,
     ) -> Record {
         let mut r = solver.record(&d.name, sol, timing, backend);
-        if let Err(e) = self.products.write(&d.path, &d.name, frame, sol) {
+        self.add_streaks(&mut r, d, sol, found);
+        let drawn = found.unwrap_or_default();
+        if let Err(e) = self.products.write(&d.path, &d.name, frame, sol, drawn) {
             // The solution stands; the user learns which file is missing and why.
             tracing::warn!("{}: {e:#}", d.name);
             r.warnings.push(format!("{e:#}"));
@@ -287,9 +292,7 @@ impl GpuRunner {
                             identify: identify_ms / n,
                             total: d.decode_ms + (detect_ms + identify_ms) / n,
                         };
-                        let mut r = solvers.record(solver, d, frame, &sol, timing, &backend);
-                        solvers.add_streaks(&mut r, d, &sol, found.as_deref());
-                        r
+                        solvers.record(solver, d, frame, &sol, found.as_deref(), timing, &backend)
                     })
                     .collect()
             }
@@ -429,9 +432,15 @@ fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) ->
         identify: identify_ms,
         total: d.decode_ms + detect_ms + identify_ms,
     };
-    let mut r = solvers.record(solver, d, frame, &sol, timing, BACKEND_CPU);
-    solvers.add_streaks(&mut r, d, &sol, found.as_deref());
-    r
+    solvers.record(
+        solver,
+        d,
+        frame,
+        &sol,
+        found.as_deref(),
+        timing,
+        BACKEND_CPU,
+    )
 }
 
 /// The frame of a decoded input that was grouped for solving (only decoded ones are).

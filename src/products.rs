@@ -7,6 +7,7 @@ use crate::attitude::pointing;
 use crate::frame::Frame;
 use crate::refine::stars_in_view;
 use crate::solve::{Outcome, Solution};
+use crate::streaks::fit::StreakFit;
 use anyhow::{Result, bail};
 use std::path::{Component, Path, PathBuf};
 
@@ -19,7 +20,14 @@ pub struct Products {
 
 impl Products {
     /// Write the products asked for of one frame (read from `input`, named `name`).
-    pub fn write(&self, input: &Path, name: &str, frame: &Frame, sol: &Solution) -> Result<()> {
+    pub fn write(
+        &self,
+        input: &Path,
+        name: &str,
+        frame: &Frame,
+        sol: &Solution,
+        streaks: &[StreakFit],
+    ) -> Result<()> {
         if let (Some(dir), Outcome::Solved(r, _)) = (&self.wcs_dir, &sol.outcome) {
             crate::wcs::write_wcs_file(&product_path(dir, name, "wcs"), &r.camera, &r.r)?;
         }
@@ -32,7 +40,7 @@ impl Products {
                     input.display()
                 );
             }
-            annotate::write_png(&out, &annotation(frame, sol))?;
+            annotate::write_png(&out, &annotation(frame, sol, streaks))?;
         }
         Ok(())
     }
@@ -60,7 +68,7 @@ fn same_file(a: &Path, b: &Path) -> bool {
 
 /// What the annotated image shows: identified detections with their HIP numbers, the other
 /// detections, and the catalog stars the solution puts in the frame that nothing matched.
-fn annotation<'a>(frame: &'a Frame, sol: &Solution) -> Annotation<'a> {
+fn annotation<'a>(frame: &'a Frame, sol: &Solution, streaks: &[StreakFit]) -> Annotation<'a> {
     let mark = |x: f64, y: f64, area: u32| Mark {
         x,
         y,
@@ -120,6 +128,7 @@ fn annotation<'a>(frame: &'a Frame, sol: &Solution) -> Annotation<'a> {
         identified,
         unmatched,
         predicted,
+        streaks: streaks.iter().map(|f| (f.ends, f.edge)).collect(),
         caption,
     }
 }
