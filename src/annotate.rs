@@ -31,6 +31,9 @@ pub struct Mark {
     pub radius_px: f64,
 }
 
+/// A streak as drawn: its two ends `(x, y)` and which of them are edge ends.
+pub type StreakMark = ([(f64, f64); 2], [bool; 2]);
+
 /// Everything one annotated PNG shows.
 #[derive(Debug, Clone)]
 pub struct Annotation<'a> {
@@ -48,7 +51,7 @@ pub struct Annotation<'a> {
     pub predicted: Vec<Mark>,
     /// Satellite streaks: their two ends, and which are edge ends (where the streak leaves
     /// the frame). Drawn as two lines beside the track, a ring at each end inside the frame.
-    pub streaks: Vec<([(f64, f64); 2], [bool; 2])>,
+    pub streaks: Vec<StreakMark>,
     /// One ASCII line, shown in upper case (the font has no lower case) and
     /// wrapped at word boundaries when wider than the frame.
     pub caption: String,
