@@ -17,20 +17,9 @@ use gpustar::gpu::detect::DETECT_KERNELS;
 use gpustar::gpu::vote::VoteJob;
 use gpustar::simulate::{SimSettings, render};
 use gpustar::solve::{Settings, Solver};
-use std::time::Instant;
+mod common;
 
-fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
-    f(); // warm-up: shader compilation, buffer allocation
-    let mut t: Vec<f64> = (0..runs)
-        .map(|_| {
-            let t0 = Instant::now();
-            f();
-            t0.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
-}
+use common::median_ms;
 
 fn list(var: &str, default: &[usize]) -> Vec<usize> {
     std::env::var(var)

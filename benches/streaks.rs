@@ -9,6 +9,9 @@
 //! Medians of several runs after a warm-up, over batches of 8 frames; milliseconds per frame
 //! and frames/s. `BENCH_SIZES=1024` narrows the run.
 
+mod common;
+
+use common::median_ms;
 use gpustar::catalog::Catalog;
 use gpustar::cpu::streak_filter::{mask_runs, streak_mask};
 use gpustar::cpu::threshold::tile_stats;
@@ -19,20 +22,6 @@ use gpustar::simulate::SimSettings;
 use gpustar::streaks::simulate::{StreakSim, render_streaks};
 use gpustar::streaks::sky::{Station, Utc};
 use gpustar::streaks::{self, StreakSettings, segments};
-use std::time::Instant;
-
-fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..runs)
-        .map(|_| {
-            let t0 = Instant::now();
-            f();
-            t0.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
-}
 
 fn main() {
     let gpu = match Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref()) {

@@ -1,8 +1,8 @@
 // Stage streak_filter, kernel 1 of 2 (CPU twin: src/cpu/streak_filter.rs streak_rows): per
 // pixel, Σ_i b_i · (pixel − background) over the row neighbours x − 2 … x + 2 (clamped at the
 // frame's edges), b = 1 4 6 4 1; the background is the tiles' bilinear interpolation rounded
-// to an integer, as threshold.rs background_at. One invocation per pixel, striding;
-// dispatch (pixels, images).
+// to an integer, as threshold.rs background_at. One invocation per run of 32 pixels of a row,
+// striding; dispatch (runs, images).
 
 @group(0) @binding(0) var<uniform> u: StreakUniform;
 @group(0) @binding(1) var<storage, read> pixels: array<u32>;
@@ -32,18 +32,28 @@ fn residual(img: u32, x: u32, y: u32) -> i32 {
     return i32(pixel(img, y * p.width + x)) - i32(bg);
 }
 
+// Pixels per invocation, along a row: their residuals are computed once for the five sums
+// that use each (a bilinear background per residual is most of the work).
+const RUN: u32 = 32u;
+
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let img = gid.y;
     let w = u.p.width;
-    for (var i = gid.x; i < u.b.pixels_per_image; i += nwg.x * 256u) {
-        let x = i % w;
-        let y = i / w;
-        let xm2 = u32(max(i32(x) - 2, 0));
-        let xm1 = u32(max(i32(x) - 1, 0));
-        let xp1 = min(x + 1u, w - 1u);
-        let xp2 = min(x + 2u, w - 1u);
-        rows[img * u.b.pixels_per_image + i] = residual(img, xm2, y) + 4 * residual(img, xm1, y)
-            + 6 * residual(img, x, y) + 4 * residual(img, xp1, y) + residual(img, xp2, y);
+    let runs_per_row = (w + RUN - 1u) / RUN;
+    for (var k = gid.x; k < runs_per_row * u.p.height; k += nwg.x * 256u) {
+        let y = k / runs_per_row;
+        let x0 = (k % runs_per_row) * RUN;
+        let n = min(RUN, w - x0);
+        // Residuals of columns x0 − 2 … x0 + n + 1, clamped to the frame.
+        var d: array<i32, 36>;
+        for (var j = 0u; j < n + 4u; j++) {
+            let x = u32(clamp(i32(x0 + j) - 2, 0, i32(w) - 1));
+            d[j] = residual(img, x, y);
+        }
+        for (var j = 0u; j < n; j++) {
+            rows[img * u.b.pixels_per_image + y * w + x0 + j] =
+                d[j] + 4 * d[j + 1u] + 6 * d[j + 2u] + 4 * d[j + 3u] + d[j + 4u];
+        }
     }
 }

@@ -305,7 +305,7 @@ pub struct StreakOpts {
     pub streaks: bool,
     /// The station for Az/El (geodetic WGS-84, east longitude positive) [default: each FITS
     /// header's OBSGEO-B/L/H, OBSGEO-X/Y/Z or SITELAT/SITELONG/SITEELEV].
-    #[arg(long, value_name = "LAT,LON,HEIGHT_M", value_parser = parse_station_arg,
+    #[arg(long, value_name = "LAT,LON,HEIGHT_M", value_parser = parse_station,
           requires = "streaks", help_heading = "Streaks")]
     pub station: Option<Station>,
     /// Where the RA/Dec of streak ends come from: gpustar's solution, the FITS header's
@@ -346,10 +346,6 @@ pub struct StreakOpts {
     #[arg(long, default_value_t = 9999, value_parser = clap::value_parser!(u16).range(0..=9999),
           help_heading = "Streaks")]
     pub iod_station: u16,
-}
-
-fn parse_station_arg(s: &str) -> std::result::Result<Station, String> {
-    parse_station(s)
 }
 
 #[derive(Args, Debug)]
@@ -419,7 +415,7 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 5.0, help_heading = "Streaks")]
     pub exposure: f64,
     /// The station written into the headers: LAT,LON,HEIGHT_M.
-    #[arg(long, default_value = "35.7,51.4,1200", value_parser = parse_station_arg,
+    #[arg(long, default_value = "35.7,51.4,1200", value_parser = parse_station,
           help_heading = "Streaks")]
     pub station: Station,
     /// Peak SNR per pixel of the streaks, LOW..HIGH (drawn uniformly).

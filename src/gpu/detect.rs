@@ -302,7 +302,8 @@ impl Gpu {
                 dispatch_strided(&mut pass, &pl.threshold, &bg_threshold, mask_words, n);
             }
             if let Some((_, bg_rows, bg_filter)) = &streak {
-                dispatch_strided(&mut pass, &pl.streak_rows, bg_rows, pixels_per_image, n);
+                let row_runs = p.width.div_ceil(32) * p.height;
+                dispatch_strided(&mut pass, &pl.streak_rows, bg_rows, row_runs, n);
                 dispatch_strided(&mut pass, &pl.streak_filter, bg_filter, mask_words, n);
             }
         }
