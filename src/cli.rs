@@ -28,6 +28,7 @@ Examples:
   gpustar batch sim --camera sim/camera.toml -o results.jsonl
   gpustar evaluate --truth sim/truth.jsonl results.jsonl
   gpustar solve frame.png --fov-deg 11.4 --epoch 2019.58
+  gpustar batch tracking/ --camera cam.toml --streaks --station 35.7,51.4,1200 --tdm obs.tdm
 
 Exit status: 0 when every input got a record and none is an error record; 1 when some input
 got an error record; 2 when the run could not start (bad options, unreadable camera or catalog,
@@ -299,8 +300,8 @@ pub struct SolveOpts {
 #[derive(Args, Debug, Clone)]
 pub struct StreakOpts {
     /// Find satellite streaks: sub-pixel ends (edge-flagged where they leave the frame),
-    /// width, flux, SNR, RA/Dec and Az/El of the ends; streak pixels are kept out of star
-    /// detection. Records get a "streaks" list.
+    /// width, flux, SNR, RA/Dec and Az/El of the ends; detections on a streak are kept out of
+    /// star identification. Records get a "streaks" list.
     #[arg(long, help_heading = "Streaks")]
     pub streaks: bool,
     /// The station for Az/El (geodetic WGS-84, east longitude positive) [default: each FITS
