@@ -174,7 +174,11 @@ pub fn resume_from(path: &Path, format: Format) -> Result<Previous> {
         let text = String::from_utf8_lossy(line);
         let name = match format {
             Format::Jsonl => serde_json::from_str::<Record>(&text).ok().map(|r| r.file),
-            Format::Csv if text == CSV_HEADER => {
+            // The header, or that of an earlier version (columns are only ever added).
+            Format::Csv
+                if text == CSV_HEADER
+                    || CSV_HEADER.starts_with(&*text) && text.starts_with("file,status,") =>
+            {
                 prev.has_header = true;
                 start += nl + 1;
                 good_end = start;
