@@ -26,6 +26,9 @@ pub enum CameraSource {
     Fixed(Camera),
     /// `--fov-deg`: square pixels, centred, no distortion, sized by each frame.
     Fov(f64),
+    /// None (`--streaks --astrometry header` alone): stars are not identified (records are
+    /// `unsolved`, reason `no_camera`); streaks are reduced through each header's WCS.
+    None,
 }
 
 /// Which backend runs the kernels, as asked on the command line.
@@ -114,7 +117,7 @@ impl Solvers {
     #[allow(clippy::too_many_arguments)]
     fn record(
         &self,
-        solver: &Solver,
+        solver: Option<&Solver>,
         d: &Decoded,
         frame: &Frame,
         sol: &Solution,
@@ -122,7 +125,19 @@ impl Solvers {
         timing: Timing,
         backend: &str,
     ) -> Record {
-        let mut r = solver.record(&d.name, sol, timing, backend);
+        let mut r = match solver {
+            Some(s) => s.record(&d.name, sol, timing, backend),
+            // No camera: the outcome is unsolved, said as Solver::record says it.
+            None => Record {
+                reason: match sol.outcome {
+                    Outcome::Unsolved(reason) => Some(reason.to_string()),
+                    Outcome::Solved(..) => None,
+                },
+                stars_detected: Some(sol.detections.len()),
+                timing_ms: timing,
+                ..Record::empty(&d.name, backend)
+            },
+        };
         self.add_streaks(&mut r, d, sol, found);
         let drawn = found.unwrap_or_default();
         if let Err(e) = self.products.write(&d.path, &d.name, frame, sol, drawn) {
@@ -171,6 +186,7 @@ impl Solvers {
                 }
                 c.clone()
             }
+            CameraSource::None => return Err("no camera given".into()),
             CameraSource::Fov(fov) => {
                 if width < MIN_SIDE || height < MIN_SIDE {
                     return Err(format!(
@@ -190,12 +206,40 @@ impl Solvers {
             Ok(f) => f,
             Err(e) => return Record::error(&d.name, e.clone(), BACKEND_CPU),
         };
+        if matches!(self.camera, CameraSource::None) {
+            return self.streaks_only(&d, frame);
+        }
         let solver = self.get(frame.width, frame.height);
         let solver = match solver.as_ref() {
             Ok(s) => s,
             Err(e) => return Record::error(&d.name, e.clone(), BACKEND_CPU),
         };
         solve_with(self, solver, &d, frame)
+    }
+
+    /// A frame without a camera: its streaks through the header's WCS, its stars detected
+    /// (and kept off the streaks) but not identified.
+    fn streaks_only(&self, d: &Decoded, frame: &Frame) -> Record {
+        let t0 = Instant::now();
+        let s = &self.settings.detect;
+        let p = detect::params(frame, s);
+        let (blobs, found) = match &self.streaks {
+            Some(o) => streaks::detect_cpu(frame, &p, &o.settings, s.k_sigma),
+            None => (detect::blobs_cpu(frame, &p), Vec::new()),
+        };
+        let sol = Solution {
+            detections: detect::star_list(&blobs, s),
+            outcome: Outcome::Unsolved("no_camera"),
+            epoch: d.epoch,
+        };
+        let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let timing = Timing {
+            decode: d.decode_ms,
+            detect: detect_ms,
+            identify: 0.0,
+            total: d.decode_ms + detect_ms,
+        };
+        self.record(None, d, frame, &sol, Some(&found), timing, BACKEND_CPU)
     }
 }
 
@@ -220,6 +264,10 @@ impl GpuRunner {
     /// Solve decoded frames: each size as one GPU batch (detection, then voting), the rest
     /// on the CPU. One record per frame, in the order given.
     pub fn solve(&mut self, solvers: &Solvers, frames: Vec<Decoded>) -> Vec<Record> {
+        if matches!(solvers.camera, CameraSource::None) {
+            // Streaks alone, through the headers' WCS: the CPU twins (see `streaks_only`).
+            return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
+        }
         let mut records: Vec<Option<Record>> = (0..frames.len()).map(|_| None).collect();
         let mut by_size: Vec<SizeGroup> = Vec::new();
         for (i, d) in frames.into_iter().enumerate() {
@@ -292,7 +340,8 @@ impl GpuRunner {
                             identify: identify_ms / n,
                             total: d.decode_ms + (detect_ms + identify_ms) / n,
                         };
-                        solvers.record(solver, d, frame, &sol, found.as_deref(), timing, &backend)
+                        let (solver, found) = (Some(solver), found.as_deref());
+                        solvers.record(solver, d, frame, &sol, found, timing, &backend)
                     })
                     .collect()
             }
@@ -433,7 +482,7 @@ fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) ->
         total: d.decode_ms + detect_ms + identify_ms,
     };
     solvers.record(
-        solver,
+        Some(solver),
         d,
         frame,
         &sol,

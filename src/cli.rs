@@ -569,8 +569,12 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
 /// Range of focal-length factors (low, high) to search when the scale is uncertain.
 type ScaleRange = (f64, f64);
 
-/// The camera source, its optional magnitude limit, and the scale range to search.
-fn camera_source(c: &CameraOpts) -> Result<(CameraSource, Option<f64>, Option<ScaleRange>)> {
+/// The camera source, its optional magnitude limit, and the scale range to search. With
+/// `header_only` (`--streaks --astrometry header`) no camera is needed.
+fn camera_source(
+    c: &CameraOpts,
+    header_only: bool,
+) -> Result<(CameraSource, Option<f64>, Option<ScaleRange>)> {
     let tolerance = match c.fov_tolerance {
         Some(t) if !(t > 0.0 && t < 0.5) => bail!("--fov-tolerance must be between 0 and 0.5"),
         Some(t) => Some((1.0 - t, 1.0 + t)),
@@ -592,7 +596,11 @@ fn camera_source(c: &CameraOpts) -> Result<(CameraSource, Option<f64>, Option<Sc
                 Some((f(hi) / f(mid), f(lo) / f(mid))),
             ))
         }
-        (None, None) => bail!("give the camera: --camera FILE or --fov-deg DEG"),
+        (None, None) if header_only => Ok((CameraSource::None, None, None)),
+        (None, None) => bail!(
+            "give the camera: --camera FILE or --fov-deg DEG (or, for streaks reduced through \
+             each FITS header's WCS alone, --streaks --astrometry header)"
+        ),
     }
 }
 
@@ -608,7 +616,8 @@ fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
 }
 
 fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCode> {
-    let (camera, camera_mag, scale_range) = camera_source(&o.camera)?;
+    let header_only = o.streaks.streaks && o.streaks.astrometry == Astrometry::Header;
+    let (camera, camera_mag, scale_range) = camera_source(&o.camera, header_only)?;
     let catalog = Catalog::load(o.catalog.catalog.as_deref())?;
     let mut s = settings(&o.catalog, camera_mag);
     s.detect.k_sigma = o.sigma;
@@ -851,9 +860,10 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
         )?;
         return print_all(&out);
     }
-    let (source, camera_mag, scale_range) = camera_source(c)?;
+    let (source, camera_mag, scale_range) = camera_source(c, false)?;
     let camera = match source {
         CameraSource::Fixed(cam) => cam,
+        CameraSource::None => bail!("give the camera: --camera FILE or --fov-deg DEG"),
         CameraSource::Fov(fov) => {
             let (w, h) = size.context("--fov-deg needs --size WIDTHxHEIGHT here")?;
             Camera::from_fov(w, h, fov)?

@@ -293,6 +293,19 @@ fn header_astrometry_gives_the_solution_s_ra_dec() {
         &gpustar::wcs::wcs_header(&camera, &r),
     );
     let header = batch(&one, &["--astrometry", "header"]);
+    // Without a camera at all: the stars are not identified, the streaks the same.
+    let mut cmd = gpustar();
+    cmd.args([
+        "batch",
+        one.to_str().unwrap(),
+        "--streaks",
+        "--astrometry",
+        "header",
+    ]);
+    let alone = run_records(&mut cmd);
+    assert_eq!(alone[0]["status"], "unsolved");
+    assert_eq!(alone[0]["reason"], "no_camera");
+    assert_eq!(alone[0]["streaks"], header[0]["streaks"]);
     let (a, b) = (&solved[k]["streaks"], &header[0]["streaks"]);
     assert_eq!(a.as_array().unwrap().len(), b.as_array().unwrap().len());
     for (sa, sb) in a.as_array().unwrap().iter().zip(b.as_array().unwrap()) {
