@@ -90,7 +90,7 @@ fn main() {
         }));
         // The streak stages alone, on the CPU.
         let tiles: Vec<_> = frames.iter().map(|f| tile_stats(&f.pixels, &p)).collect();
-        let sp = ss.params(ds.k_sigma);
+        let sp = ss.params(&p, ds.k_sigma);
         let masks: Vec<_> = frames
             .iter()
             .zip(&tiles)
@@ -103,8 +103,8 @@ fn main() {
         }));
         let seg_ms = per(median_ms(runs, || {
             for m in &masks {
-                let runs = mask_runs(m, p.width, p.height);
-                std::hint::black_box(segments::segments(&runs, p.width, &Default::default()));
+                let runs = mask_runs(m, sp.width, sp.height);
+                std::hint::black_box(segments::segments(&runs, sp.width, &Default::default()));
             }
         }));
         let measure_ms = per(median_ms(runs, || {

@@ -374,7 +374,7 @@ impl GpuRunner {
         let (blobs, found) = match streak_opts {
             None => (self.gpu.detect(frames, &p)?, vec![None; frames.len()]),
             Some(o) => {
-                let sp = o.settings.params(settings.k_sigma);
+                let sp = o.settings.params(&p, settings.k_sigma);
                 let (blobs, pixels) = self.gpu.detect_streaks(frames, &p, &sp)?;
                 let mut kept = Vec::with_capacity(blobs.len());
                 let mut found = Vec::with_capacity(blobs.len());

@@ -2,9 +2,10 @@
 //! features), and every host↔WGSL struct has the same field offsets and size on both sides.
 
 use gpustar::cpu::centroid::Blob;
+use gpustar::cpu::streak_filter::StreakParams;
 use gpustar::cpu::threshold::{DetectParams, TileStats};
 use gpustar::cpu::vote::PairRange;
-use gpustar::gpu::detect::{BatchParams, DetectUniform};
+use gpustar::gpu::detect::{BatchParams, DetectUniform, StreakUniform};
 use gpustar::gpu::vote::VoteUniform;
 use gpustar::gpu::{KERNELS, kernel_source};
 use std::mem::{offset_of, size_of};
@@ -120,4 +121,15 @@ fn host_and_wgsl_structs_have_the_same_layout() {
         ]
     );
     assert_layout!(vote, "PairRange", PairRange, [i, j, lo, hi]);
+
+    let streak = module("streak_filter");
+    assert_layout!(
+        streak,
+        "StreakParams",
+        StreakParams,
+        [
+            level_num, level_den, width, height, words, _pad0, _pad1, _pad2
+        ]
+    );
+    assert_layout!(streak, "StreakUniform", StreakUniform, [p, b, s]);
 }

@@ -269,8 +269,9 @@ impl Gpu {
         // The streak mask: two more kernels over the pixels and tiles already uploaded.
         let streak = streaks.map(|sp| {
             let su = self.uniform("streak params", &StreakUniform { p: *p, b, s: *sp });
-            let rows = self.storage("streak rows", 4 * pixels_per_image as u64 * n as u64);
-            let smask = self.storage("streak mask", 4 * (mask_words * n) as u64);
+            let blocks = (sp.width * sp.height) as u64;
+            let rows = self.storage("streak rows", 4 * blocks * n as u64);
+            let smask = self.storage("streak mask", 4 * (sp.words * n) as u64);
             let bg_rows = self.bind_group(&pl.streak_rows, &[&su, &pixels, &tiles, &rows]);
             let bg_filter = self.bind_group(&pl.streak_filter, &[&su, &rows, &tiles, &smask]);
             (smask, bg_rows, bg_filter)
@@ -281,7 +282,8 @@ impl Gpu {
         let label_bytes = 4 * pixels_per_image as u64 * n as u64;
         let mask_bytes = 4 * (mask_words * n) as u64;
         let stage_mask = inspect.then(|| self.staging("mask out", mask_bytes));
-        let stage_streak = streaks.map(|_| self.staging("streak mask out", mask_bytes));
+        let streak_bytes = streaks.map_or(0, |sp| 4 * (sp.words * n) as u64);
+        let stage_streak = streaks.map(|_| self.staging("streak mask out", streak_bytes));
         let stage_labels = inspect.then(|| self.staging("labels out", label_bytes));
         let stage_counts = self.staging("blob counts out", 4 * n as u64);
         let stage_set_count = self.staging("set count out", 4 * n as u64);
@@ -301,10 +303,10 @@ impl Gpu {
             if run(1) {
                 dispatch_strided(&mut pass, &pl.threshold, &bg_threshold, mask_words, n);
             }
-            if let Some((_, bg_rows, bg_filter)) = &streak {
-                let row_runs = p.width.div_ceil(32) * p.height;
+            if let (Some((_, bg_rows, bg_filter)), Some(sp)) = (&streak, streaks) {
+                let row_runs = sp.width.div_ceil(32) * sp.height;
                 dispatch_strided(&mut pass, &pl.streak_rows, bg_rows, row_runs, n);
-                dispatch_strided(&mut pass, &pl.streak_filter, bg_filter, mask_words, n);
+                dispatch_strided(&mut pass, &pl.streak_filter, bg_filter, sp.words, n);
             }
         }
         if let Some(st) = &stage_tiles {
@@ -314,7 +316,7 @@ impl Gpu {
             enc.copy_buffer_to_buffer(&mask, 0, sm, 0, mask_bytes);
         }
         if let (Some(ss), Some((smask, _, _))) = (&stage_streak, &streak) {
-            enc.copy_buffer_to_buffer(smask, 0, ss, 0, mask_bytes);
+            enc.copy_buffer_to_buffer(smask, 0, ss, 0, streak_bytes);
         }
         // The list kernels stride over at most `max_set` entries per frame.
         let list_items = room.set.min(LIST_GROUPS * 256);
@@ -367,7 +369,7 @@ impl Gpu {
             staged.push((t, tile_bytes));
         }
         if let Some(ss) = &stage_streak {
-            staged.push((ss, mask_bytes));
+            staged.push((ss, streak_bytes));
         }
         let bytes = self.read_all(&staged)?;
         let counts: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[0]);
@@ -396,11 +398,11 @@ impl Gpu {
         // Staged after the inspection buffers: tiles, then the streak mask.
         let tiles_at = if inspect { 5 } else { 3 };
         let mut streak_out = Vec::new();
-        if streaks.is_some() {
+        if let Some(sp) = streaks {
             let words: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[tiles_at + 1]);
             streak_out = per_frame_tiles(&bytes[tiles_at])
                 .into_iter()
-                .zip(words.chunks(mask_words as usize))
+                .zip(words.chunks(sp.words as usize))
                 .map(|(tiles, m)| StreakPixels {
                     tiles,
                     mask: m.to_vec(),

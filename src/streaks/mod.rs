@@ -18,7 +18,7 @@ pub mod simulate;
 pub mod sky;
 
 use crate::cpu::centroid::Blob;
-use crate::cpu::streak_filter::{StreakParams, mask_runs, streak_mask};
+use crate::cpu::streak_filter::{BIN, StreakParams, mask_runs, streak_mask};
 use crate::cpu::threshold::{DetectParams, TileStats, background_at, tile_stats};
 use crate::frame::Frame;
 use fit::StreakFit;
@@ -66,9 +66,10 @@ impl Default for StreakSettings {
 }
 
 impl StreakSettings {
-    /// The mask parameters for tiles made with detection threshold `k_detect`.
-    pub fn params(&self, k_detect: f32) -> StreakParams {
-        StreakParams::new(self.k_sigma, k_detect)
+    /// The mask parameters of a `p`-sized frame whose tiles were made with detection
+    /// threshold `k_detect`.
+    pub fn params(&self, p: &DetectParams, k_detect: f32) -> StreakParams {
+        StreakParams::new(p, self.k_sigma, k_detect)
     }
 }
 
@@ -110,13 +111,14 @@ pub fn detect_cpu(
     let runs = threshold::threshold(&frame.pixels, &tiles, p);
     let labels = components::components(&runs, p.width);
     let blobs = centroid::centroid(&frame.pixels, &runs, &labels, &tiles, p);
-    let mask = streak_mask(&frame.pixels, &tiles, p, &s.params(k_detect));
+    let mask = streak_mask(&frame.pixels, &tiles, p, &s.params(p, k_detect));
     let streaks = measure(frame, &tiles, &mask, p, s);
     (off_streaks(&blobs, &streaks), streaks)
 }
 
-/// From a streak mask (words, as `streak_filter` writes them, on the CPU or the GPU) to the
-/// streaks: segments, fits, and the tests that keep everything else out. Ordered by SNR,
+/// From a streak mask (words of the binned grid, as `streak_filter` writes them, on the CPU or
+/// the GPU) to the streaks: segments (found on the grid, fitted in pixels), fits, and the tests
+/// that keep everything else out. Ordered by SNR,
 /// brightest first (ties by position), so the order does not depend on the backend.
 pub fn measure(
     frame: &Frame,
@@ -125,8 +127,12 @@ pub fn measure(
     p: &DetectParams,
     s: &StreakSettings,
 ) -> Vec<StreakFit> {
-    let runs = mask_runs(mask, p.width, p.height);
-    let segs = segments(&runs, p.width, &SegmentSettings::default());
+    let grid = StreakParams::new(p, s.k_sigma, 1.0);
+    let runs = mask_runs(mask, grid.width, grid.height);
+    let segs: Vec<segments::Joined> = segments(&runs, grid.width, &SegmentSettings::default())
+        .iter()
+        .map(|j| j.in_pixels(BIN))
+        .collect();
     // Saturated pixels tell nothing of the profile: the fit leaves them out (NaN).
     let d = |x: u32, y: u32| {
         let v = frame.pixels[(y * p.width + x) as usize];
@@ -158,11 +164,23 @@ pub fn measure(
                 .flatten()
         });
         let Some(f) = found else { continue };
-        // One streak is one fit: pieces that were not joined can converge on the same line.
-        if out.iter().any(|g| same_line(g, &f)) {
-            continue;
+        // One streak is one fit: pieces that were not joined (a defect crossing the track
+        // splits it) can lie on the same line; such a pair is fitted again as one.
+        match out
+            .iter()
+            .position(|g| same_line(g, &f) || continues(g, &f))
+        {
+            None => out.push(f),
+            Some(k) => {
+                let whole = try_fit(&span(&out[k], &f));
+                let longer = if length(&f) > length(&out[k]) {
+                    f
+                } else {
+                    out[k]
+                };
+                out[k] = whole.unwrap_or(longer);
+            }
         }
-        out.push(f);
     }
     out.sort_by(|a, b| {
         b.snr
@@ -225,6 +243,42 @@ fn same_line(a: &StreakFit, b: &StreakFit) -> bool {
     let (m, n) = (mid(b), mid(a));
     let across = (-(m.0 - n.0) * a.dir.1 + (m.1 - n.1) * a.dir.0).abs();
     cos > 2f64.to_radians().cos() && across < 3.0 && distance_to(a, m.0, m.1) < 3.0
+}
+
+/// Do two fits lie on one line with their tracks overlapping or less than 10 px apart?
+fn continues(a: &StreakFit, b: &StreakFit) -> bool {
+    let cos = (a.dir.0 * b.dir.0 + a.dir.1 * b.dir.1).abs();
+    let near = |f: &StreakFit, (x, y): (f64, f64)| {
+        let (x0, y0) = f.ends[0];
+        (-(x - x0) * f.dir.1 + (y - y0) * f.dir.0).abs() < 3.0
+    };
+    cos > 2f64.to_radians().cos()
+        && b.ends.iter().all(|&e| near(a, e))
+        && b.ends.iter().any(|&(x, y)| distance_to(a, x, y) < 10.0)
+}
+
+/// The segment from the farther apart of two collinear fits' ends to the other.
+fn span(a: &StreakFit, b: &StreakFit) -> segments::Segment {
+    let (ux, uy) = a.dir;
+    let (x0, y0) = a.ends[0];
+    let ts: Vec<f64> = a
+        .ends
+        .iter()
+        .chain(&b.ends)
+        .map(|&(x, y)| (x - x0) * ux + (y - y0) * uy)
+        .collect();
+    let (lo, hi) = ts
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(l, h), &t| (l.min(t), h.max(t)));
+    segments::Segment {
+        cx: x0,
+        cy: y0,
+        ux,
+        uy,
+        t_min: lo,
+        t_max: hi,
+        pixels: 0,
+    }
 }
 
 /// Does any pixel within 2σ of the track reach saturation?

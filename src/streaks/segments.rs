@@ -38,25 +38,46 @@ impl Segment {
     pub fn point(&self, t: f64) -> (f64, f64) {
         (self.cx + t * self.ux, self.cy + t * self.uy)
     }
+
+    /// The segment of a grid of `bin`×`bin` blocks in pixels of the frame (block x covers
+    /// pixels bin·x … bin·x + bin − 1, so its centre is pixel bin·x + (bin − 1)/2).
+    pub fn in_pixels(&self, bin: u32) -> Segment {
+        let (b, o) = (bin as f64, (bin as f64 - 1.0) / 2.0);
+        Segment {
+            cx: b * self.cx + o,
+            cy: b * self.cy + o,
+            t_min: b * self.t_min,
+            t_max: b * self.t_max,
+            pixels: self.pixels * (bin * bin) as usize,
+            ..*self
+        }
+    }
 }
 
-/// Settings of segment extraction.
+/// Settings of segment extraction, in cells of the mask (blocks of 2×2 pixels for the streak
+/// mask).
 #[derive(Clone, Copy, Debug)]
 pub struct SegmentSettings {
-    /// Shortest piece kept (pixels along the line).
+    /// Shortest piece kept (along the line).
     pub min_piece_px: f64,
-    /// Pixels within this distance of a line belong to it.
+    /// Cells within this distance of a line belong to it; pieces whose ends are this close
+    /// to each other's lines may join.
     pub band_px: f64,
     /// Largest gap along the line inside one piece.
     pub max_gap_px: f64,
+    /// Largest gap between two pieces that join (or their lengths together, if longer).
+    pub max_join_gap_px: f64,
 }
 
 impl Default for SegmentSettings {
+    /// For the 2×2-binned streak mask: 12 px pieces, a 3 px band, 6 px gaps in a piece, 40 px
+    /// between pieces.
     fn default() -> Self {
         SegmentSettings {
-            min_piece_px: 12.0,
-            band_px: 3.0,
-            max_gap_px: 6.0,
+            min_piece_px: 6.0,
+            band_px: 1.5,
+            max_gap_px: 3.0,
+            max_join_gap_px: 20.0,
         }
     }
 }
@@ -70,6 +91,16 @@ const MAX_LINES_PER_COMPONENT: usize = 4;
 pub struct Joined {
     pub line: Segment,
     pub pieces: Vec<Segment>,
+}
+
+impl Joined {
+    /// See [`Segment::in_pixels`].
+    pub fn in_pixels(&self, bin: u32) -> Joined {
+        Joined {
+            line: self.line.in_pixels(bin),
+            pieces: self.pieces.iter().map(|p| p.in_pixels(bin)).collect(),
+        }
+    }
 }
 
 /// The segments of a streak mask (runs in raster order).
@@ -117,7 +148,7 @@ pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Joined> {
             }
         }
     }
-    join_collinear(pieces)
+    join_collinear(pieces, s)
 }
 
 /// The strongest line through a component's pixels, and which pixels it took, or None when
@@ -165,8 +196,10 @@ fn strongest_line(px: &[(f64, f64)], s: &SegmentSettings) -> Option<(Segment, Ve
         pixels: 0,
     };
     // Refine by principal axes of the pixels near the line: wide first (the coarse angle
-    // drifts 0.5° off at most), then within the band.
-    for band in [s.band_px + 0.0087 * r_max, s.band_px] {
+    // drifts 0.5° off at most), then twice within the band (the 2-cell bins of ρ leave the
+    // line up to a cell off, and a band around a line that is off takes the streak's pixels
+    // on one side only).
+    for band in [s.band_px + 0.0087 * r_max, s.band_px, s.band_px] {
         let near: Vec<(f64, f64)> = px
             .iter()
             .copied()
@@ -198,7 +231,7 @@ fn strongest_line(px: &[(f64, f64)], s: &SegmentSettings) -> Option<(Segment, Ve
     seg.t_min = ts.get(a)?.0;
     seg.t_max = ts[b].0;
     seg.pixels = b + 1 - a;
-    // A line piece, not a blob: several times longer than it is wide. Its half width is
+    // A line piece, not a blob: at least twice as long as it is wide. Its half width is
     // where the count of its pixels per pixel of distance from the line drops below a quarter
     // of the count on the line (a bright streak's mask is wide; a star's is as wide as long; a
     // streak crossing this one adds only a few pixels to each distance).
@@ -212,7 +245,7 @@ fn strongest_line(px: &[(f64, f64)], s: &SegmentSettings) -> Option<(Segment, Ve
     }
     let peak = counts[0].max(counts[1]);
     let half = counts.iter().position(|&c| 4 * c < peak).unwrap_or(64) as f64;
-    if len < s.min_piece_px || len < 3.0 * (2.0 * half + 1.0) {
+    if len < s.min_piece_px || len < 2.0 * (2.0 * half + 1.0) {
         return None;
     }
     let band = s.band_px.max(half + 1.0);
@@ -252,14 +285,14 @@ fn principal_axis(p: &[(f64, f64)]) -> Segment {
 }
 
 /// Join pieces that lie on one line (a faint streak breaks up; a long one crosses stars):
-/// directions within 2°, each one's ends within 3 px of the other's line, and a gap along
-/// the line shorter than the two pieces together (or 40 px). Pieces are joined in a fixed
+/// directions within 2°, each one's ends within the band of the other's line, and a gap along
+/// the line shorter than the two pieces together (or `max_join_gap_px`). Pieces are joined in a fixed
 /// order, so the result does not depend on which piece came first.
-fn join_collinear(mut pieces: Vec<Segment>) -> Vec<Joined> {
+fn join_collinear(mut pieces: Vec<Segment>, s: &SegmentSettings) -> Vec<Joined> {
     pieces.sort_by(|a, b| b.length().total_cmp(&a.length()));
     let mut out: Vec<Joined> = Vec::new();
     for p in pieces {
-        let joined = out.iter_mut().find(|j| collinear(&j.line, &p)).map(|j| {
+        let joined = out.iter_mut().find(|j| collinear(&j.line, &p, s)).map(|j| {
             j.pieces.push(p);
             let q = &mut j.line;
             // Extend q by p's extent; keep q's line (the longer piece's, the better fixed).
@@ -279,16 +312,16 @@ fn join_collinear(mut pieces: Vec<Segment>) -> Vec<Joined> {
     out
 }
 
-fn collinear(q: &Segment, p: &Segment) -> bool {
+fn collinear(q: &Segment, p: &Segment, s: &SegmentSettings) -> bool {
     let cos = (p.ux * q.ux + p.uy * q.uy).abs();
     if cos < 2f64.to_radians().cos() {
         return false;
     }
     let ends = [p.point(p.t_min), p.point(p.t_max)];
-    if ends.iter().any(|e| q.across(e.0, e.1).abs() > 3.0) {
+    if ends.iter().any(|e| q.across(e.0, e.1).abs() > s.band_px) {
         return false;
     }
     let (ta, tb) = (q.along(ends[0].0, ends[0].1), q.along(ends[1].0, ends[1].1));
     let gap = (ta.min(tb) - q.t_max).max(q.t_min - ta.max(tb)).max(0.0);
-    gap <= (q.length() + p.length()).max(40.0)
+    gap <= (q.length() + p.length()).max(s.max_join_gap_px)
 }
