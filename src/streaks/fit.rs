@@ -208,9 +208,9 @@ impl Region {
 }
 
 /// Pixels this far (along the track) from either end of the search are all fitted.
-const END_ZONE: f64 = 30.0;
+const END_ZONE: f64 = 20.0;
 /// Positions along the track's middle that are fitted, at most (every k-th pixel of t).
-const MIDDLE_SAMPLES: f64 = 150.0;
+const MIDDLE_SAMPLES: f64 = 80.0;
 
 struct Model {
     /// Reference point of the parametrisation.
@@ -303,8 +303,8 @@ impl Model {
         (hi > lo).then_some((lo, hi))
     }
 
-    fn point(&self, q: &P, t: f64) -> (f64, f64) {
-        let (s, c) = q[1].sin_cos();
+    /// The point at t on the line (ρ, θ), (sin θ, cos θ) given.
+    fn point(&self, q: &P, (s, c): (f64, f64), t: f64) -> (f64, f64) {
         (self.c.0 - q[0] * s + t * c, self.c.1 + q[0] * c + t * s)
     }
 
@@ -409,7 +409,7 @@ impl Model {
             while u < t + 4.0 {
                 let mut off = -half_width;
                 while off <= half_width {
-                    let (x, y) = self.point(q, u);
+                    let (x, y) = self.point(q, sc, u);
                     let (x, y) = (x - off * s, y + off * c);
                     let (xi, yi) = (x.round(), y.round());
                     let inside = xi >= 0.0 && yi >= 0.0 && xi < self.w as f64 && yi < self.h as f64;
@@ -447,7 +447,7 @@ impl Model {
         let axis = s.abs().min(c.abs()).asin().to_degrees();
         let modulation = self.modulation(q, v0, v1, d);
         Some(StreakFit {
-            ends: [self.point(q, v0), self.point(q, v1)],
+            ends: [self.point(q, sc, v0), self.point(q, sc, v1)],
             edge,
             sigma_px: sg,
             amplitude: a,
@@ -496,7 +496,7 @@ impl Model {
         // The profile at t, across the track around offset `base` (weights of the fitted
         // profile, ±1.5σ in half-pixel steps).
         let profile = |t: f64, base: f64| -> Option<f64> {
-            let (px, py) = self.point(q, t);
+            let (px, py) = self.point(q, (s, c), t);
             let mut sum = 0.0;
             let mut o = -1.5 * sg;
             while o <= 1.5 * sg {

@@ -124,8 +124,8 @@ pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Joined> {
             .fold((u32::MAX, 0), |(a, b), r| (a.min(r.x0), b.max(r.x1)));
         let (y0, y1) = (comp[0].y, comp[comp.len() - 1].y + 1);
         let diag = (((x1 - x0) as f64).powi(2) + ((y1 - y0) as f64).powi(2)).sqrt();
-        if diag < s.min_piece_px {
-            continue; // stars, noise, hot pixels
+        if diag < s.min_piece_px || (diag < 4.0 * s.min_piece_px && round(&comp)) {
+            continue; // stars, noise, hot pixels (large round ones may be crossing streaks)
         }
         let mut px: Vec<(f64, f64)> = comp
             .iter()
@@ -149,6 +149,30 @@ pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Joined> {
         }
     }
     join_collinear(pieces, s)
+}
+
+/// Is the component about as wide as long (second moments within a factor 4: an axis ratio
+/// under 2)? A bright star is; a piece of a streak is not.
+fn round(comp: &[Run]) -> bool {
+    let (mut n, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    for r in comp {
+        for x in r.x0..r.x1 {
+            let (x, y) = (x as f64, r.y as f64);
+            n += 1.0;
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            syy += y * y;
+            sxy += x * y;
+        }
+    }
+    let (mx, my) = (sx / n, sy / n);
+    let (a, c, b) = (sxx / n - mx * mx, syy / n - my * my, sxy / n - mx * my);
+    // Eigenvalues of [[a, b], [b, c]].
+    let root = ((a - c).powi(2) / 4.0 + b * b).sqrt();
+    let (l1, l2) = ((a + c) / 2.0 + root, (a + c) / 2.0 - root);
+    l1 < 4.0 * l2.max(1e-9)
 }
 
 /// The strongest line through a component's pixels, and which pixels it took, or None when
