@@ -79,7 +79,7 @@ pub fn fit(d: &dyn Fn(u32, u32) -> f64, w: u32, h: u32, seg: &Segment) -> Option
     let mut q = P::from_column_slice(&[rho0, th0, -half, half, a0, 1.2, 0.0]);
     let mut region = region;
     for round in 0..3 {
-        q = model.levenberg_marquardt(&region, q, if round == 0 { 30 } else { 15 })?;
+        q = model.levenberg_marquardt(&region, q, if round == 0 { 20 } else { 10 })?;
         // Leave out what the model cannot be (stars on the track, cosmic rays), then refit.
         let r: Vec<f64> = region
             .px
