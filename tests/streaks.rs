@@ -339,3 +339,47 @@ fn streak_mask_gpu_equals_cpu() {
         }
     }
 }
+
+#[test]
+fn correlated_noise_makes_no_streak() {
+    // Noise correlated over a few pixels (fixed patterns, compression blocks): the per-pixel
+    // noise under-rates a filter's scatter, so lines of it look significant by `snr`; the
+    // test against the same filter beside the track refuses them.
+    let (w, h) = (512u32, 512u32);
+    let mut rng = ChaCha8Rng::seed_from_u64(90);
+    let n = Normal::new(0.0, 1.0).unwrap();
+    let white: Vec<f64> = (0..w * h).map(|_| n.sample(&mut rng)).collect();
+    // A 5×5 box average, scaled back to NOISE per pixel.
+    let mut v = vec![SKY; (w * h) as usize];
+    for y in 2..h - 2 {
+        for x in 2..w - 2 {
+            let mut s = 0.0;
+            for dy in 0..5 {
+                for dx in 0..5 {
+                    s += white[((y + dy - 2) * w + x + dx - 2) as usize];
+                }
+            }
+            v[(y * w + x) as usize] += s / 5.0 * NOISE * 2.0;
+        }
+    }
+    let f = Frame {
+        width: w,
+        height: h,
+        pixels: v
+            .iter()
+            .map(|&x| x.round().clamp(0.0, 65535.0) as u16)
+            .collect(),
+        saturation: u16::MAX,
+    };
+    let p = params(&f);
+    assert!(find(&f).is_empty(), "{:?}", find(&f));
+    let loose = StreakSettings {
+        min_local_snr: f64::NEG_INFINITY,
+        ..StreakSettings::default()
+    };
+    let without = streaks::find_cpu(&f, &p, &loose, 5.0);
+    assert!(
+        !without.is_empty(),
+        "the frame tests nothing without the local test"
+    );
+}

@@ -34,6 +34,10 @@ pub struct StreakSettings {
     /// Smallest matched-filter SNR reported (a 40 px streak of peak SNR 3 per pixel has about
     /// 30; the false lines of fixed-pattern noise that pass the other tests, 10 to 12).
     pub min_snr: f64,
+    /// Smallest [`StreakFit::local_snr`]: the track must stand above the same filter run
+    /// beside it (fixed-pattern noise, compression blocks and diffuse light make lines of
+    /// single-pixel SNR 20–30 that stand 2–4 there; independently simulated streaks 9 and up).
+    pub min_local_snr: f64,
     /// Largest RMS distance of the track's local centroids from the line: an orbit's arc
     /// over one exposure is straight (independently simulated streaks: at most 0.65 px).
     pub max_fit_rms_px: f64,
@@ -59,6 +63,7 @@ impl Default for StreakSettings {
             min_sigma_px: 0.5,
             max_sigma_px: 8.0,
             max_fit_rms_px: 1.0,
+            min_local_snr: 5.0,
             max_gap_fraction: 0.25,
             max_modulation: 0.3,
         }
@@ -148,7 +153,10 @@ pub fn measure(
             return None;
         };
         match accept(&f, frame, s) {
-            Ok(()) => Some(f),
+            Ok(()) => {
+                tracing::debug!("streak {:?}: local snr {:.1}", f.ends, f.local_snr);
+                Some(f)
+            }
             Err(why) => {
                 tracing::debug!("streak candidate {:?}: {why}", f.ends);
                 None
@@ -202,6 +210,12 @@ fn accept(f: &StreakFit, frame: &Frame, s: &StreakSettings) -> Result<(), String
     }
     if f.sigma_px < s.min_sigma_px || f.sigma_px > s.max_sigma_px {
         return Err(format!("profile sigma {:.2} px", f.sigma_px));
+    }
+    if f.local_snr < s.min_local_snr {
+        return Err(format!(
+            "stands only {:.1} sigmas above the same filter beside it",
+            f.local_snr
+        ));
     }
     if f.fit_rms_px > s.max_fit_rms_px {
         return Err(format!(
