@@ -176,3 +176,96 @@ fn cedar_solve_frames_are_solved_each_with_its_own_field_of_view() {
     }
     assert!(correct >= 11, "{correct}/13 correct");
 }
+
+/// The records of a real set solved with `--streaks` and without, in input order.
+fn with_and_without_streaks(
+    set: &str,
+    camera: &str,
+    opts: &[&str],
+) -> Option<(Vec<Value>, Vec<Value>)> {
+    let shared = shared_dir(set)?;
+    let dir = shared.join("data/real").join(set);
+    let cam = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(camera);
+    let run = |streaks: bool| {
+        let mut cmd = gpustar();
+        cmd.arg("batch")
+            .arg(&dir)
+            .arg("--camera")
+            .arg(&cam)
+            .args(opts)
+            .args(["--backend", "cpu", "-q"]);
+        if streaks {
+            cmd.arg("--streaks");
+        }
+        common::run_records(&mut cmd)
+    };
+    Some((run(true), run(false)))
+}
+
+/// The streak a record holds near these two ends (either order), if any.
+fn streak_near<'a>(r: &'a Value, a: (f64, f64), b: (f64, f64)) -> Option<&'a Value> {
+    let xy = |e: &Value| (e["x"].as_f64().unwrap(), e["y"].as_f64().unwrap());
+    let d = |p: (f64, f64), q: (f64, f64)| (p.0 - q.0).hypot(p.1 - q.1);
+    r["streaks"].as_array()?.iter().find(|s| {
+        let (e0, e1) = (xy(&s["ends"][0]), xy(&s["ends"][1]));
+        (d(e0, a) < 3.0 && d(e1, b) < 3.0) || (d(e0, b) < 3.0 && d(e1, a) < 3.0)
+    })
+}
+
+/// A satellite trail crosses one of the tetra3 frames (looked at: thin, straight, 117 px);
+/// the other frames have none, and the stars are identified as without `--streaks`.
+#[test]
+fn the_satellite_trail_in_a_tetra3_frame_is_found_and_nothing_else() {
+    let Some((with, without)) = with_and_without_streaks(
+        "esa-tetra3",
+        "scripts/cameras/esa-tetra3.toml",
+        &["--epoch", "2019.58", "--fov-tolerance", "0.01"],
+    ) else {
+        return;
+    };
+    for (a, b) in with.iter().zip(&without) {
+        assert_eq!(a["stars_matched"], b["stars_matched"], "{}", a["file"]);
+        let n = a["streaks"].as_array().unwrap().len();
+        if a["file"] == "2019-07-29T204726_Alt60_Azi-135_Try1.tiff" {
+            assert_eq!(n, 1, "{a}");
+            let s = streak_near(a, (213.2, 171.1), (327.7, 147.5)).expect("the trail");
+            assert!((s["width_px"].as_f64().unwrap() - 3.7).abs() < 0.5, "{s}");
+        } else {
+            assert_eq!(n, 0, "{}: {}", a["file"], a["streaks"]);
+        }
+    }
+}
+
+/// Swarm's frames have star-tracker artefacts, and one a wide trail of a particle near the
+/// spacecraft. Every frame keeps its record (an ulp-crossing clamp in the fit once made every
+/// one an error record) and its stars.
+#[test]
+fn swarm_frames_keep_their_stars_and_show_the_particle_trail() {
+    let Some((with, without)) = with_and_without_streaks(
+        "swarm-a",
+        "scripts/cameras/swarm-a.toml",
+        &[
+            "--epoch",
+            "2014.85",
+            "--fov-tolerance",
+            "0.01",
+            "--fit",
+            "distortion",
+        ],
+    ) else {
+        return;
+    };
+    assert_eq!(with.len(), 30);
+    for (a, b) in with.iter().zip(&without) {
+        assert_eq!(a["status"], "solved", "{a}");
+        assert_eq!(a["stars_matched"], b["stars_matched"], "{}", a["file"]);
+    }
+    let particle = with
+        .iter()
+        .find(|r| r["file"] == "SWA_StrC_2014-11-17T17h40m10.000Z_171.png")
+        .unwrap();
+    assert!(
+        streak_near(particle, (100.0, 130.0), (199.4, 108.0)).is_some(),
+        "{particle}"
+    );
+}

@@ -319,9 +319,7 @@ impl Model {
     fn clamp(&self, q: &mut P) {
         q[5] = q[5].clamp(0.3, 15.0);
         if let Some((lo, hi)) = self.frame_span(q) {
-            let m = 4.0 * q[5];
-            q[2] = q[2].clamp(lo - m, hi + m - 1.0);
-            q[3] = q[3].clamp(q[2] + 1.0, hi + m);
+            (q[2], q[3]) = clamp_ends(q[2], q[3], lo, hi, 4.0 * q[5]);
         }
     }
 
@@ -584,6 +582,14 @@ impl Model {
     }
 }
 
+/// The ends t0 < t1 kept within `m` of the frame's span [lo, hi] along the line and at least
+/// a pixel apart. max/min, not clamp: the bounds come from rounding arithmetic and may cross
+/// by an ulp (t0 at its upper bound plus 1 px can exceed t1's), where clamp panics.
+fn clamp_ends(t0: f64, t1: f64, lo: f64, hi: f64, m: f64) -> (f64, f64) {
+    let t0 = t0.max(lo - m).min(hi + m - 1.0);
+    (t0, t1.min(hi + m).max(t0 + 1.0))
+}
+
 /// Distances (in σ) beyond which the profile is taken as 0 and the along-track factor as 0
 /// or 1: e^(−5²/2) ≈ 4e-6 of the peak, below the noise of any streak short of SNR 10^5.
 const FAR: f64 = 5.0;
@@ -611,4 +617,23 @@ fn robust_sigma(v: &[f64]) -> Option<f64> {
     let mid = a.len() / 2;
     let m = *a.select_nth_unstable_by(mid, f64::total_cmp).1;
     Some((1.4826 * m).max(1e-6))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frame's span whose end plus the margin is −1.484292886511039: t0 at its upper bound
+    /// plus one pixel rounds to −1.4842928865110387, past t1's bound (f64::clamp panicked
+    /// there, on every Swarm frame once).
+    #[test]
+    fn clamping_the_ends_survives_bounds_that_cross_by_an_ulp() {
+        // No margin, so that hi + m is that value exactly.
+        let end = -1.484292886511039;
+        assert!((end - 1.0) + 1.0 > end, "the rounding this test is about");
+        let (t0, t1) = clamp_ends(1e6, 0.0, -100.0, end, 0.0);
+        assert!(t0 <= end - 1.0 && t1 >= t0 + 1.0, "{t0} {t1}");
+        let (t0, t1) = clamp_ends(-1e6, 1e6, -100.0, 50.0, 4.0);
+        assert_eq!((t0, t1), (-104.0, 54.0));
+    }
 }
