@@ -203,7 +203,7 @@ fn with_and_without_streaks(
 }
 
 /// The streak a record holds near these two ends (either order), if any.
-fn streak_near<'a>(r: &'a Value, a: (f64, f64), b: (f64, f64)) -> Option<&'a Value> {
+fn streak_near(r: &Value, a: (f64, f64), b: (f64, f64)) -> Option<&Value> {
     let xy = |e: &Value| (e["x"].as_f64().unwrap(), e["y"].as_f64().unwrap());
     let d = |p: (f64, f64), q: (f64, f64)| (p.0 - q.0).hypot(p.1 - q.1);
     r["streaks"].as_array()?.iter().find(|s| {
