@@ -5,6 +5,16 @@ mod common;
 use common::{gpustar, shared_dir};
 use serde_json::Value;
 
+/// Swarm's frames as a user solves them: the epoch, the focal length known to 1 %, k1 fitted.
+const SWARM_OPTIONS: &[&str] = &[
+    "--epoch",
+    "2014.85",
+    "--fov-tolerance",
+    "0.01",
+    "--fit",
+    "distortion",
+];
+
 /// The camera as a user would write it from the set's camera.json: 1024×768, 11.425°.
 #[test]
 fn esa_tetra3_frames_are_solved_against_truth() {
@@ -99,18 +109,8 @@ fn openstartracker_frames_are_solved_with_a_median_dark() {
 /// An in-orbit star tracker: 752×290 pixels of 88.9″ × 171.4″ and unknown lens distortion.
 #[test]
 fn swarm_frames_are_solved_with_a_fitted_scale_and_distortion() {
-    let Some((s, frames)) = solve_set(
-        "swarm-a",
-        "scripts/cameras/swarm-a.toml",
-        &[
-            "--epoch",
-            "2014.85",
-            "--fov-tolerance",
-            "0.01",
-            "--fit",
-            "distortion",
-        ],
-    ) else {
+    let Some((s, frames)) = solve_set("swarm-a", "scripts/cameras/swarm-a.toml", SWARM_OPTIONS)
+    else {
         return;
     };
     assert_eq!(s["frames"], 30);
@@ -241,18 +241,9 @@ fn the_satellite_trail_in_a_tetra3_frame_is_found_and_nothing_else() {
 /// one an error record) and its stars.
 #[test]
 fn swarm_frames_keep_their_stars_and_show_the_particle_trail() {
-    let Some((with, without)) = with_and_without_streaks(
-        "swarm-a",
-        "scripts/cameras/swarm-a.toml",
-        &[
-            "--epoch",
-            "2014.85",
-            "--fov-tolerance",
-            "0.01",
-            "--fit",
-            "distortion",
-        ],
-    ) else {
+    let Some((with, without)) =
+        with_and_without_streaks("swarm-a", "scripts/cameras/swarm-a.toml", SWARM_OPTIONS)
+    else {
         return;
     };
     assert_eq!(with.len(), 30);

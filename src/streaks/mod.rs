@@ -1,13 +1,14 @@
 //! Satellite streaks in optical-tracking frames (seed 004): found in the frame, measured to
 //! sub-pixel ends, kept out of star detection, and reduced to RA/Dec and topocentric Az/El.
 //!
-//! The pipeline: `streak_filter` (the pixel stage, a GPU kernel with its CPU twin in
-//! `cpu::streak_filter`: background-subtracted pixels smoothed by a 5×5 binomial kernel,
-//! thresholded at k noise sigmas) → [`segments`] (components of that mask, lines by a coarse
-//! Hough vote per component, collinear pieces joined) → [`fit`] (least squares of a
-//! PSF-blurred segment for the ends, width, flux) → the tests below that keep stars, chains of
-//! stars, hot or bleeding columns and noise out → [`sky`] (times, station, Az/El) and
-//! [`formats`] (CCSDS TDM, IOD).
+//! The pipeline: `streak_filter` (the pixel stage, GPU kernels with their CPU twins in
+//! `cpu::streak_filter`: the frame binned 2×2, less its background, smoothed by a 5×5 binomial
+//! kernel, thresholded at k noise sigmas) → [`segments`] (components of that mask, lines by a
+//! coarse Hough vote per component, collinear pieces joined) → [`fit`] (least squares of a
+//! PSF-blurred segment on the full-resolution pixels for the ends, width, flux) → the tests
+//! below that keep stars, chains of stars, hot or bleeding columns, correlated noise and noise
+//! out → [`reduce`] with [`sky`] (RA/Dec, times, station, Az/El) → [`export`] with [`formats`]
+//! (CCSDS TDM, IOD).
 
 pub mod export;
 pub mod fit;
