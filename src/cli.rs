@@ -1,6 +1,6 @@
 //! The command line (clap derive). `main` calls [`run`].
 
-use crate::batch::{Backend, BackendChoice, CameraSource, Solvers};
+use crate::batch::{Backend, BackendChoice, BackendNote, CameraSource, Solvers};
 use crate::camera::Camera;
 use crate::catalog::{Catalog, DoubleStars};
 use crate::dark::Darks;
@@ -18,7 +18,7 @@ use crate::streaks::{StreakOptions, StreakSettings, export::Exports};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -241,8 +241,10 @@ pub struct SolveOpts {
     /// Record format.
     #[arg(long, value_enum, default_value_t = Format::Jsonl)]
     pub format: Format,
-    /// Where the kernels run: the GPU if there is one (auto), the GPU, or the CPU. The adapter
-    /// is the best one found, or the first whose name contains $GPUSTAR_ADAPTER.
+    /// Where the kernels run: the GPU if there is a hardware one, else the CPU twins (auto;
+    /// a software rasterizer such as lavapipe is slower than the twins), the GPU whatever it
+    /// is, or the CPU. The adapter is the best one found, or the first whose name contains
+    /// $GPUSTAR_ADAPTER.
     #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
     pub backend: BackendChoice,
     /// Frames per GPU batch (one submission for detection and one for voting per batch).
@@ -453,6 +455,9 @@ fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
 /// Run the command line; errors are printed once by `main`.
 pub fn run(cli: Cli) -> Result<ExitCode> {
     init_logging(cli.verbose);
+    if cli.verbose == 0 {
+        give_the_driver_a_runtime_dir();
+    }
     match cli.command {
         Command::Batch { dir, opts, run } => {
             let mut inputs = inputs::list(&dir, run.recursive)?;
@@ -665,9 +670,11 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         ),
         None => Box::new(std::io::stdout()),
     };
-    let (mut backend, warning) = Backend::open(o.backend)?;
-    if let Some(w) = warning {
-        tracing::warn!("{w}");
+    let (mut backend, note) = Backend::open(o.backend)?;
+    match note {
+        Some(BackendNote::Warning(w)) => tracing::warn!("{w}"),
+        Some(BackendNote::Info(i)) => tracing::info!("{i}"),
+        None => {}
     }
     let mut solvers = Solvers::new(catalog, s, camera);
     solvers.darks = match (&o.dark, o.dark_median) {
@@ -800,6 +807,29 @@ fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
         .progress_chars("=> "),
     );
     bar
+}
+
+/// Mesa's Vulkan drivers print "error: XDG_RUNTIME_DIR is invalid or not set in the
+/// environment." on stderr, twice, where the environment has no runtime directory (containers,
+/// batch jobs, cron): give them one of gpustar's own in the temp directory. Left alone with
+/// `-v`, so that the driver's own words can be seen.
+fn give_the_driver_a_runtime_dir() {
+    let set = std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| Path::new(&d).is_dir());
+    if set {
+        return;
+    }
+    let dir = std::env::temp_dir().join("gpustar-runtime");
+    if std::fs::create_dir_all(&dir).is_err() {
+        return;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700));
+    }
+    // SAFETY: called first thing in `run`, before any thread of gpustar's exists, so no other
+    // thread can read the environment while it changes.
+    unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
 }
 
 /// Logs to stderr: warnings by default, more with -v.

@@ -103,6 +103,8 @@ pub struct AdapterSummary {
     pub name: String,
     pub backend: String,
     pub device_type: String,
+    /// A software rasterizer (lavapipe, llvmpipe, SwiftShader): the kernels run on the CPU.
+    pub software: bool,
     pub driver: String,
 }
 
@@ -112,6 +114,7 @@ impl AdapterSummary {
             name: info.name.clone(),
             backend: format!("{:?}", info.backend),
             device_type: format!("{:?}", info.device_type),
+            software: info.device_type == wgpu::DeviceType::Cpu,
             driver: format!("{} {}", info.driver, info.driver_info)
                 .trim()
                 .to_string(),
