@@ -522,21 +522,29 @@ impl Backend {
         match choice {
             BackendChoice::Cpu => Ok((Backend::Cpu, None)),
             BackendChoice::Gpu => Ok((gpu(Gpu::new(name.as_deref())?), None)),
-            BackendChoice::Auto => match Gpu::new(name.as_deref()) {
-                Ok(g) if g.adapter.software && name.is_none() => {
-                    let why = format!(
-                        "the only GPU adapter, {}, is a software rasterizer: the CPU twins of \
-                         the kernels are faster (--backend gpu uses it anyway)",
-                        g.adapter.name
-                    );
-                    Ok((Backend::Cpu, Some(BackendNote::Info(why))))
+            BackendChoice::Auto => {
+                let fallback = |e: anyhow::Error| {
+                    let w = BackendNote::Warning(format!("{e:#}; using the CPU"));
+                    Ok((Backend::Cpu, Some(w)))
+                };
+                // The adapter is looked at before a device is made (that takes a third of a
+                // second on lavapipe).
+                match crate::gpu::best_adapter(name.as_deref()) {
+                    Ok(a) if a.software && name.is_none() => {
+                        let why = format!(
+                            "the only GPU adapter, {}, is a software rasterizer: the CPU twins \
+                             of the kernels are faster (--backend gpu uses it anyway)",
+                            a.name
+                        );
+                        Ok((Backend::Cpu, Some(BackendNote::Info(why))))
+                    }
+                    Ok(_) => match Gpu::new(name.as_deref()) {
+                        Ok(g) => Ok((gpu(g), None)),
+                        Err(e) => fallback(e),
+                    },
+                    Err(e) => fallback(e),
                 }
-                Ok(g) => Ok((gpu(g), None)),
-                Err(e) => Ok((
-                    Backend::Cpu,
-                    Some(BackendNote::Warning(format!("{e:#}; using the CPU"))),
-                )),
-            },
+            }
         }
     }
 

@@ -174,6 +174,41 @@ fn preference(t: wgpu::DeviceType) -> u8 {
     }
 }
 
+/// The adapter [`Gpu::new`] would open, without opening it (no device is made).
+pub fn best_adapter(name: Option<&str>) -> Result<AdapterSummary> {
+    Ok(AdapterSummary::of(
+        &pick_adapter(&instance(), name)?.get_info(),
+    ))
+}
+
+/// The first adapter whose name contains `name`, else the best device type.
+fn pick_adapter(instance: &wgpu::Instance, name: Option<&str>) -> Result<wgpu::Adapter> {
+    let mut all = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    if all.is_empty() {
+        bail!("{NO_ADAPTER_HELP}");
+    }
+    all.sort_by_key(|a| preference(a.get_info().device_type));
+    Ok(match name {
+        Some(n) => {
+            let n = n.to_lowercase();
+            let found = all
+                .iter()
+                .position(|a| a.get_info().name.to_lowercase().contains(&n));
+            match found {
+                Some(i) => all.swap_remove(i),
+                None => bail!(
+                    "no GPU adapter's name contains {n:?} (GPUSTAR_ADAPTER); found: {}",
+                    all.iter()
+                        .map(|a| a.get_info().name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            }
+        }
+        None => all.swap_remove(0),
+    })
+}
+
 /// The message when no adapter is found.
 pub const NO_ADAPTER_HELP: &str = "no GPU adapter found: install a Vulkan driver (on Debian/Ubuntu \
      `apt-get install mesa-vulkan-drivers libvulkan1` gives lavapipe, a software one), or run \
@@ -183,31 +218,7 @@ impl Gpu {
     /// Pick an adapter (the first whose name contains `name`, case-insensitive, when given;
     /// else the best device type) and build the device and pipelines.
     pub fn new(name: Option<&str>) -> Result<Gpu> {
-        let instance = instance();
-        let mut all = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
-        if all.is_empty() {
-            bail!("{NO_ADAPTER_HELP}");
-        }
-        all.sort_by_key(|a| preference(a.get_info().device_type));
-        let adapter = match name {
-            Some(n) => {
-                let n = n.to_lowercase();
-                let found = all
-                    .iter()
-                    .position(|a| a.get_info().name.to_lowercase().contains(&n));
-                match found {
-                    Some(i) => all.swap_remove(i),
-                    None => bail!(
-                        "no GPU adapter's name contains {n:?} (GPUSTAR_ADAPTER); found: {}",
-                        all.iter()
-                            .map(|a| a.get_info().name)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                }
-            }
-            None => all.swap_remove(0),
-        };
+        let adapter = pick_adapter(&instance(), name)?;
         let info = adapter.get_info();
         let granted = adapter.limits();
         // The defaults, so that what passes here runs on any GPU; only buffer sizes grow, to
