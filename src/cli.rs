@@ -696,16 +696,15 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         dut1_s: so.dut1,
         astrometry: so.astrometry,
     });
-    let mut exports = Exports {
-        tdm: so.tdm.clone(),
-        iod: so.iod.clone(),
-        iod_station: so.iod_station,
-        station_name: so.station.map_or_else(
+    let mut exports = Exports::new(
+        so.tdm.clone(),
+        so.iod.clone(),
+        so.iod_station,
+        so.station.map_or_else(
             || "STATION".to_string(),
             |s| format!("{:.5},{:.5},{:.1}", s.lat_deg, s.lon_deg, s.height_m),
         ),
-        ..Exports::default()
-    };
+    );
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
     let bar = progress_bar(inputs.len() as u64, o.quiet);

@@ -25,6 +25,12 @@ pub const SMOOTHED_NOISE: f32 = 140.0;
 /// Side of the blocks the mask is made of (pixels).
 pub const BIN: u32 = 2;
 
+/// The binned grid of a `p`-sized frame: blocks across and down (the frame's size halved,
+/// rounded down: an odd last column or row is left out).
+pub fn grid(p: &DetectParams) -> (u32, u32) {
+    ((p.width / BIN).max(1), (p.height / BIN).max(1))
+}
+
 /// Parameters of the streak mask. Keep in sync with `shaders/shared/streak.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
@@ -34,8 +40,7 @@ pub struct StreakParams {
     /// k_streak · 140 · σ.
     pub level_num: u32,
     pub level_den: u32,
-    /// The binned grid: blocks across and down (the frame's size halved, rounded down: an odd
-    /// last column or row is left out), and mask words (32 blocks each) per frame.
+    /// The binned grid ([`grid`]) and its mask words (32 blocks each) per frame.
     pub width: u32,
     pub height: u32,
     pub words: u32,
@@ -53,7 +58,7 @@ impl StreakParams {
         // offset ≤ 2^19 (k_sigma · 1.4826 · 65535 for k_sigma ≤ 5.4); the product must fit
         // u32, so the ratio is capped at 2^12 / 16 = 256 (k_streak/k_sigma ≤ 1.8).
         let ratio = (k_streak * SMOOTHED_NOISE / k_sigma.max(0.1)).clamp(0.0, 256.0);
-        let (width, height) = ((p.width / BIN).max(1), (p.height / BIN).max(1));
+        let (width, height) = grid(p);
         StreakParams {
             level_num: ((ratio * DEN as f32).round() as u32).clamp(1, 4096),
             level_den: DEN,

@@ -19,14 +19,30 @@ pub struct Exports {
     /// The station's name in the TDM (PARTICIPANT_1).
     pub station_name: String,
     /// One per streak with a timed midpoint.
-    pub tracks: Vec<Track>,
+    tracks: Vec<Track>,
     /// The IOD lines of the same midpoints.
-    pub iod_lines: Vec<String>,
+    iod_lines: Vec<String>,
     /// Streaks without a timed midpoint with RA/Dec (edge ends, no time, no plate).
     pub left_out: usize,
 }
 
 impl Exports {
+    /// Nothing collected yet; files written only where a path is given.
+    pub fn new(
+        tdm: Option<PathBuf>,
+        iod: Option<PathBuf>,
+        iod_station: u16,
+        station_name: String,
+    ) -> Exports {
+        Exports {
+            tdm,
+            iod,
+            iod_station,
+            station_name,
+            ..Exports::default()
+        }
+    }
+
     pub fn wanted(&self) -> bool {
         self.tdm.is_some() || self.iod.is_some()
     }

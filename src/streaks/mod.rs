@@ -19,7 +19,7 @@ pub mod simulate;
 pub mod sky;
 
 use crate::cpu::centroid::Blob;
-use crate::cpu::streak_filter::{BIN, StreakParams, mask_runs, streak_mask};
+use crate::cpu::streak_filter::{BIN, StreakParams, grid, mask_runs, streak_mask};
 use crate::cpu::threshold::{DetectParams, TileStats, background_at, tile_stats};
 use crate::frame::Frame;
 use fit::StreakFit;
@@ -133,9 +133,9 @@ pub fn measure(
     p: &DetectParams,
     s: &StreakSettings,
 ) -> Vec<StreakFit> {
-    let grid = StreakParams::new(p, s.k_sigma, 1.0);
-    let runs = mask_runs(mask, grid.width, grid.height);
-    let segs: Vec<segments::Joined> = segments(&runs, grid.width, &SegmentSettings::default())
+    let (width, height) = grid(p);
+    let runs = mask_runs(mask, width, height);
+    let segs: Vec<segments::Joined> = segments(&runs, width, &SegmentSettings::default())
         .iter()
         .map(|j| j.in_pixels(BIN))
         .collect();

@@ -117,13 +117,13 @@ pub fn records(
 }
 
 /// A map from pixels to ICRS.
-enum Plate {
+enum Plate<'a> {
     /// gpustar's solution: the fitted camera, then the attitude.
-    Solved(Box<crate::refine::Refined>),
+    Solved(&'a crate::refine::Refined),
     Header(crate::wcs::HeaderWcs),
 }
 
-impl Plate {
+impl Plate<'_> {
     fn radec(&self, x: f64, y: f64) -> Option<(f64, f64)> {
         match self {
             Plate::Solved(r) => {
@@ -135,15 +135,15 @@ impl Plate {
     }
 }
 
-fn plate(
-    sol: &Solution,
+fn plate<'a>(
+    sol: &'a Solution,
     keywords: &BTreeMap<String, String>,
     mode: Astrometry,
     warnings: &mut Vec<String>,
-) -> Option<Plate> {
+) -> Option<Plate<'a>> {
     if mode != Astrometry::Header {
         if let Outcome::Solved(r, _) = &sol.outcome {
-            return Some(Plate::Solved(Box::new(r.clone())));
+            return Some(Plate::Solved(r));
         }
     }
     if mode == Astrometry::Solve {
