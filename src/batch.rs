@@ -5,12 +5,13 @@
 use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::dark::Darks;
-use crate::detect::{self, Detection};
+use crate::detect::{self, DetectSettings, Detection};
 use crate::frame::Frame;
 use crate::gpu::Gpu;
 use crate::gpu::vote::{GpuTable, VoteJob};
 use crate::products::Products;
 use crate::record::{Record, Timing};
+use crate::sequence::Detected;
 use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use anyhow::Result;
@@ -53,7 +54,11 @@ pub type SharedSolver = Arc<std::result::Result<Solver, String>>;
 
 /// Frames of one size and bit depth (they share the detection parameters), with their
 /// positions in the batch.
-type SizeGroup = ((u32, u32, u16), Vec<(usize, Decoded)>);
+type SizeGroup = (DetectKey, Vec<(usize, Decoded)>);
+
+/// Frame width, height and saturation level: frames alike in these share detection's
+/// parameters.
+type DetectKey = (u32, u32, u16);
 
 /// Solvers per frame size, built on first use (one distance table per camera) and shared by
 /// every worker thread.
@@ -115,7 +120,7 @@ impl Solvers {
     /// The record of a solved or unsolved frame (with its streaks under `--streaks`), and its
     /// products when asked for.
     #[allow(clippy::too_many_arguments)]
-    fn record(
+    pub(crate) fn record(
         &self,
         solver: Option<&Solver>,
         d: &Decoded,
@@ -198,6 +203,25 @@ impl Solvers {
             }
         };
         Solver::new(&self.catalog, camera, self.settings).map_err(|e| format!("{e:#}"))
+    }
+
+    /// The pixel stages alone on the CPU (`--sequence`), keeping the brightest `max_stars`.
+    pub fn detect_cpu(&self, decoded: Decoded, max_stars: usize) -> Detected {
+        let t0 = Instant::now();
+        let s = DetectSettings {
+            max_stars,
+            ..self.settings.detect
+        };
+        let detections = match &decoded.frame {
+            Ok(f) => Ok(detect::detect(f, &s)),
+            Err(e) => Err(e.clone()),
+        };
+        Detected {
+            decoded,
+            detections,
+            detect_ms: t0.elapsed().as_secs_f64() * 1e3,
+            backend: BACKEND_CPU.to_string(),
+        }
     }
 
     /// Solve a decoded frame on the CPU: one record.
@@ -303,6 +327,78 @@ impl GpuRunner {
         records
             .into_iter()
             .map(|r| r.expect("one record per frame"))
+            .collect()
+    }
+
+    /// The pixel stages alone (`--sequence`), keeping the brightest `max_stars`: each size as
+    /// one GPU batch; on a GPU error the CPU takes over for good. One result per frame, in the
+    /// order given.
+    pub fn detect(
+        &mut self,
+        solvers: &Solvers,
+        frames: Vec<Decoded>,
+        max_stars: usize,
+    ) -> Vec<Detected> {
+        let mut by_size: Vec<(DetectKey, Vec<usize>)> = Vec::new();
+        for (i, d) in frames.iter().enumerate() {
+            if let Ok(f) = &d.frame {
+                let size = (f.width, f.height, f.saturation);
+                match by_size.iter_mut().find(|(s, _)| *s == size) {
+                    Some((_, v)) => v.push(i),
+                    None => by_size.push((size, vec![i])),
+                }
+            }
+        }
+        let mut found: Vec<Option<(Vec<Detection>, f64)>> = vec![None; frames.len()];
+        let s = &DetectSettings {
+            max_stars,
+            ..solvers.settings.detect
+        };
+        for (_, group) in by_size {
+            let batch: Vec<&Frame> = group.iter().map(|&i| decoded_frame(&frames[i])).collect();
+            let t0 = Instant::now();
+            let blobs = if self.failed {
+                Err(anyhow::anyhow!("the GPU failed earlier"))
+            } else {
+                self.gpu.detect(&batch, &detect::params(batch[0], s))
+            };
+            match blobs {
+                Ok(blobs) => {
+                    let ms = t0.elapsed().as_secs_f64() * 1e3 / group.len() as f64;
+                    for (&i, b) in group.iter().zip(&blobs) {
+                        found[i] = Some((detect::star_list(b, s), ms));
+                    }
+                }
+                Err(e) => {
+                    if !self.failed {
+                        tracing::warn!("{e:#}; this batch and the rest of the run use the CPU");
+                        self.failed = true;
+                    }
+                    for &i in &group {
+                        let t0 = Instant::now();
+                        let dets = detect::detect(decoded_frame(&frames[i]), s);
+                        found[i] = Some((dets, t0.elapsed().as_secs_f64() * 1e3));
+                    }
+                }
+            }
+        }
+        let backend = self.name();
+        frames
+            .into_iter()
+            .zip(found)
+            .map(|(decoded, found)| {
+                let (detections, detect_ms) = match (&decoded.frame, found) {
+                    (Err(e), _) => (Err(e.clone()), 0.0),
+                    (Ok(_), Some((d, ms))) => (Ok(d), ms),
+                    (Ok(_), None) => unreachable!("every decoded frame is in a group"),
+                };
+                Detected {
+                    decoded,
+                    detections,
+                    detect_ms,
+                    backend: backend.clone(),
+                }
+            })
             .collect()
     }
 

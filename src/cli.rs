@@ -10,6 +10,7 @@ use crate::output::{self, Format, RecordWriter};
 use crate::products::Products;
 use crate::refine::CameraFit;
 use crate::run::{self as stream, RunOptions};
+use crate::sequence::SequenceOptions;
 use crate::simulate::{self, SimSettings};
 use crate::solve::{PassKind, Settings, Solver, scaled};
 use crate::streaks::reduce::Astrometry;
@@ -41,7 +42,8 @@ GPU asked for but absent) or merge found inputs missing or repeated; 130 when in
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
-    /// Log more to stderr (-v: info, -vv: debug).
+    /// Log more to stderr (-v: info, -vv: debug, -vvv: trace, e.g. every detection of a
+    /// sequence with what it was judged).
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]
     pub verbose: u8,
 }
@@ -134,6 +136,25 @@ pub struct BatchOpts {
     /// Worker threads for decoding (and solving on the CPU) [default: all cores].
     #[arg(short = 'j', long)]
     pub threads: Option<usize>,
+    /// Each directory's frames (with -r, each subdirectory's) are one sequence of a camera
+    /// head, in name order: detections moving against the stars are judged particles (they
+    /// never vote or match), and frames are identified from the attitude the previous ones
+    /// predict (lost-in-space when that fails). Records add sequence_mode and particles.
+    /// A sequence is never split across shards.
+    #[arg(long, help_heading = "Sequences")]
+    pub sequence: bool,
+    /// Seconds between frames, for frames without a time in their header (FITS DATE-OBS).
+    #[arg(long, value_name = "SECONDS", requires = "sequence", help_heading = "Sequences",
+          value_parser = parse_positive)]
+    pub frame_interval: Option<f64>,
+}
+
+/// A number greater than zero.
+fn parse_positive(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("expected a number of seconds above 0, got {s:?}")),
+    }
 }
 
 #[derive(Subcommand, Debug)]
@@ -424,6 +445,34 @@ pub struct SimulateArgs {
     /// Peak SNR per pixel of the streaks, LOW..HIGH (drawn uniformly).
     #[arg(long, default_value = "4..25", value_parser = parse_range, help_heading = "Streaks")]
     pub streak_snr: (f64, f64),
+    /// Sequences of a turning star tracker with moving particles: --sequences directories
+    /// seq_NNN of -n frames each, 16-bit FITS with DATE-OBS, DATE-END and EXPTIME;
+    /// truth.jsonl adds each frame's sequence, index, time and particles.
+    #[arg(long, conflicts_with_all = ["camera", "streaks"], help_heading = "Sequences")]
+    pub sequence: bool,
+    /// Number of sequences.
+    #[arg(long, default_value_t = 2, help_heading = "Sequences")]
+    pub sequences: usize,
+    /// Seconds between frames.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive,
+          help_heading = "Sequences")]
+    pub frame_interval: f64,
+    /// The camera's turn rate, LOW..HIGH degrees per second (drawn per sequence).
+    #[arg(long, default_value = "0.05..0.5", value_parser = parse_range,
+          help_heading = "Sequences")]
+    pub turn_rate: (f64, f64),
+    /// Particles per catalog star in view of the first frame (0: none).
+    #[arg(long, default_value_t = 1.5, help_heading = "Sequences")]
+    pub particle_ratio: f64,
+    /// Particle speeds against the stars, LOW..HIGH arcmin per second.
+    #[arg(long, default_value = "6..40", value_parser = parse_range,
+          help_heading = "Sequences")]
+    pub particle_speed: (f64, f64),
+    /// Particle magnitudes, LOW..HIGH (on the stars' scale: most are brighter than most
+    /// stars).
+    #[arg(long, default_value = "1.5..5", value_parser = parse_range,
+          help_heading = "Sequences")]
+    pub particle_mag: (f64, f64),
 }
 
 /// `LOW..HIGH`, two positive numbers.
@@ -462,7 +511,14 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Batch { dir, opts, run } => {
             let mut inputs = inputs::list(&dir, run.recursive)?;
             if let Some(shard) = run.shard {
-                inputs.retain(|i| shard.takes(&i.name));
+                // A sequence goes to one shard whole: its frames depend on each other.
+                inputs.retain(|i| {
+                    shard.takes(if run.sequence {
+                        crate::sequence::sequence_of(&i.name)
+                    } else {
+                        &i.name
+                    })
+                });
             }
             run_solve(inputs, &opts, &run)
         }
@@ -473,6 +529,8 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 resume: false,
                 shard: None,
                 threads: Some(1),
+                sequence: false,
+                frame_interval: None,
             };
             run_solve(vec![Input { path: image, name }], &opts, &run)
         }
@@ -621,6 +679,12 @@ fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
 }
 
 fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCode> {
+    if b.sequence && o.streaks.streaks {
+        anyhow::bail!(
+            "--sequence and --streaks do not go together yet: run the sequences and the \
+             streak frames separately"
+        );
+    }
     let header_only = o.streaks.streaks && o.streaks.astrometry == Astrometry::Header;
     let (camera, camera_mag, scale_range) = camera_source(&o.camera, header_only)?;
     let catalog = Catalog::load(o.catalog.catalog.as_deref())?;
@@ -715,6 +779,10 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         threads,
         batch_size: o.batch_size,
         flush_every: std::time::Duration::from_millis(250),
+        sequence: b.sequence.then(|| SequenceOptions {
+            frame_interval_s: b.frame_interval,
+            ..SequenceOptions::default()
+        }),
     };
     let summary = stream::run(
         inputs,
@@ -836,7 +904,8 @@ fn init_logging(verbose: u8) {
     let level = match verbose {
         0 => tracing::Level::WARN,
         1 => tracing::Level::INFO,
-        _ => tracing::Level::DEBUG,
+        2 => tracing::Level::DEBUG,
+        _ => tracing::Level::TRACE,
     };
     let _ = tracing_subscriber::fmt()
         .with_max_level(level)
@@ -1033,6 +1102,34 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    if a.sequence {
+        let q = crate::sequence::simulate::SequenceSim {
+            sequences: a.sequences,
+            frames: a.frames,
+            interval_s: a.frame_interval,
+            rate_deg_s: a.turn_rate,
+            particle_ratio: a.particle_ratio,
+            particle_speed_arcmin_s: a.particle_speed,
+            particle_mag: a.particle_mag,
+            start: crate::streaks::sky::Utc::parse(&a.start_utc)
+                .map_err(|e| anyhow::anyhow!("--start-utc: {e}"))?,
+            ..Default::default()
+        };
+        let s = SimSettings {
+            epoch: crate::fits::julian_year(&a.start_utc).unwrap_or(a.epoch),
+            ..s
+        };
+        crate::sequence::simulate::write_set(&catalog, &s, &q, &a.out, threads)?;
+        eprintln!(
+            "gpustar: wrote {} sequences of {} FITS frames, truth.jsonl and camera.toml to {} \
+             in {:.1} s",
+            a.sequences,
+            a.frames,
+            a.out.display(),
+            t0.elapsed().as_secs_f64()
+        );
+        return Ok(ExitCode::SUCCESS);
+    }
     simulate::write_set(&catalog, &s, &a.out, threads, |_| {})?;
     eprintln!(
         "gpustar: wrote {} frames, truth.jsonl and camera.toml to {} in {:.1} s",

@@ -29,6 +29,7 @@ pub mod products;
 pub mod record;
 pub mod refine;
 pub mod run;
+pub mod sequence;
 pub mod simulate;
 pub mod solve;
 pub mod streaks;

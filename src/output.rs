@@ -16,7 +16,7 @@ pub enum Format {
     Csv,
 }
 
-pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1,streaks";
+pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1,streaks,sequence_mode,particles";
 
 /// Writes records as whole lines: lines are collected and handed to the file in one write
 /// per flush, so a crash leaves at most one incomplete last line (which `--resume` drops).
@@ -109,6 +109,14 @@ fn csv_row(r: &Record) -> String {
             &r.streaks
                 .as_ref()
                 .map(|s| serde_json::to_string(s).expect("streaks serialise"))
+                .unwrap_or_default(),
+        ),
+        // With --sequence: the mode, and the particles as their JSON array.
+        csv_field(r.sequence_mode.as_deref().unwrap_or_default()),
+        csv_field(
+            &r.particles
+                .as_ref()
+                .map(|p| serde_json::to_string(p).expect("particles serialise"))
                 .unwrap_or_default(),
         ),
     ]

@@ -118,6 +118,25 @@ pub struct Record {
     /// otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub streaks: Option<Vec<StreakRecord>>,
+    /// With `--sequence`: how the frame was identified, `tracking` (from the attitude the
+    /// previous frames predict) or `lost_in_space`; absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sequence_mode: Option<String>,
+    /// With `--sequence`: detections judged to move against the star field (never used as
+    /// stars; an empty list when none); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub particles: Option<Vec<ParticleRecord>>,
+}
+
+/// A detection judged to be a moving particle (`--sequence`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ParticleRecord {
+    pub x: f64,
+    pub y: f64,
+    /// Its velocity against the stars, in this frame's pixels per second; null for a
+    /// particle seen in this frame only (judged by what the previous frame did not show).
+    pub vx_px_s: Option<f64>,
+    pub vy_px_s: Option<f64>,
 }
 
 impl Record {
@@ -147,6 +166,8 @@ impl Record {
             epoch: None,
             warnings: Vec::new(),
             streaks: None,
+            sequence_mode: None,
+            particles: None,
         }
     }
 

@@ -73,6 +73,11 @@ pub struct Refined {
     pub p90_arcsec: f64,
     pub max_arcsec: f64,
     pub false_match_prob: f64,
+    /// What the false-match probability counted: the hypotheses a chance match could come
+    /// from, and the stars that fixed the one accepted (2 for a pair or a predicted attitude,
+    /// 3 for a triangle). Refining again from another start counts the same.
+    pub hypotheses: u64,
+    pub fixed: usize,
 }
 
 /// Reference stars projecting inside the image under `r`: (ref id, pixel).
@@ -222,6 +227,8 @@ pub fn refine(
         max_arcsec: *res.last().unwrap(),
         matches,
         false_match_prob,
+        hypotheses,
+        fixed,
     })
 }
 

@@ -9,6 +9,7 @@ use crate::batch::{Backend, Counts, Decoded, Solvers};
 use crate::inputs::Input;
 use crate::output::RecordWriter;
 use crate::record::Record;
+use crate::sequence::{Detected, SequenceOptions, Sequencer};
 use anyhow::Result;
 use crossbeam_channel::{Receiver, Sender, bounded};
 use std::collections::BTreeMap;
@@ -24,6 +25,8 @@ pub struct RunOptions {
     pub batch_size: usize,
     /// Hand records to the file at least this often, and every `FLUSH_RECORDS` records.
     pub flush_every: Duration,
+    /// `--sequence`: each directory's frames are solved as one sequence, in input order.
+    pub sequence: Option<SequenceOptions>,
 }
 
 /// Records written between flushes at most: a crash loses at most this many (plus those the
@@ -73,48 +76,84 @@ pub fn run(
                 }
             }
         });
-        match backend {
-            Backend::Cpu => {
-                for _ in 0..threads {
-                    let (rx, tx) = (work_rx.clone(), done_tx.clone());
-                    scope.spawn(move || {
-                        for (i, input) in rx {
-                            let r = guarded(&input.name, || {
-                                solvers.solve_cpu(solvers.decode(&input.path, &input.name))
-                            });
-                            if tx.send((i, r)).is_err() {
-                                break;
+        if let Some(seq) = opts.sequence {
+            // Sequences: the pixel stages in parallel (or batched on the GPU), then one thread
+            // that takes the frames in input order.
+            let (det_tx, det_rx) = bounded::<(usize, Detected)>(window);
+            match backend {
+                Backend::Cpu => {
+                    for _ in 0..threads {
+                        let (rx, tx) = (work_rx.clone(), det_tx.clone());
+                        scope.spawn(move || {
+                            for (i, input) in rx {
+                                let d = guarded_detect(&input, || {
+                                    solvers.detect_cpu(
+                                        solvers.decode(&input.path, &input.name),
+                                        seq.detect_stars,
+                                    )
+                                });
+                                if tx.send((i, d)).is_err() {
+                                    break;
+                                }
                             }
-                        }
+                        });
+                    }
+                }
+                Backend::Gpu(runner) => {
+                    let frame_rx = spawn_decoders(scope, solvers, &work_rx, threads, window);
+                    let tx = det_tx.clone();
+                    scope.spawn(move || {
+                        gpu_detect_loop(runner, solvers, frame_rx, tx, batch, seq.detect_stars)
                     });
                 }
             }
-            Backend::Gpu(runner) => {
-                let (frame_tx, frame_rx) = bounded::<(usize, Decoded)>(window);
-                for _ in 0..threads {
-                    let (rx, tx) = (work_rx.clone(), frame_tx.clone());
-                    scope.spawn(move || {
-                        for (i, input) in rx {
-                            let d = std::panic::catch_unwind(|| {
-                                solvers.decode(&input.path, &input.name)
-                            })
-                            .unwrap_or_else(|p| Decoded {
-                                name: input.name.clone(),
-                                path: input.path.clone(),
-                                epoch: None,
-                                keywords: Default::default(),
-                                frame: Err(panic_message(&p)),
-                                decode_ms: 0.0,
-                            });
-                            if tx.send((i, d)).is_err() {
-                                break;
+            drop(det_tx);
+            let tx = done_tx.clone();
+            scope.spawn(move || sequence_loop(solvers, seq, det_rx, tx));
+        } else {
+            match backend {
+                Backend::Cpu => {
+                    for _ in 0..threads {
+                        let (rx, tx) = (work_rx.clone(), done_tx.clone());
+                        scope.spawn(move || {
+                            for (i, input) in rx {
+                                let r = guarded(&input.name, || {
+                                    solvers.solve_cpu(solvers.decode(&input.path, &input.name))
+                                });
+                                if tx.send((i, r)).is_err() {
+                                    break;
+                                }
                             }
-                        }
-                    });
+                        });
+                    }
                 }
-                drop(frame_tx);
-                let tx = done_tx.clone();
-                scope.spawn(move || gpu_loop(runner, solvers, frame_rx, tx, batch));
+                Backend::Gpu(runner) => {
+                    let (frame_tx, frame_rx) = bounded::<(usize, Decoded)>(window);
+                    for _ in 0..threads {
+                        let (rx, tx) = (work_rx.clone(), frame_tx.clone());
+                        scope.spawn(move || {
+                            for (i, input) in rx {
+                                let d = std::panic::catch_unwind(|| {
+                                    solvers.decode(&input.path, &input.name)
+                                })
+                                .unwrap_or_else(|p| Decoded {
+                                    name: input.name.clone(),
+                                    path: input.path.clone(),
+                                    epoch: None,
+                                    keywords: Default::default(),
+                                    frame: Err(panic_message(&p)),
+                                    decode_ms: 0.0,
+                                });
+                                if tx.send((i, d)).is_err() {
+                                    break;
+                                }
+                            }
+                        });
+                    }
+                    drop(frame_tx);
+                    let tx = done_tx.clone();
+                    scope.spawn(move || gpu_loop(runner, solvers, frame_rx, tx, batch));
+                }
             }
         }
         drop(work_rx);
@@ -164,6 +203,129 @@ fn gpu_loop(
             }
         }
     }
+}
+
+/// Decoder threads for the GPU's sequence path: decoded frames, in any order.
+fn spawn_decoders<'s, 'e: 's>(
+    scope: &'s std::thread::Scope<'s, 'e>,
+    solvers: &'e Solvers,
+    work: &Receiver<(usize, Input)>,
+    threads: usize,
+    window: usize,
+) -> Receiver<(usize, Decoded)> {
+    let (frame_tx, frame_rx) = bounded::<(usize, Decoded)>(window);
+    for _ in 0..threads {
+        let (rx, tx) = (work.clone(), frame_tx.clone());
+        scope.spawn(move || {
+            for (i, input) in rx {
+                let d = std::panic::catch_unwind(|| solvers.decode(&input.path, &input.name))
+                    .unwrap_or_else(|p| panicked_decode(&input, &p));
+                if tx.send((i, d)).is_err() {
+                    break;
+                }
+            }
+        });
+    }
+    frame_rx
+}
+
+/// The decoded frame of an input whose decoding panicked: its error record says so.
+fn panicked_decode(input: &Input, p: &Box<dyn std::any::Any + Send>) -> Decoded {
+    Decoded {
+        name: input.name.clone(),
+        path: input.path.clone(),
+        epoch: None,
+        keywords: Default::default(),
+        frame: Err(panic_message(p)),
+        decode_ms: 0.0,
+    }
+}
+
+/// The GPU thread of a sequence run: batches of decoded frames through the pixel stages.
+fn gpu_detect_loop(
+    runner: &mut crate::batch::GpuRunner,
+    solvers: &Solvers,
+    frames: Receiver<(usize, Decoded)>,
+    done: Sender<(usize, Detected)>,
+    batch: usize,
+    max_stars: usize,
+) {
+    while let Ok(first) = frames.recv() {
+        let mut items = vec![first];
+        let deadline = Instant::now() + Duration::from_millis(50);
+        while items.len() < batch {
+            match frames.recv_deadline(deadline) {
+                Ok(item) => items.push(item),
+                Err(_) => break,
+            }
+        }
+        let (indices, decoded): (Vec<usize>, Vec<Decoded>) = items.into_iter().unzip();
+        let inputs: Vec<Input> = decoded
+            .iter()
+            .map(|d| Input {
+                path: d.path.clone(),
+                name: d.name.clone(),
+            })
+            .collect();
+        let found = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            runner.detect(solvers, decoded, max_stars)
+        }))
+        .unwrap_or_else(|p| {
+            let backend = runner.name();
+            inputs
+                .iter()
+                .map(|i| Detected {
+                    decoded: panicked_decode(i, &p),
+                    detections: Err(panic_message(&p)),
+                    detect_ms: 0.0,
+                    backend: backend.clone(),
+                })
+                .collect()
+        });
+        for (i, d) in indices.into_iter().zip(found) {
+            if done.send((i, d)).is_err() {
+                return;
+            }
+        }
+    }
+}
+
+/// The sequence thread: frames in input order through the sequence stage (a panic on one frame
+/// becomes its error record, and its sequence starts again at the next frame).
+fn sequence_loop(
+    solvers: &Solvers,
+    opts: SequenceOptions,
+    detected: Receiver<(usize, Detected)>,
+    done: Sender<(usize, Record)>,
+) {
+    let mut seq = Sequencer::new(solvers, opts);
+    let mut waiting: BTreeMap<usize, Detected> = BTreeMap::new();
+    let mut next = 0usize;
+    for (i, d) in detected {
+        waiting.insert(i, d);
+        while let Some(d) = waiting.remove(&next) {
+            let (name, backend) = (d.decoded.name.clone(), d.backend.clone());
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| seq.next(d)))
+                .unwrap_or_else(|p| {
+                    seq = Sequencer::new(solvers, opts);
+                    Record::error(&name, panic_message(&p), &backend)
+                });
+            if done.send((next, r)).is_err() {
+                return;
+            }
+            next += 1;
+        }
+    }
+}
+
+/// The pixel stages of one input; a panic becomes its error.
+fn guarded_detect(input: &Input, f: impl FnOnce() -> Detected) -> Detected {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| Detected {
+        decoded: panicked_decode(input, &p),
+        detections: Err(panic_message(&p)),
+        detect_ms: 0.0,
+        backend: crate::batch::BACKEND_CPU.to_string(),
+    })
 }
 
 /// Run `f` for one input; a panic (a bug, in gpustar or a decoder) becomes that input's

@@ -162,10 +162,34 @@ pub fn add_spot(signal: &mut [f64], w: u32, h: u32, x: f64, y: f64, electrons: f
 
 /// Render one frame: the pixels (as u16 in ADU) and its truth.
 pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u16>, Truth)> {
-    let camera = s.camera()?;
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(index as u64);
     let r = random_rotation(&mut rng);
+    render_with(catalog, s, index, &mut rng, &r, &[])
+}
+
+/// A spot drawn besides the stars (a particle of `simulate --sequence`): where, how many
+/// electrons, its Gaussian sigma (pixels).
+#[derive(Clone, Copy, Debug)]
+pub struct Spot {
+    pub x: f64,
+    pub y: f64,
+    pub electrons: f64,
+    pub sigma_px: f64,
+}
+
+/// Render frame `index` at attitude `r` with `extra` spots, drawing its false stars and noise
+/// from `rng`.
+pub fn render_with(
+    catalog: &Catalog,
+    s: &SimSettings,
+    index: usize,
+    rng: &mut ChaCha8Rng,
+    r: &Matrix3<f64>,
+    extra: &[Spot],
+) -> Result<(Vec<u16>, Truth)> {
+    let camera = s.camera()?;
+    let r = *r;
     let (w, h) = (camera.width, camera.height);
     let vig = |x: f64, y: f64| {
         let (dx, dy) = (x - camera.cx, y - camera.cy);
@@ -229,6 +253,9 @@ pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u
         );
         false_stars.push([x, y]);
     }
+    for e in extra {
+        add_spot(&mut signal, w, h, e.x, e.y, e.electrons, e.sigma_px);
+    }
     let full = if s.bits == 8 { 255.0 } else { 65535.0 };
     let read = Normal::new(0.0, s.read_noise_e).context("read noise")?;
     let mut pixels = vec![0u16; (w * h) as usize];
@@ -237,13 +264,11 @@ pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u
             let i = (y * w + x) as usize;
             let mean = signal[i] + s.sky_e * vig(x as f64, y as f64);
             let e = if mean > 0.0 {
-                Poisson::new(mean)
-                    .map(|p| p.sample(&mut rng))
-                    .unwrap_or(mean)
+                Poisson::new(mean).map(|p| p.sample(rng)).unwrap_or(mean)
             } else {
                 0.0
             };
-            let adu = (e + read.sample(&mut rng)) * full / s.full_well_e;
+            let adu = (e + read.sample(rng)) * full / s.full_well_e;
             pixels[i] = adu.round().clamp(0.0, full) as u16;
         }
     }

@@ -343,6 +343,8 @@ pub struct Solution {
     pub epoch: Option<f64>,
 }
 
+// One per frame, moved rarely: boxing the solution would buy nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Outcome {
     /// The refined solution, and the reference stars its matches' ids index.
