@@ -432,7 +432,8 @@ pub struct SimulateArgs {
     /// Every fifth frame has none, the others one or two, many crossing the frame's edge.
     #[arg(long, conflicts_with = "camera", help_heading = "Streaks")]
     pub streaks: bool,
-    /// Exposure start of the first frame (UTC); each next frame starts a minute later.
+    /// Exposure start of the first frame (UTC); each next frame starts a minute later. With
+    /// --sequence: mid-exposure of each sequence's first frame.
     #[arg(long, default_value = "2024-03-15T20:00:00", help_heading = "Streaks")]
     pub start_utc: String,
     /// Exposure time, seconds.

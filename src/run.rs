@@ -128,29 +128,7 @@ pub fn run(
                     }
                 }
                 Backend::Gpu(runner) => {
-                    let (frame_tx, frame_rx) = bounded::<(usize, Decoded)>(window);
-                    for _ in 0..threads {
-                        let (rx, tx) = (work_rx.clone(), frame_tx.clone());
-                        scope.spawn(move || {
-                            for (i, input) in rx {
-                                let d = std::panic::catch_unwind(|| {
-                                    solvers.decode(&input.path, &input.name)
-                                })
-                                .unwrap_or_else(|p| Decoded {
-                                    name: input.name.clone(),
-                                    path: input.path.clone(),
-                                    epoch: None,
-                                    keywords: Default::default(),
-                                    frame: Err(panic_message(&p)),
-                                    decode_ms: 0.0,
-                                });
-                                if tx.send((i, d)).is_err() {
-                                    break;
-                                }
-                            }
-                        });
-                    }
-                    drop(frame_tx);
+                    let frame_rx = spawn_decoders(scope, solvers, &work_rx, threads, window);
                     let tx = done_tx.clone();
                     scope.spawn(move || gpu_loop(runner, solvers, frame_rx, tx, batch));
                 }
@@ -175,16 +153,7 @@ fn gpu_loop(
     done: Sender<(usize, Record)>,
     batch: usize,
 ) {
-    while let Ok(first) = frames.recv() {
-        let mut items = vec![first];
-        // Wait briefly for the decoders so batches are full while they keep up.
-        let deadline = Instant::now() + Duration::from_millis(50);
-        while items.len() < batch {
-            match frames.recv_deadline(deadline) {
-                Ok(item) => items.push(item),
-                Err(_) => break,
-            }
-        }
+    while let Some(items) = next_batch(&frames, batch) {
         let (indices, decoded): (Vec<usize>, Vec<Decoded>) = items.into_iter().unzip();
         let names: Vec<String> = decoded.iter().map(|d| d.name.clone()).collect();
         let records = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -205,7 +174,22 @@ fn gpu_loop(
     }
 }
 
-/// Decoder threads for the GPU's sequence path: decoded frames, in any order.
+/// The next GPU batch: as many decoded frames as are ready, up to `batch`, after waiting
+/// briefly for the decoders so batches are full while they keep up; None when the decoders are
+/// done.
+fn next_batch(frames: &Receiver<(usize, Decoded)>, batch: usize) -> Option<Vec<(usize, Decoded)>> {
+    let mut items = vec![frames.recv().ok()?];
+    let deadline = Instant::now() + Duration::from_millis(50);
+    while items.len() < batch {
+        match frames.recv_deadline(deadline) {
+            Ok(item) => items.push(item),
+            Err(_) => break,
+        }
+    }
+    Some(items)
+}
+
+/// Decoder threads for the GPU paths: decoded frames, in any order.
 fn spawn_decoders<'s, 'e: 's>(
     scope: &'s std::thread::Scope<'s, 'e>,
     solvers: &'e Solvers,
@@ -250,15 +234,7 @@ fn gpu_detect_loop(
     batch: usize,
     max_stars: usize,
 ) {
-    while let Ok(first) = frames.recv() {
-        let mut items = vec![first];
-        let deadline = Instant::now() + Duration::from_millis(50);
-        while items.len() < batch {
-            match frames.recv_deadline(deadline) {
-                Ok(item) => items.push(item),
-                Err(_) => break,
-            }
-        }
+    while let Some(items) = next_batch(&frames, batch) {
         let (indices, decoded): (Vec<usize>, Vec<Decoded>) = items.into_iter().unzip();
         let inputs: Vec<Input> = decoded
             .iter()

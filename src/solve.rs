@@ -519,7 +519,9 @@ impl Solver {
             },
         };
         let (refined, hypotheses, fixed) = accepted;
-        match self.deepen(&refined, detections, p, epoch, hypotheses, fixed) {
+        match self.deepen(
+            &refined, detections, p.band, &p.refine, epoch, hypotheses, fixed,
+        ) {
             Some((deeper, deep_refs)) => Outcome::Solved(deeper, deep_refs),
             None => Outcome::Solved(refined, refs),
         }
@@ -532,18 +534,20 @@ impl Solver {
     /// the same false-match test with the same hypotheses; None = nothing deeper to check
     /// against, or the deeper refinement matched fewer stars or failed the test (the accepted
     /// one then stands).
-    fn deepen(
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn deepen(
         &self,
         accepted: &Refined,
         detections: &[Detection],
-        p: &Prepared,
+        band: usize,
+        rs: &RefineSettings,
         epoch: Option<f64>,
         hypotheses: u64,
         fixed: usize,
     ) -> Option<(Refined, Arc<RefCatalog>)> {
         let deeper = self.deeper.as_ref()?;
         let mag_limit = auto_mag_limit(&deeper.catalog, &accepted.camera);
-        let voted_with = self.bands[p.band].refs.selection;
+        let voted_with = self.bands[band].refs.selection;
         if mag_limit <= voted_with.mag_limit {
             return None;
         }
@@ -572,7 +576,7 @@ impl Solver {
             &accepted.camera,
             hypotheses,
             fixed,
-            &p.refine,
+            rs,
         )?;
         (refined.matches.len() >= accepted.matches.len()
             && refined.false_match_prob <= self.settings.refine.max_false_prob)

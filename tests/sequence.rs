@@ -269,3 +269,71 @@ fn shards_keep_a_sequence_whole() {
         );
     }
 }
+
+/// swarm-a's real frames as sequences (one directory per satellite, head and day; 600 s
+/// apart, the attitude turning 25–39° between frames): frames from each series' third on are
+/// tracked at the rate of the last two solutions, and every frame is solved within 300″ of
+/// the truth (Swarm's pixels are 89″ × 171″; lost-in-space's median there is 56″).
+#[test]
+fn swarm_a_series_are_tracked() {
+    let Some(shared) = common::shared_dir("swarm_a_series_are_tracked") else {
+        return;
+    };
+    let real = shared.join("data/real/swarm-a");
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("swarm");
+    for e in std::fs::read_dir(&real).unwrap() {
+        let p = e.unwrap().path();
+        let name = p.file_name().unwrap().to_str().unwrap().to_string();
+        if !name.ends_with(".png") {
+            continue;
+        }
+        // SWA_StrA_2014-10-21T10h30m10.000Z_151.png → SWA_StrA_2014-10-21
+        let series = dir.join(name.split('T').next().unwrap());
+        std::fs::create_dir_all(&series).unwrap();
+        std::fs::copy(&p, series.join(&name)).unwrap();
+    }
+    let camera =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/cameras/swarm-a.toml");
+    let opts = [
+        "--epoch",
+        "2014.85",
+        "--fov-tolerance",
+        "0.01",
+        "--fit",
+        "distortion",
+    ];
+    let mut base = vec!["--backend", "cpu"];
+    base.extend(opts);
+    let alone = batch(&dir, &camera, &base);
+    base.extend(["--sequence", "--frame-interval", "600"]);
+    let seq = batch(&dir, &camera, &base);
+    let truth: Vec<Value> = std::fs::read_to_string(real.join("truth.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let mut tracked = 0;
+    for (r, a) in seq.iter().zip(&alone) {
+        assert_eq!(r["file"], a["file"]);
+        assert_eq!(r["status"], "solved", "{r}");
+        let name = r["file"].as_str().unwrap().rsplit('/').next().unwrap();
+        let t = truth.iter().find(|t| t["file"] == name).unwrap();
+        let err = attitude_error(
+            &matrix(&r["rotation_matrix"]),
+            &matrix(&t["rotation_matrix"]),
+        )
+        .to_degrees()
+            * 3600.0;
+        assert!(err < 300.0, "{name}: {err}″ from the truth");
+        if r["sequence_mode"] == "tracking" {
+            tracked += 1;
+            // At most one star fewer than alone (see README: --fit distortion).
+            assert!(
+                r["stars_matched"].as_u64().unwrap() + 1 >= a["stars_matched"].as_u64().unwrap()
+            );
+        }
+    }
+    assert!(tracked >= 14, "{tracked} of {} frames tracked", seq.len());
+    println!("swarm-a: {tracked} of {} frames tracked", seq.len());
+}

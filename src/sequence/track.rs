@@ -117,12 +117,19 @@ pub fn identify(
     };
     // The prediction is one more hypothesis; refinement fits the attitude to its matches, and
     // any two stars can be fitted exactly: they count as fixed, as for a pair.
-    if let Some(r) = from(pred.r, 2) {
-        return Some((r, refs.clone()));
-    }
-    pairs.iter().take(s.max_tries).find_map(|&(i, j, a, b)| {
-        let icrs = [refs.stars[a as usize].v, refs.stars[b as usize].v];
-        let r0 = wahba(&[cam[i], cam[j]], &icrs)?;
-        from(r0, 2).map(|r| (r, refs.clone()))
-    })
+    let accepted = from(pred.r, 2).or_else(|| {
+        pairs.iter().take(s.max_tries).find_map(|&(i, j, a, b)| {
+            let icrs = [refs.stars[a as usize].v, refs.stars[b as usize].v];
+            let r0 = wahba(&[cam[i], cam[j]], &icrs)?;
+            from(r0, 2)
+        })
+    })?;
+    // As lost-in-space does after a scale search: checked against the catalog as deep as the
+    // fitted field calls for.
+    let (h, fixed) = (accepted.hypotheses, accepted.fixed);
+    Some(
+        solver
+            .deepen(&accepted, dets, band, rs, epoch, h, fixed)
+            .unwrap_or((accepted, refs)),
+    )
 }
