@@ -411,13 +411,8 @@ fn predict(
 ) -> Option<Prediction> {
     let last = solved.last()?;
     let px_cone = CHAIN_CONE_PX * camera.ifov_rad();
-    // The last solution's scale (searched, when the scale is uncertain) with the solver's own
-    // distortion: refinement then fits from where lost-in-space would start.
-    let camera = {
-        let mut c = camera.clone();
-        (c.fx, c.fy) = (last.camera.fx, last.camera.fy);
-        c
-    };
+    // The camera as the last solution fitted it (scale, distortion): the same camera.
+    let camera = last.camera.clone();
     if let (Some((id, c)), Some((last_id, last_c))) = (chain, last.chain) {
         if id == last_id {
             return Some(Prediction {
@@ -467,11 +462,12 @@ fn with_all_detections(
     for m in &mut r.matches {
         m.det = kept[m.det];
     }
-    if kept.len() == all.len() {
-        return Outcome::Solved(r, refs);
-    }
     let s = &solver.settings.refine;
     let alone = &all[..all.len().min(solver.settings.detect.max_stars)];
+    // No particle among the frame's own detections: the solution is already theirs.
+    if kept.iter().take(alone.len()).copied().eq(0..alone.len()) {
+        return Outcome::Solved(r, refs);
+    }
     match refine::refine(r.r, alone, &refs, &r.camera, r.hypotheses, r.fixed, s) {
         Some(again)
             if again.false_match_prob <= s.max_false_prob

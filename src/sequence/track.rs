@@ -40,7 +40,7 @@ impl Default for TrackSettings {
 pub struct Prediction {
     /// ICRS → camera.
     pub r: Matrix3<f64>,
-    /// The camera to start from: the last solution's scale, the solver's distortion.
+    /// The camera as the last solution fitted it (its scale and distortion, when fitted).
     pub camera: Camera,
     /// How far (radians) a star may be from where the prediction puts it.
     pub cone_rad: f64,
@@ -76,8 +76,9 @@ pub fn identify(
     // The catalog stars that can be in view, then each detection's candidates, nearest first.
     let boresight = pred.r.transpose() * camera.centre_vector();
     let reach = (camera.diagonal_rad() / 2.0 + cone + 0.01).min(std::f64::consts::PI);
+    let cos_reach = reach.cos();
     let near: Vec<u32> = (0..refs.stars.len() as u32)
-        .filter(|&id| refs.stars[id as usize].v.angle(&boresight) <= reach)
+        .filter(|&id| refs.stars[id as usize].v.dot(&boresight) >= cos_reach)
         .collect();
     let tol = s.pair_tol_px * camera.ifov_rad();
     let candidates: Vec<Vec<u32>> = cam
