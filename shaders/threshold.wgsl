@@ -1,5 +1,7 @@
 // Stage threshold, kernel 2 of 2 (CPU twin: src/cpu/threshold.rs threshold): the mask
-// pixel · s² > interpolated (background + offset) · s², in integers. One invocation per 32
+// pixel · s² > interpolated (background + offset) · s², in integers; with the matched filter
+// (matched = 1, twin threshold_filtered) the pixel and its 3x3 binomial smoothing both above
+// the filter's level. One invocation per 32
 // pixels (in raster order) writes one mask word; each set pixel starts as its own label and
 // its index is appended to the set list, which the later kernels walk instead of the frame
 // (the list's order does not matter to them). Dispatch (blocks, images), striding.
@@ -20,6 +22,28 @@ fn pixel(img: u32, i: u32) -> u32 {
 fn level(img: u32, tx: u32, ty: u32) -> u32 {
     let t = tiles[img * u.b.tiles_per_image + ty * u.p.tiles_x + tx];
     return min(t.background + t.offset, 65536u);
+}
+
+// The matched filter's tile level in 1/16 ADU (src/cpu/threshold.rs filtered_tile_level).
+fn flevel(img: u32, tx: u32, ty: u32) -> u32 {
+    let t = tiles[img * u.b.tiles_per_image + ty * u.p.tiles_x + tx];
+    return 16u * t.background + 6u * min(t.offset, 1u << 20u);
+}
+
+// The 3x3 binomial sum at (x, y), edges repeated (src/cpu/threshold.rs binomial3).
+fn binomial3(img: u32, x: u32, y: u32) -> u32 {
+    let w = u.p.width;
+    let xl = select(x - 1u, 0u, x == 0u);
+    let xr = min(x + 1u, w - 1u);
+    let yu = select(y - 1u, 0u, y == 0u);
+    let yd = min(y + 1u, u.p.height - 1u);
+    let ru = yu * w;
+    let rc = y * w;
+    let rd = yd * w;
+    let up = pixel(img, ru + xl) + 2u * pixel(img, ru + x) + pixel(img, ru + xr);
+    let mid = pixel(img, rc + xl) + 2u * pixel(img, rc + x) + pixel(img, rc + xr);
+    let down = pixel(img, rd + xl) + 2u * pixel(img, rd + x) + pixel(img, rd + xr);
+    return up + 2u * mid + down;
 }
 
 // The position of a coordinate among the tile centres, kept as the doubled offset o from the
@@ -81,10 +105,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         for (var i = first; i < last; i++) {
             let a = axis_value(ax, p.tiles_x);
             let tx1 = min(a.x + 1u, p.tiles_x - 1u);
-            let lvl = bilinear(level(img, a.x, ay.x), level(img, tx1, ay.x), level(img, a.x, ty1),
-                               level(img, tx1, ty1), a.y, ay.y, s);
-            if (pixel(img, i) * s * s > lvl) {
-                bits |= 1u << (i - first);
+            if (p.matched == 1u) {
+                // The matched filter: floored interpolation between rows, then columns.
+                let c0 = ((s - ay.y) * flevel(img, a.x, ay.x) + ay.y * flevel(img, a.x, ty1)) / s;
+                let c1 = ((s - ay.y) * flevel(img, tx1, ay.x) + ay.y * flevel(img, tx1, ty1)) / s;
+                let lvl = ((s - a.y) * c0 + a.y * c1) / s;
+                if (16u * pixel(img, i) > lvl && binomial3(img, x, y) > lvl) {
+                    bits |= 1u << (i - first);
+                }
+            } else {
+                let lvl = bilinear(level(img, a.x, ay.x), level(img, tx1, ay.x),
+                                   level(img, a.x, ty1), level(img, tx1, ty1), a.y, ay.y, s);
+                if (pixel(img, i) * s * s > lvl) {
+                    bits |= 1u << (i - first);
+                }
             }
             x++;
             if (x == p.width) {

@@ -192,6 +192,13 @@ pub struct CameraOpts {
     pub fit: CameraFit,
 }
 
+/// Detection's matched filter (`--detect-filter`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum DetectFilter {
+    None,
+    Binomial,
+}
+
 /// `--fov-deg`: one value or a range.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FovArg {
@@ -274,6 +281,11 @@ pub struct SolveOpts {
     /// Detection threshold above the local background, in noise sigmas.
     #[arg(long, default_value_t = 5.0)]
     pub sigma: f32,
+    /// Detection's matched filter: `binomial` thresholds each pixel's 3x3 binomial smoothing
+    /// (about a star's PSF) at --sigma sigmas of the smoothed noise, and the pixel at 0.375 of
+    /// that, which finds stars of about half the peak SNR; `none` thresholds the pixels alone.
+    #[arg(long, value_enum, default_value_t = DetectFilter::None)]
+    pub detect_filter: DetectFilter,
     /// Brightest detected stars that take part in the vote.
     #[arg(long, default_value_t = 40)]
     pub vote_stars: usize,
@@ -691,6 +703,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     let catalog = Catalog::load(o.catalog.catalog.as_deref())?;
     let mut s = settings(&o.catalog, camera_mag);
     s.detect.k_sigma = o.sigma;
+    s.detect.matched_filter = o.detect_filter == DetectFilter::Binomial;
     s.identify.vote_stars = o.vote_stars;
     s.retry = !o.no_retry;
     s.identify.pair_tol_px = o.pair_tol_px;
@@ -985,7 +998,13 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
     // What a run with these options votes with: the solver's own selections and tables.
     let solver = Solver::new(&catalog, camera.clone(), s)?;
     for (k, band) in solver.bands.iter().enumerate() {
-        if scale_range.is_some() {
+        if Some(k) == solver.shallow_band {
+            writeln!(
+                out,
+                "shallow pass (frames that show few stars): {} stars in view on average",
+                crate::solve::SHALLOW_STARS_IN_VIEW
+            )?;
+        } else if scale_range.is_some() {
             writeln!(
                 out,
                 "scale band: FOV {:.4} to {:.4} deg ({} scales tried)",

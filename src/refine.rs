@@ -148,9 +148,11 @@ pub fn refine(
     let mut det_vectors = vectors_of(&camera);
     let mut pairs: Vec<(usize, u32)> = Vec::new();
     let mut in_view = 0;
+    let mut view: Vec<(u32, f64, f64)> = Vec::new();
     for _ in 0..s.rounds.max(1) {
         let proj = stars_in_view(&r, refs, &camera);
         in_view = proj.len();
+        view.clone_from(&proj);
         let next = mutual_nearest(dets, &proj, s.match_radius_px);
         if next.len() < 2 {
             return None;
@@ -178,16 +180,30 @@ pub fn refine(
     // The evidence of a match is how close it is: chance places a star within r of one of the
     // detections with probability N·πr²/area. r is three times the scatter of the residuals
     // (with 3 degrees of freedom taken by the fit), at least CONFIDENCE_RADIUS_FLOOR_PX, at
-    // most the match radius; matches farther out count as unmatched.
+    // most the match radius; matches farther out count as unmatched. The test is made on the
+    // brightest m detections against the brightest k catalog stars in view (m and k doubling
+    // from 10, Bonferroni over both), as tetra3 verifies with the brightest catalog stars: a
+    // sensor that shows 6 stars is judged by the catalog stars it can show, not by the 40 a
+    // deeper selection puts in view, so an unknown or too deep magnitude limit costs little.
     let radius = (3.0 * scatter).clamp(CONFIDENCE_RADIUS_FLOOR_PX, s.match_radius_px);
     let area = camera.width as f64 * camera.height as f64;
+    // Each match's place among the catalog stars in view, brightest first (ids are in
+    // brightness order, and so is the list).
+    let rank: std::collections::HashMap<u32, usize> = view
+        .iter()
+        .enumerate()
+        .map(|(k, &(id, _, _))| (id, k))
+        .collect();
     let false_match_prob = brightest_first(dets.len(), |m| {
-        let close = matches
-            .iter()
-            .filter(|x| x.det < m && x.residual_px <= radius)
-            .count();
         let p_single = (m as f64 * std::f64::consts::PI * radius * radius / area).min(1.0);
-        false_match_probability(close, in_view, p_single, hypotheses, fixed)
+        brightest_first(in_view, |k| {
+            let close = matches
+                .iter()
+                .filter(|x| x.det < m && x.residual_px <= radius)
+                .filter(|x| rank.get(&x.ref_id).is_some_and(|&q| q < k))
+                .count();
+            false_match_probability(close, k, p_single, hypotheses, fixed)
+        })
     });
     // Centroids scattered by more than a third of the match radius (blur, defocus) leave many
     // of their stars outside it: once the solution is accepted, the attitude is fitted again to
@@ -360,7 +376,7 @@ fn fit_camera(
 }
 
 /// The smallest false-match probability `prob(m)` over the brightest m = 10, 20, 40, … and
-/// all `n` detections, times the number of m tried (Bonferroni). Real stars are among the
+/// all `n` (detections, or catalog stars in view), times the number of m tried (Bonferroni). Real stars are among the
 /// brightest detections: 6 matches among the brightest 10 are far stronger evidence than 6
 /// among 100 in a frame of faint stars and noise detections (openstartracker's img7.png: 2.6e-4
 /// instead of 0.052, all else the same), while a frame whose matches spread over all its

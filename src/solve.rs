@@ -64,15 +64,27 @@ pub const AUTO_STARS_IN_VIEW: f64 = 40.0;
 /// The faintest magnitude at which the catalog holds on average [`AUTO_STARS_IN_VIEW`] stars
 /// in the camera's field (at least 5.0, at most the catalog's faintest).
 pub fn auto_mag_limit(catalog: &Catalog, camera: &Camera) -> f64 {
+    mag_limit_for(catalog, camera, AUTO_STARS_IN_VIEW).max(5.0)
+}
+
+/// The faintest magnitude at which the catalog holds on average `stars` stars in the camera's
+/// field (to a tenth; at most the catalog's faintest).
+pub fn mag_limit_for(catalog: &Catalog, camera: &Camera, stars: f64) -> f64 {
     let fov_sr = (camera.fov_x_deg() * camera.fov_y_deg())
         .to_radians()
         .to_radians();
     let fraction = fov_sr / (4.0 * std::f64::consts::PI);
     let mut mags: Vec<f64> = catalog.stars.iter().map(|s| s.mag).collect();
     mags.sort_by(f64::total_cmp);
-    let n = ((AUTO_STARS_IN_VIEW / fraction).round() as usize).clamp(1, mags.len());
-    ((mags[n - 1] * 10.0).round() / 10.0).max(5.0)
+    let n = ((stars / fraction).round() as usize).clamp(1, mags.len());
+    (mags[n - 1] * 10.0).round() / 10.0
 }
+
+/// Average number of catalog stars in the field of the shallow pass's selection: a sensor that
+/// shows 4 to 8 stars (a 10° field to Hp 6) leaves them among 40 catalog stars in view of the
+/// automatic selection, whose pairs crowd the vote and whose count weakens the false-match
+/// test; voting against the brightest 12 in view gives those stars a catalog they can match.
+pub const SHALLOW_STARS_IN_VIEW: f64 = 12.0;
 
 /// A camera with its catalog selections and distance tables, ready to solve frames.
 pub struct Solver {
@@ -89,6 +101,8 @@ pub struct Solver {
     /// When the scale is searched and the magnitude limit left to the solver: the catalog,
     /// to check each solution against as deep a selection as its fitted field calls for.
     deeper: Option<Deeper>,
+    /// The band of the shallow pass, when there is one (the last of `bands`).
+    pub shallow_band: Option<usize>,
 }
 
 /// Widest ratio of focal lengths one band of a scale search covers. A band's reference stars
@@ -131,12 +145,13 @@ impl Band {
         settings: &Settings,
         (lo, hi): (f64, f64),
         middle: f64,
+        mag_limit: Option<f64>,
     ) -> Result<Band> {
         let middle = scaled(camera, middle);
         let selection = Selection {
             epoch: settings.epoch,
-            mag_limit: settings
-                .mag_limit
+            mag_limit: mag_limit
+                .or(settings.mag_limit)
                 .unwrap_or_else(|| auto_mag_limit(catalog, &middle)),
             double_stars: settings.double_stars,
             double_sep_rad: settings.double_star_px * middle.ifov_rad(),
@@ -232,6 +247,9 @@ pub enum PassKind {
     Spread,
     /// Wide pair tolerance and match radius.
     Wide,
+    /// The vote against a shallow selection ([`SHALLOW_STARS_IN_VIEW`] stars in view), for
+    /// frames that show few stars; the solution is then refined against the automatic one.
+    Shallow,
 }
 
 impl PassKind {
@@ -367,15 +385,35 @@ impl Solver {
                 (lo * hi).sqrt()
             }
         };
-        let bands = edges
+        let mut bands = edges
             .iter()
-            .map(|&e| Band::new(catalog, &camera, &settings, e, middle(e)))
+            .map(|&e| Band::new(catalog, &camera, &settings, e, middle(e), None))
             .collect::<Result<Vec<Band>>>()?;
+        // The shallow pass's band: with a known scale and the magnitude limit left to the
+        // solver, when it is shallower than the automatic one by half a magnitude or more.
+        let shallow_mag = mag_limit_for(catalog, &camera, SHALLOW_STARS_IN_VIEW);
+        let shallow = (settings.retry
+            && settings.scale_range.is_none()
+            && settings.mag_limit.is_none()
+            && shallow_mag <= bands[0].refs.selection.mag_limit - 0.5)
+            .then(|| {
+                Band::new(
+                    catalog,
+                    &camera,
+                    &settings,
+                    (1.0, 1.0),
+                    1.0,
+                    Some(shallow_mag),
+                )
+            })
+            .transpose()?;
+        let main_bands = bands.len();
+        bands.extend(shallow);
         let band_of = |scale: f64| {
-            bands
+            bands[..main_bands]
                 .iter()
                 .position(|b| scale <= b.hi * (1.0 + 1e-12))
-                .unwrap_or(bands.len() - 1)
+                .unwrap_or(main_bands - 1)
         };
         let scales_at = |step| match settings.scale_range {
             Some((lo, hi)) => scale_hypotheses(lo, hi, step),
@@ -388,7 +426,7 @@ impl Solver {
             PassKind::Spread,
             PassKind::Wide,
         ];
-        let passes = kinds[..if settings.retry { kinds.len() } else { 1 }]
+        let mut passes: Vec<Pass> = kinds[..if settings.retry { kinds.len() } else { 1 }]
             .iter()
             .flat_map(|&kind| {
                 scales_at(kind.scale_step())
@@ -400,9 +438,18 @@ impl Solver {
                     })
             })
             .collect();
+        if bands.len() > main_bands {
+            passes.push(Pass {
+                scale: 1.0,
+                band: main_bands,
+                kind: PassKind::Shallow,
+            });
+        }
+        let shallow_band = (bands.len() > main_bands).then_some(main_bands);
         Ok(Solver {
             camera,
             settings,
+            shallow_band,
             bands,
             scales,
             passes,
@@ -519,6 +566,29 @@ impl Solver {
             },
         };
         let (refined, hypotheses, fixed) = accepted;
+        if Some(p.band) == self.shallow_band {
+            // Found against the shallow selection: the automatic one matches the fainter stars
+            // too, judged by the same test.
+            let main = self.bands[0].refs_at(epoch);
+            let s = &self.settings.refine;
+            return match refine::refine(
+                refined.r,
+                detections,
+                &main,
+                &refined.camera,
+                hypotheses,
+                fixed,
+                &p.refine,
+            ) {
+                Some(r)
+                    if r.false_match_prob <= s.max_false_prob
+                        && r.matches.len() >= refined.matches.len() =>
+                {
+                    Outcome::Solved(r, main)
+                }
+                _ => Outcome::Solved(refined, refs),
+            };
+        }
         match self.deepen(
             &refined, detections, p.band, &p.refine, epoch, hypotheses, fixed,
         ) {

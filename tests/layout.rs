@@ -70,7 +70,7 @@ fn host_and_wgsl_structs_have_the_same_layout() {
         "DetectParams",
         DetectParams,
         [
-            width, height, tile, tiles_x, tiles_y, saturation, k_mad, _pad
+            width, height, tile, tiles_x, tiles_y, saturation, k_mad, matched
         ]
     );
     assert_layout!(

@@ -141,3 +141,118 @@ fn gpu_equals_cpu_on_odd_sizes_and_one_pixel_frames() {
         common::assert_detect_stages_equal(&g, &[f], 4);
     }
 }
+
+#[test]
+fn filtered_runs_equal_the_per_pixel_definition() {
+    // The matched filter's mask marks exactly the pixels with 16·pixel > level and
+    // binomial3 > level (level = filtered_level_at), the definition the GPU kernel evaluates,
+    // edges included.
+    let (w, h) = (77u32, 51u32);
+    let p = DetectParams::new(w, h, 8, 3.0, 255).with_filter(true);
+    let mut seed = 4321u32;
+    let mut next = || {
+        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+        seed >> 16
+    };
+    let px: Vec<u16> = (0..w * h).map(|_| (next() % 256) as u16).collect();
+    let tiles: Vec<TileStats> = (0..p.tiles_x * p.tiles_y)
+        .map(|_| TileStats {
+            background: next() % 200,
+            offset: next() % 40,
+        })
+        .collect();
+    let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
+    let mut set = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let level = filtered_level_at(&tiles, &p, x, y);
+            let want = (16 * px[i] as u32 > level && binomial3(&px, w, h, x, y) > level) as u32;
+            assert_eq!(mask[i], want, "pixel ({x}, {y})");
+            set += want;
+        }
+    }
+    assert!(
+        set > 100 && set < w * h - 100,
+        "{set} set: both outcomes tested"
+    );
+}
+
+#[test]
+fn matched_filter_finds_a_faint_star_and_drops_a_hot_pixel() {
+    // Flat sky 100 ± 4 (noise from a fixed pattern), a Gaussian star (σ 1.2 px) of peak 3.5σ
+    // above it, and a hot pixel of 30σ: without the filter the star is missed; with it the star
+    // is one blob of several pixels and the hot pixel a single pixel (dropped by min_area).
+    let (w, h) = (64u32, 64u32);
+    let mut seed = 7u32;
+    let mut px: Vec<f64> = (0..w * h)
+        .map(|_| {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            // Sum of 4 uniforms: roughly Gaussian, σ = 4.
+            let u: f64 = (0..4)
+                .map(|k| ((seed.rotate_left(8 * k) >> 16) as f64 / 65536.0) - 0.5)
+                .sum();
+            100.0 + u * 4.0 * (12.0f64 / 4.0).sqrt()
+        })
+        .collect();
+    let (sx, sy, sigma) = (20.3, 30.6, 1.2);
+    for y in 0..h {
+        for x in 0..w {
+            let r2 = (x as f64 - sx).powi(2) + (y as f64 - sy).powi(2);
+            px[(y * w + x) as usize] += 3.5 * 4.0 * (-r2 / (2.0 * sigma * sigma)).exp();
+        }
+    }
+    px[(40 * w + 45) as usize] += 120.0;
+    let px: Vec<u16> = px.iter().map(|v| v.round() as u16).collect();
+    let frame = gpustar::frame::Frame {
+        width: w,
+        height: h,
+        pixels: px,
+        saturation: 255,
+    };
+    let detect = |filter: bool| {
+        let s = gpustar::detect::DetectSettings {
+            tile: 16,
+            matched_filter: filter,
+            ..Default::default()
+        };
+        gpustar::detect::detect(&frame, &s)
+    };
+    let near = |d: &[gpustar::detect::Detection], x: f64, y: f64| {
+        d.iter().any(|d| (d.x - x).hypot(d.y - y) < 1.5)
+    };
+    let raw = detect(false);
+    let filtered = detect(true);
+    assert!(!near(&raw, sx, sy), "{raw:?}");
+    assert!(near(&filtered, sx, sy), "{filtered:?}");
+    assert!(!near(&filtered, 45.0, 40.0), "the hot pixel: {filtered:?}");
+}
+
+#[test]
+fn gpu_equals_cpu_with_the_matched_filter() {
+    let Some(g) = common::gpu("gpu_equals_cpu_with_the_matched_filter") else {
+        return;
+    };
+    let n8 = common::assert_detect_stages_equal_with(
+        &g,
+        &common::sim_frames(3, (640, 480), 18.0, 8, 21),
+        32,
+        true,
+    );
+    let n16 = common::assert_detect_stages_equal_with(
+        &g,
+        &common::sim_frames(2, (333, 77), 10.0, 16, 22),
+        16,
+        true,
+    );
+    for (w, h, v) in [(1, 1, 7u16), (2, 5, 0), (3, 1, 65535)] {
+        let f = gpustar::frame::Frame {
+            width: w,
+            height: h,
+            pixels: vec![v; (w * h) as usize],
+            saturation: 65535,
+        };
+        common::assert_detect_stages_equal_with(&g, &[f], 4, true);
+    }
+    assert!(n8 > 50 && n16 > 5, "{n8} and {n16} blobs compared");
+}

@@ -10,7 +10,8 @@ struct DetectParams {
     tiles_y: u32,
     saturation: u32,
     k_mad: f32,
-    _pad: u32,
+    // 0: the pixel against its level; 1: also its 3x3 binomial smoothing (the matched filter).
+    matched: u32,
 }
 
 // How a batch of frames lies in the buffers. Keep in sync with src/gpu/detect.rs (BatchParams).

@@ -109,6 +109,16 @@ pub fn assert_detect_stages_equal(
     frames: &[gpustar::frame::Frame],
     tile: u32,
 ) -> usize {
+    assert_detect_stages_equal_with(g, frames, tile, false)
+}
+
+/// As [`assert_detect_stages_equal`], with the matched filter on or off.
+pub fn assert_detect_stages_equal_with(
+    g: &gpustar::gpu::Gpu,
+    frames: &[gpustar::frame::Frame],
+    tile: u32,
+    matched_filter: bool,
+) -> usize {
     let f0 = &frames[0];
     let p = gpustar::cpu::threshold::DetectParams::new(
         f0.width,
@@ -116,7 +126,8 @@ pub fn assert_detect_stages_equal(
         tile,
         5.0,
         f0.saturation as u32,
-    );
+    )
+    .with_filter(matched_filter);
     let refs: Vec<&gpustar::frame::Frame> = frames.iter().collect();
     let (blobs, ins) = g.detect_inspect(&refs, &p).unwrap();
     let mut n = 0;
