@@ -529,7 +529,7 @@ impl GpuRunner {
                 outcomes[*i] = solver.finish(&detections[*i], p, &v, epochs[*i]);
             }
         }
-        let solutions = detections
+        let mut solutions: Vec<Solution> = detections
             .into_iter()
             .zip(outcomes)
             .zip(epochs)
@@ -539,6 +539,29 @@ impl GpuRunner {
                 epoch,
             })
             .collect();
+        // The detection retry: frames that did not solve, detected again with the matched
+        // filter (on the GPU, in one submission) and identified again (the CPU twin's vote).
+        if streak_opts.is_none() && solver.detection_stages() > 1 {
+            let unsolved: Vec<usize> = (0..frames.len())
+                .filter(|&i| matches!(solutions[i].outcome, Outcome::Unsolved(_)))
+                .collect();
+            if !unsolved.is_empty() {
+                let subset: Vec<&Frame> = unsolved.iter().map(|&i| frames[i]).collect();
+                let filtered = DetectSettings {
+                    matched_filter: true,
+                    ..*settings
+                };
+                let blobs = self
+                    .gpu
+                    .detect(&subset, &detect::params(frames[0], &filtered))?;
+                for (&i, b) in unsolved.iter().zip(&blobs) {
+                    let again = solver.identify(detect::star_list(b, &filtered), epochs[i]);
+                    if matches!(again.outcome, Outcome::Solved(..)) {
+                        solutions[i] = again;
+                    }
+                }
+            }
+        }
         Ok((
             solutions,
             found,

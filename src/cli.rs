@@ -1,6 +1,6 @@
 //! The command line (clap derive). `main` calls [`run`].
 
-use crate::batch::{Backend, BackendChoice, BackendNote, CameraSource, Solvers};
+use crate::batch::{Backend, BackendChoice, BackendNote, CameraSource, Pipeline, Solvers};
 use crate::camera::Camera;
 use crate::catalog::{Catalog, DoubleStars};
 use crate::dark::Darks;
@@ -8,6 +8,7 @@ use crate::evaluate;
 use crate::inputs::{self, Input, Shard};
 use crate::output::{self, Format, RecordWriter};
 use crate::products::Products;
+use crate::record::Record;
 use crate::refine::CameraFit;
 use crate::run::{self as stream, RunOptions};
 use crate::sequence::SequenceOptions;
@@ -114,6 +115,34 @@ pub enum Command {
         /// Write the merged records here (default: stdout).
         #[arg(short, long)]
         output: Option<PathBuf>,
+    },
+    /// Fit the camera (fx, fy, cx, cy, k1, k2) to the identified stars of all solvable frames
+    /// of DIR together (camera and attitudes adjusted jointly), re-identify with the fitted
+    /// camera, fit again, and write a camera file `batch --camera` reads; residuals before and
+    /// after on stderr.
+    Calibrate {
+        /// The directory of frames (one camera).
+        dir: PathBuf,
+        /// The camera file to start from (a focal length or FOV is enough).
+        #[arg(long)]
+        camera: PathBuf,
+        /// The focal length is only known to within this fraction: search the scale at first.
+        #[arg(long)]
+        fov_tolerance: Option<f64>,
+        /// Frames in subdirectories too.
+        #[arg(short, long)]
+        recursive: bool,
+        /// Keep the principal point where the camera file puts it.
+        #[arg(long)]
+        fixed_centre: bool,
+        /// Fit k1 only (k2 stays as the camera file gives it).
+        #[arg(long)]
+        no_k2: bool,
+        /// Write the fitted camera here (TOML).
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        catalog: CatalogOpts,
     },
     /// Catalog maintenance.
     #[command(subcommand)]
@@ -603,6 +632,28 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             catalog,
         } => info(&camera, size, &catalog),
         Command::Simulate(a) => simulate_cmd(a),
+        Command::Calibrate {
+            dir,
+            camera,
+            fov_tolerance,
+            recursive,
+            fixed_centre,
+            no_k2,
+            output,
+            catalog,
+        } => calibrate_cmd(
+            &dir,
+            &camera,
+            fov_tolerance,
+            recursive,
+            crate::calibrate::FitOptions {
+                fit_principal_point: !fixed_centre,
+                fit_k2: !no_k2,
+                ..Default::default()
+            },
+            &output,
+            &catalog,
+        ),
         Command::Evaluate {
             results,
             truth,
@@ -1157,6 +1208,143 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         a.out.display(),
         t0.elapsed().as_secs_f64()
     );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `gpustar calibrate`: solve DIR, fit the camera to every solved frame's identified stars,
+/// re-identify with the fitted camera and fit again, then write the camera file.
+fn calibrate_cmd(
+    dir: &Path,
+    camera_path: &Path,
+    fov_tolerance: Option<f64>,
+    recursive: bool,
+    opts: crate::calibrate::FitOptions,
+    out: &Path,
+    c: &CatalogOpts,
+) -> Result<ExitCode> {
+    use crate::calibrate::{self, FrameStars, Star};
+    let inputs: Vec<(PathBuf, String)> = inputs::list(dir, recursive)?
+        .into_iter()
+        .map(|i| (i.path, i.name))
+        .collect();
+    if inputs.is_empty() {
+        bail!("{}: no image files to calibrate with", dir.display());
+    }
+    let (start, camera_mag) = Camera::from_toml_file(camera_path)?;
+    let catalog = Catalog::load(c.catalog.as_deref())?;
+    let solve = |camera: &Camera, search: bool| -> Result<Vec<Record>> {
+        let mut s = settings(c, camera_mag);
+        if search {
+            if let Some(t) = fov_tolerance {
+                if !(t > 0.0 && t < 0.5) {
+                    bail!("--fov-tolerance must be between 0 and 0.5");
+                }
+                s.scale_range = Some((1.0 - t, 1.0 + t));
+            }
+        }
+        let mut p = Pipeline::new(
+            catalog.clone(),
+            s,
+            CameraSource::Fixed(camera.clone()),
+            Backend::Cpu,
+        );
+        Ok(p.process_batch(&inputs))
+    };
+    let stars_of = |records: &[Record]| -> Vec<FrameStars> {
+        records
+            .iter()
+            .filter_map(|r| {
+                let m = r.rotation_matrix?;
+                let stars = r
+                    .matches
+                    .as_ref()?
+                    .iter()
+                    .map(|m| Star {
+                        x: m.x,
+                        y: m.y,
+                        v: crate::catalog::radec_to_vector(m.ra_deg, m.dec_deg),
+                    })
+                    .collect();
+                Some(FrameStars {
+                    name: r.file.clone(),
+                    r: nalgebra::Matrix3::from_fn(|i, j| m[i][j]),
+                    stars,
+                })
+            })
+            .collect()
+    };
+    let summary = |what: &str, records: &[Record]| {
+        let solved: Vec<&Record> = records
+            .iter()
+            .filter(|r| r.status == crate::record::Status::Solved)
+            .collect();
+        let mut rmse: Vec<f64> = solved.iter().filter_map(|r| r.rmse_arcsec).collect();
+        rmse.sort_by(f64::total_cmp);
+        let stars: usize = solved.iter().filter_map(|r| r.stars_matched).sum();
+        eprintln!(
+            "gpustar: {what}: {} of {} frames solved, {stars} stars identified, median rmse {}",
+            solved.len(),
+            records.len(),
+            rmse.get(rmse.len() / 2)
+                .map_or("-".to_string(), |v| format!("{v:.2}\"")),
+        );
+    };
+    let before = solve(&start, true)?;
+    summary("with the camera given", &before);
+    let first = calibrate::fit(&start, &stars_of(&before), &opts)?;
+    // Edge stars a rough camera missed come in with the fitted one: fit again.
+    let again = solve(&first.camera, false)?;
+    let fit = calibrate::fit(&first.camera, &stars_of(&again), &opts)?;
+    let after = solve(&fit.camera, false)?;
+    summary("with the fitted camera", &after);
+    for (name, (v, sd)) in fit.fitted.iter().zip(
+        fit.fitted
+            .iter()
+            .map(|n| match *n {
+                "fx" => fit.camera.fx,
+                "fy" => fit.camera.fy,
+                "cx" => fit.camera.cx,
+                "cy" => fit.camera.cy,
+                "k1" => fit.camera.k1,
+                _ => fit.camera.k2,
+            })
+            .zip(&fit.sigmas),
+    ) {
+        eprintln!("  {name} = {v:.6} ± {sd:.2e}");
+    }
+    eprintln!(
+        "  pixel residuals rms: {:.3} px with the camera given (each frame's attitude fitted \
+         alone), {:.3} px fitted; {} stars used, {} rejected, {} frames",
+        fit.rms_before_px,
+        fit.rms_after_px,
+        fit.stars_used,
+        fit.stars_rejected,
+        fit.rotations.len()
+    );
+    let k = &fit.camera;
+    let mut text = format!(
+        "# written by gpustar calibrate from {} solved frames of {} ({} stars; rms {:.3} px)\n\
+         width = {}\nheight = {}\nfx_px = {}\nfy_px = {}\ncx_px = {}\ncy_px = {}\nk1 = {}\n\
+         k2 = {}\nmirrored = {}\n",
+        fit.rotations.len(),
+        dir.display(),
+        fit.stars_used,
+        fit.rms_after_px,
+        k.width,
+        k.height,
+        k.fx,
+        k.fy,
+        k.cx,
+        k.cy,
+        k.k1,
+        k.k2,
+        k.mirrored
+    );
+    if let Some(m) = camera_mag {
+        text.push_str(&format!("mag_limit = {m}\n"));
+    }
+    std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
+    eprintln!("gpustar: wrote {}", out.display());
     Ok(ExitCode::SUCCESS)
 }
 

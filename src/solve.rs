@@ -39,6 +39,9 @@ pub struct Settings {
     /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`]), then
     /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
     pub retry: bool,
+    /// Frames that do not solve are detected again with the matched filter (fainter stars)
+    /// and tried again, when the filter is not on already and `retry` is.
+    pub detect_retry: bool,
 }
 
 impl Default for Settings {
@@ -54,6 +57,7 @@ impl Default for Settings {
             table_cache: true,
             scale_range: None,
             retry: true,
+            detect_retry: true,
         }
     }
 }
@@ -524,6 +528,21 @@ impl Solver {
         })
     }
 
+    /// How many passes a frame of `n` detections can be tried with: the retries with more
+    /// voting stars and with voters spread over the frame need more detections than vote
+    /// (`prepare` passes them over otherwise), so they add no hypothesis to such a frame.
+    pub fn passes_for(&self, n: usize) -> usize {
+        let vote = self.settings.identify.vote_stars;
+        self.passes
+            .iter()
+            .filter(|p| match p.kind {
+                PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
+                PassKind::Spread => n > vote,
+                _ => true,
+            })
+            .count()
+    }
+
     /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
     /// one solves.
     pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
@@ -682,11 +701,11 @@ impl Solver {
             .map(|m| refs.stars[m.ref_id as usize].v)
             .collect();
         let r0 = wahba(&cam, &icrs).ok_or("no_consistent_match")?;
-        // Every pass tried multiplies the hypotheses a chance match could come from; the vote
-        // has half the error budget (see `STAGES`).
-        let hypotheses = voted
-            .hypotheses
-            .saturating_mul(STAGES * self.passes.len() as u64);
+        // Every pass this frame can be tried with multiplies the hypotheses a chance match could
+        // come from; the vote has half the error budget (see `STAGES`).
+        let hypotheses = voted.hypotheses.saturating_mul(
+            STAGES * self.detection_stages() * self.passes_for(detections.len()) as u64,
+        );
         let refined = refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
             .ok_or("no_consistent_match")?;
         if refined.false_match_prob > s.refine.max_false_prob {
@@ -721,7 +740,9 @@ impl Solver {
             &vectors[..p.triangle_stars],
             &band.refs,
         );
-        let hypotheses = matched.saturating_mul(STAGES * self.passes.len() as u64);
+        let hypotheses = matched.saturating_mul(
+            STAGES * self.detection_stages() * self.passes_for(detections.len()) as u64,
+        );
         hyps.iter().find_map(|t| {
             let cam = t.stars.map(|i| vectors[i]);
             let icrs = t.refs.map(|id| refs.stars[id as usize].v);
@@ -745,11 +766,42 @@ impl Solver {
         let t1 = Instant::now();
         let sol = self.identify(dets, epoch);
         let t2 = Instant::now();
-        (
-            sol,
-            (t1 - t0).as_secs_f64() * 1e3,
-            (t2 - t1).as_secs_f64() * 1e3,
-        )
+        let (mut detect_ms, identify_ms) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
+        if matches!(sol.outcome, Outcome::Unsolved(_)) && self.detection_stages() > 1 {
+            let t3 = Instant::now();
+            let filtered = self.detect_filtered(frame);
+            detect_ms += t3.elapsed().as_secs_f64();
+            let t4 = Instant::now();
+            let again = self.identify(filtered, epoch);
+            let identify_ms = identify_ms + t4.elapsed().as_secs_f64();
+            if matches!(again.outcome, Outcome::Solved(..)) {
+                return (again, detect_ms * 1e3, identify_ms * 1e3);
+            }
+            return (sol, detect_ms * 1e3, identify_ms * 1e3);
+        }
+        (sol, detect_ms * 1e3, identify_ms * 1e3)
+    }
+
+    /// How many detections a frame may be identified from: 2 when a frame that does not solve
+    /// is detected again with the matched filter. Each judges its hypotheses against its share
+    /// of the false-match budget, so the chance that either accepts a wrong attitude stays
+    /// within the whole.
+    pub fn detection_stages(&self) -> u64 {
+        let s = &self.settings;
+        if s.retry && s.detect_retry && !s.detect.matched_filter {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// The frame's detections with the matched filter (the detection retry).
+    pub fn detect_filtered(&self, frame: &Frame) -> Vec<Detection> {
+        let s = DetectSettings {
+            matched_filter: true,
+            ..self.settings.detect
+        };
+        detect::detect(frame, &s)
     }
 
     /// The result record of a solution.
