@@ -12,6 +12,7 @@
 pub mod annotate;
 pub mod attitude;
 pub mod batch;
+pub mod calibrate;
 pub mod camera;
 pub mod catalog;
 pub mod cli;

@@ -337,11 +337,20 @@ pub fn binomial3(pixels: &[u16], width: u32, height: u32, x: u32, y: u32) -> u32
 /// the same bit for bit.
 pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
     let s = 2 * p.tile;
+    // Column segments with the same pair of tile columns, as in `threshold`.
+    let mut segments: Vec<(usize, usize, usize, usize)> = Vec::new();
+    let mut weights = Vec::with_capacity(p.width as usize);
+    for x in 0..p.width {
+        let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
+        let t1 = (tx + 1).min(p.tiles_x - 1) as usize;
+        weights.push(wx);
+        match segments.last_mut() {
+            Some(seg) if seg.2 == tx as usize && seg.3 == t1 => seg.1 = x as usize + 1,
+            _ => segments.push((x as usize, x as usize + 1, tx as usize, t1)),
+        }
+    }
     let mut runs = Vec::new();
     let mut col = vec![0u32; p.tiles_x as usize];
-    let weights: Vec<(u32, u32)> = (0..p.width)
-        .map(|x| axis_weight(x, p.tile, p.tiles_x))
-        .collect();
     for y in 0..p.height {
         let (ty, wy) = axis_weight(y, p.tile, p.tiles_y);
         let ty1 = (ty + 1).min(p.tiles_y - 1);
@@ -352,23 +361,39 @@ pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams)
         }
         let row = &pixels[(y * p.width) as usize..((y + 1) * p.width) as usize];
         let mut start: Option<u32> = None;
-        for x in 0..p.width {
-            let (tx, wx) = weights[x as usize];
-            let tx1 = (tx + 1).min(p.tiles_x - 1);
-            let (c0, c1) = (col[tx as usize], col[tx1 as usize]);
-            let v = 16 * row[x as usize] as u32;
-            // The level is at least min(c0, c1): most pixels stop here.
-            let set = v > c0.min(c1) && {
-                let level = ((s - wx) * c0 + wx * c1) / s;
-                v > level && binomial3(pixels, p.width, p.height, x, y) > level
-            };
-            match (set, start) {
-                (true, None) => start = Some(x),
-                (false, Some(x0)) => {
-                    runs.push(Run { y, x0, x1: x });
-                    start = None;
+        for &(x0, x1, t0, t1) in &segments {
+            let (c0, c1) = (col[t0], col[t1]);
+            // The level is at least min(c0, c1), so a pixel at or below a sixteenth of it is
+            // below its level: most of a star field is, and is passed over 16 at a time.
+            let floor = (c0.min(c1) / 16).min(65535) as u16;
+            let mut x = x0;
+            while x < x1 {
+                if start.is_none() {
+                    while x + 16 <= x1 && row[x..x + 16].iter().fold(0, |m, &v| m.max(v)) <= floor {
+                        x += 16;
+                    }
+                    match row[x..x1].iter().position(|&v| v > floor) {
+                        Some(k) => x += k,
+                        None => break,
+                    }
                 }
-                _ => {}
+                let wx = weights[x];
+                let level = ((s - wx) * c0 + wx * c1) / s;
+                let set = 16 * row[x] as u32 > level
+                    && binomial3(pixels, p.width, p.height, x as u32, y) > level;
+                match (set, start) {
+                    (true, None) => start = Some(x as u32),
+                    (false, Some(r0)) => {
+                        runs.push(Run {
+                            y,
+                            x0: r0,
+                            x1: x as u32,
+                        });
+                        start = None;
+                    }
+                    _ => {}
+                }
+                x += 1;
             }
         }
         if let Some(x0) = start {

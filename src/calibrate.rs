@@ -1,0 +1,1001 @@
+//! Camera calibration from solved star frames: one camera (fx, fy, cx, cy, k1, k2) fitted
+//! jointly to the identified stars of many frames, each frame with its own attitude, by
+//! Levenberg–Marquardt on the pixel residuals (detected pixel − projected catalog star).
+//!
+//! The frames must share one camera; their stars come from solving them with a rough camera
+//! (often just a focal length). The attitudes absorb everything a rotation can explain, so
+//! what is left to the camera is the shape of the projection: the scale (fx, fy), the
+//! distortion (k1, k2), and — through the perspective of a wide field — the principal point.
+
+use crate::attitude::wahba;
+use crate::camera::Camera;
+use anyhow::{Result, bail};
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
+
+/// A detection and its catalog direction.
+#[derive(Clone, Debug)]
+pub struct Star {
+    /// Detected pixel (column, row).
+    pub x: f64,
+    pub y: f64,
+    /// ICRS direction of the matched catalog star (its length does not matter).
+    pub v: Vector3<f64>,
+}
+
+/// The identified stars of one frame.
+#[derive(Clone, Debug)]
+pub struct FrameStars {
+    pub name: String,
+    /// The frame's solved attitude, v_cam = r · v_icrs: the starting point only.
+    pub r: Matrix3<f64>,
+    pub stars: Vec<Star>,
+}
+
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// Fit cx, cy (only with 3 or more usable frames; otherwise they stay as given).
+    pub fit_principal_point: bool,
+    pub fit_k2: bool,
+    /// Reject stars whose residual exceeds this many robust per-axis sigmas; ∞ disables.
+    pub outlier_sigma: f64,
+    /// Levenberg–Marquardt iterations per fit (there is one fit per rejection round).
+    pub max_iterations: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            fit_principal_point: true,
+            fit_k2: true,
+            outlier_sigma: 5.0,
+            max_iterations: 50,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Fit {
+    /// The fitted camera (width, height and mirrored as given).
+    pub camera: Camera,
+    /// Fitted attitude per frame, in the order given.
+    pub rotations: Vec<Matrix3<f64>>,
+    /// RMS residual norm of the initial camera with each frame's attitude re-fitted alone, over
+    /// the same stars as `rms_after_px`: what the attitudes alone could do, the fair "before".
+    pub rms_before_px: f64,
+    pub rms_after_px: f64,
+    /// Per frame, over its stars kept; NaN for a frame with none.
+    pub per_frame_rms_px: Vec<f64>,
+    /// Stars in the final fit; frames with fewer than 3 stars kept take no part in the camera
+    /// fit (their attitude alone is re-fitted) and their stars count as neither used nor rejected.
+    pub stars_used: usize,
+    pub stars_rejected: usize,
+    /// (frame index, star index) of each star rejected as an outlier.
+    pub rejected: Vec<(usize, usize)>,
+    /// Levenberg–Marquardt iterations, all rejection rounds together.
+    pub iterations: usize,
+    /// Names of the fitted camera parameters, e.g. ["fx","fy","cx","cy","k1","k2"].
+    pub fitted: Vec<&'static str>,
+    /// Formal 1-σ uncertainty of each parameter in `fitted` (same order; pixels for fx, fy,
+    /// cx, cy), from the covariance at the solution scaled by the residual variance.
+    pub sigmas: Vec<f64>,
+}
+
+/// The least data a camera fit accepts: fewer stars leave six parameters poorly determined.
+pub const MIN_STARS: usize = 20;
+/// A frame with fewer stars barely constrains its own attitude (3 unknowns) and tells
+/// nothing about the camera.
+pub const MIN_FRAME_STARS: usize = 3;
+/// The principal point trades off against each frame's rotation; it is only fitted over
+/// this many frames, so that it rests on many stars spread over the image.
+pub const MIN_FRAMES_FOR_PRINCIPAL_POINT: usize = 3;
+const MAX_REJECTION_ROUNDS: usize = 3;
+/// No centroid is better than this: keeps noise-free (synthetic) data from rejecting everything.
+const MIN_ROBUST_SIGMA_PX: f64 = 0.01;
+
+const NAMES: [&str; 6] = ["fx", "fy", "cx", "cy", "k1", "k2"];
+
+fn params_of(c: &Camera) -> [f64; 6] {
+    [c.fx, c.fy, c.cx, c.cy, c.k1, c.k2]
+}
+
+fn camera_with(base: &Camera, p: &[f64; 6]) -> Camera {
+    Camera {
+        fx: p[0],
+        fy: p[1],
+        cx: p[2],
+        cy: p[3],
+        k1: p[4],
+        k2: p[5],
+        ..base.clone()
+    }
+}
+
+/// The pixel of camera-frame direction `c` (as `Camera::vector_to_pixel`), its derivatives
+/// with respect to the six camera parameters, and with respect to a small rotation ω applied
+/// in the camera frame (c ← exp([ω]×) c). None behind the camera.
+#[allow(clippy::type_complexity)]
+fn project(cam: &Camera, c: &Vector3<f64>) -> Option<([f64; 2], [[f64; 6]; 2], [[f64; 3]; 2])> {
+    if c.z <= 1e-9 {
+        return None;
+    }
+    let (xu, yu) = (c.x / c.z, c.y / c.z);
+    let r2 = xu * xu + yu * yu;
+    let s = 1.0 + cam.k1 * r2 + cam.k2 * r2 * r2;
+    let ds = cam.k1 + 2.0 * cam.k2 * r2; // ds/d(r²)
+    let (xd, yd) = (xu * s, yu * s);
+    let m = if cam.mirrored { -1.0 } else { 1.0 };
+    let (fx, fym) = (cam.fx, cam.fy * m);
+    let px = [cam.cx + fx * xd, cam.cy + fym * yd];
+    let dcam = [
+        [xd, 0.0, 1.0, 0.0, fx * xu * r2, fx * xu * r2 * r2],
+        [0.0, m * yd, 0.0, 1.0, fym * yu * r2, fym * yu * r2 * r2],
+    ];
+    // d(xu, yu)/dω for c ← c + ω × c.
+    let dxu = [-xu * yu, 1.0 + xu * xu, -yu];
+    let dyu = [-1.0 - yu * yu, xu * yu, xu];
+    let (a, b) = (s + 2.0 * xu * xu * ds, 2.0 * xu * yu * ds); // dxd/dxu, dxd/dyu
+    let (c2, d) = (2.0 * xu * yu * ds, s + 2.0 * yu * yu * ds); // dyd/dxu, dyd/dyu
+    let mut drot = [[0.0; 3]; 2];
+    for k in 0..3 {
+        drot[0][k] = fx * (a * dxu[k] + b * dyu[k]);
+        drot[1][k] = fym * (c2 * dxu[k] + d * dyu[k]);
+    }
+    Some((px, dcam, drot))
+}
+
+/// Residual (projected − detected) of one star, or None behind the camera.
+fn residual(cam: &Camera, r: &Matrix3<f64>, s: &Star) -> Option<[f64; 2]> {
+    let (p, _, _) = project(cam, &(r * s.v))?;
+    Some([p[0] - s.x, p[1] - s.y])
+}
+
+/// The unknowns of one Levenberg–Marquardt problem: which camera parameters are free, and
+/// which frames have their attitude free (the others keep theirs and contribute no stars).
+struct Problem<'a> {
+    frames: &'a [FrameStars],
+    inliers: &'a [Vec<bool>],
+    free_cam: &'a [usize],
+    active: &'a [bool],
+}
+
+impl Problem<'_> {
+    fn cost(&self, p: &[f64; 6], base: &Camera, rots: &[Matrix3<f64>]) -> f64 {
+        let cam = camera_with(base, p);
+        let mut sum = 0.0;
+        for (f, frame) in self.frames.iter().enumerate() {
+            if !self.active[f] {
+                continue;
+            }
+            for (s, star) in frame.stars.iter().enumerate() {
+                if self.inliers[f][s] {
+                    match residual(&cam, &rots[f], star) {
+                        Some(e) => sum += e[0] * e[0] + e[1] * e[1],
+                        None => return f64::INFINITY,
+                    }
+                }
+            }
+        }
+        sum
+    }
+
+    /// Offsets of the rotation unknowns per frame, and the number of unknowns.
+    fn layout(&self) -> (Vec<Option<usize>>, usize) {
+        let mut n = self.free_cam.len();
+        let offsets = self
+            .active
+            .iter()
+            .map(|&a| {
+                a.then(|| {
+                    n += 3;
+                    n - 3
+                })
+            })
+            .collect();
+        (offsets, n)
+    }
+
+    /// Normal equations JᵀJ, Jᵀe and the number of residuals, at (p, rots).
+    fn normal(
+        &self,
+        p: &[f64; 6],
+        base: &Camera,
+        rots: &[Matrix3<f64>],
+    ) -> (DMatrix<f64>, DVector<f64>, usize) {
+        let cam = camera_with(base, p);
+        let (offsets, n) = self.layout();
+        let nc = self.free_cam.len();
+        let mut a = DMatrix::<f64>::zeros(n, n);
+        let mut g = DVector::<f64>::zeros(n);
+        let mut m = 0;
+        let mut idx = Vec::with_capacity(nc + 3);
+        let mut row = Vec::with_capacity(nc + 3);
+        for (f, frame) in self.frames.iter().enumerate() {
+            let Some(o) = offsets[f] else { continue };
+            for (s, star) in frame.stars.iter().enumerate() {
+                if !self.inliers[f][s] {
+                    continue;
+                }
+                let Some((px, dcam, drot)) = project(&cam, &(rots[f] * star.v)) else {
+                    continue;
+                };
+                let e = [px[0] - star.x, px[1] - star.y];
+                m += 2;
+                for axis in 0..2 {
+                    idx.clear();
+                    row.clear();
+                    for (k, &q) in self.free_cam.iter().enumerate() {
+                        idx.push(k);
+                        row.push(dcam[axis][q]);
+                    }
+                    for (k, d) in drot[axis].iter().enumerate() {
+                        idx.push(o + k);
+                        row.push(*d);
+                    }
+                    for (i, &ii) in idx.iter().enumerate() {
+                        g[ii] += row[i] * e[axis];
+                        for (j, &jj) in idx.iter().enumerate() {
+                            a[(ii, jj)] += row[i] * row[j];
+                        }
+                    }
+                }
+            }
+        }
+        (a, g, m)
+    }
+
+    fn apply(
+        &self,
+        p: &[f64; 6],
+        rots: &[Matrix3<f64>],
+        delta: &DVector<f64>,
+    ) -> ([f64; 6], Vec<Matrix3<f64>>) {
+        let (offsets, _) = self.layout();
+        let mut p2 = *p;
+        for (k, &q) in self.free_cam.iter().enumerate() {
+            p2[q] += delta[k];
+        }
+        let rots2 = rots
+            .iter()
+            .zip(&offsets)
+            .map(|(r, o)| match o {
+                Some(o) => {
+                    let w = Vector3::new(delta[*o], delta[o + 1], delta[o + 2]);
+                    Rotation3::new(w).into_inner() * r
+                }
+                None => *r,
+            })
+            .collect();
+        (p2, rots2)
+    }
+
+    /// Levenberg–Marquardt with Marquardt's diagonal scaling (the unknowns mix pixels,
+    /// radians and dimensionless distortion); returns the iterations taken.
+    fn solve(
+        &self,
+        p: &mut [f64; 6],
+        base: &Camera,
+        rots: &mut [Matrix3<f64>],
+        max_iterations: usize,
+    ) -> usize {
+        let mut cost = self.cost(p, base, rots);
+        let mut lambda = 1e-3;
+        let mut iterations = 0;
+        while iterations < max_iterations && cost.is_finite() && cost > 0.0 {
+            iterations += 1;
+            let (a, g, _) = self.normal(p, base, rots);
+            let n = g.len();
+            let d: Vec<f64> = (0..n)
+                .map(|i| {
+                    let v = a[(i, i)].sqrt();
+                    if v > 0.0 { v } else { 1.0 }
+                })
+                .collect();
+            let scaled = DMatrix::from_fn(n, n, |i, j| a[(i, j)] / (d[i] * d[j]));
+            let gs = DVector::from_fn(n, |i, _| g[i] / d[i]);
+            let mut accepted = None;
+            for _ in 0..16 {
+                let mut m = scaled.clone();
+                for i in 0..n {
+                    m[(i, i)] += lambda;
+                }
+                if let Some(ch) = m.cholesky() {
+                    let step = -ch.solve(&gs);
+                    let delta = DVector::from_fn(n, |i, _| step[i] / d[i]);
+                    let (p2, r2) = self.apply(p, rots, &delta);
+                    let c2 = self.cost(&p2, base, &r2);
+                    if c2 < cost {
+                        accepted = Some((p2, r2, c2));
+                        lambda = (lambda / 10.0).max(1e-12);
+                        break;
+                    }
+                }
+                lambda *= 10.0;
+            }
+            let Some((p2, r2, c2)) = accepted else { break };
+            let decrease = cost - c2;
+            *p = p2;
+            rots.copy_from_slice(&r2);
+            cost = c2;
+            if decrease <= 1e-10 * cost {
+                break;
+            }
+        }
+        iterations
+    }
+
+    /// Formal 1-σ of the free camera parameters at the solution.
+    fn sigmas(&self, p: &[f64; 6], base: &Camera, rots: &[Matrix3<f64>]) -> Vec<f64> {
+        let (a, _, m) = self.normal(p, base, rots);
+        let n = a.nrows();
+        let nc = self.free_cam.len();
+        let dof = m.saturating_sub(n).max(1) as f64;
+        let var = self.cost(p, base, rots) / dof;
+        let d: Vec<f64> = (0..n).map(|i| a[(i, i)].sqrt().max(1e-300)).collect();
+        let scaled = DMatrix::from_fn(n, n, |i, j| a[(i, j)] / (d[i] * d[j]));
+        let Some(ch) = scaled.cholesky() else {
+            return vec![f64::NAN; nc];
+        };
+        (0..nc)
+            .map(|k| {
+                let e = DVector::from_fn(n, |i, _| if i == k { 1.0 } else { 0.0 });
+                (ch.solve(&e)[k] * var).sqrt() / d[k]
+            })
+            .collect()
+    }
+}
+
+/// Fit one frame's attitude alone with the camera fixed: the better of the given attitude and
+/// Wahba on the camera's directions, then Gauss–Newton on the pixels.
+fn refit_attitude(
+    cam: &Camera,
+    frame: &FrameStars,
+    inliers: &[bool],
+    start: &Matrix3<f64>,
+) -> Matrix3<f64> {
+    let kept: Vec<&Star> = frame
+        .stars
+        .iter()
+        .zip(inliers)
+        .filter_map(|(s, &k)| k.then_some(s))
+        .collect();
+    if kept.len() < 2 {
+        return *start;
+    }
+    let frames = std::slice::from_ref(frame);
+    let inl = [inliers.to_vec()];
+    let problem = Problem {
+        frames,
+        inliers: &inl,
+        free_cam: &[],
+        active: &[true],
+    };
+    let mut p = params_of(cam);
+    let mut best = *start;
+    let cam_dirs: Vec<Vector3<f64>> = kept.iter().map(|s| cam.pixel_to_vector(s.x, s.y)).collect();
+    let icrs: Vec<Vector3<f64>> = kept.iter().map(|s| s.v.normalize()).collect();
+    if let Some(w) = wahba(&cam_dirs, &icrs) {
+        if problem.cost(&p, cam, &[w]) < problem.cost(&p, cam, &[best]) {
+            best = w;
+        }
+    }
+    let mut rots = [best];
+    problem.solve(&mut p, cam, &mut rots, 10);
+    rots[0]
+}
+
+/// RMS residual norm over the kept stars of the given frames.
+fn rms(
+    cam: &Camera,
+    frames: &[FrameStars],
+    rots: &[Matrix3<f64>],
+    keep: impl Fn(usize, usize) -> bool,
+) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (f, frame) in frames.iter().enumerate() {
+        for (s, star) in frame.stars.iter().enumerate() {
+            if keep(f, s) {
+                let e = residual(cam, &rots[f], star).unwrap_or([f64::INFINITY; 2]);
+                sum += e[0] * e[0] + e[1] * e[1];
+                n += 1;
+            }
+        }
+    }
+    if n == 0 {
+        f64::NAN
+    } else {
+        (sum / n as f64).sqrt()
+    }
+}
+
+/// Reject a camera whose radial map r_d = r (1 + k1 r² + k2 r⁴) stops increasing before the
+/// farthest image corner: such a camera folds the image and cannot be inverted.
+fn check_monotonic(cam: &Camera) -> Result<()> {
+    let (w, h) = (cam.width as f64 - 0.5, cam.height as f64 - 0.5);
+    let rd_max = [(-0.5, -0.5), (w, -0.5), (-0.5, h), (w, h)]
+        .iter()
+        .map(|&(x, y)| ((x - cam.cx) / cam.fx).hypot((y - cam.cy) / cam.fy))
+        .fold(0.0, f64::max);
+    // dr_d/dr = 1 + 3 k1 u + 5 k2 u² with u = r²: its smallest positive root, if any.
+    let (a, b) = (5.0 * cam.k2, 3.0 * cam.k1);
+    let root = if a == 0.0 {
+        (b < 0.0).then(|| -1.0 / b)
+    } else {
+        let disc = b * b - 4.0 * a;
+        if disc < 0.0 {
+            None
+        } else {
+            let q = -0.5 * (b + b.signum() * disc.sqrt());
+            [q / a, if q != 0.0 { 1.0 / q } else { f64::NAN }]
+                .into_iter()
+                .filter(|u| *u > 0.0)
+                .reduce(f64::min)
+        }
+    };
+    if let Some(u) = root {
+        let r = u.sqrt();
+        let rd = r * (1.0 + cam.k1 * u + cam.k2 * u * u);
+        if rd <= rd_max {
+            bail!(
+                "the fitted distortion k1 = {:.5}, k2 = {:.5} folds the image: r(1 + k1 r² + k2 r⁴) \
+                 stops increasing {:.0} px from the principal point, inside the image corner at {:.0} px; \
+                 the stars do not constrain the distortion (fit without k2, or use frames with stars \
+                 nearer the corners)",
+                cam.k1,
+                cam.k2,
+                rd * cam.fx.min(cam.fy),
+                rd_max * cam.fx.min(cam.fy)
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Fit one camera and an attitude per frame to the identified stars of all frames.
+///
+/// Stars are rejected as outliers (then the fit is repeated, up to 3 rounds) when their
+/// residual norm exceeds `outlier_sigma` robust per-axis sigmas (median norm / √ln 4, the
+/// Rayleigh median). Errors when there are too few stars, or when the fitted distortion folds
+/// the image.
+pub fn fit(initial: &Camera, frames: &[FrameStars], opts: &FitOptions) -> Result<Fit> {
+    let finite = params_of(initial).iter().all(|v| v.is_finite());
+    if !(finite && initial.fx > 0.0 && initial.fy > 0.0) {
+        bail!("the initial camera must have finite parameters and positive focal lengths");
+    }
+    let usable = |inl: &[Vec<bool>]| -> (Vec<bool>, usize) {
+        let counts: Vec<usize> = inl
+            .iter()
+            .map(|f| f.iter().filter(|&&k| k).count())
+            .collect();
+        let active: Vec<bool> = counts.iter().map(|&c| c >= MIN_FRAME_STARS).collect();
+        let n = counts
+            .iter()
+            .zip(&active)
+            .filter(|(_, a)| **a)
+            .map(|(c, _)| c)
+            .sum();
+        (active, n)
+    };
+    let need = |active: &[bool], n: usize, what: &str| -> Result<()> {
+        let nf = active.iter().filter(|&&a| a).count();
+        if n < MIN_STARS || nf == 0 {
+            bail!(
+                "calibration needs at least {MIN_STARS} identified stars over at least 1 frame \
+                 (counting frames with {MIN_FRAME_STARS} or more stars); got {n} stars over {nf} \
+                 frames{what} ({} frames given)",
+                frames.len()
+            );
+        }
+        Ok(())
+    };
+    let mut inliers: Vec<Vec<bool>> = frames
+        .iter()
+        .map(|f| {
+            f.stars
+                .iter()
+                .map(|s| {
+                    [s.x, s.y, s.v.x, s.v.y, s.v.z]
+                        .iter()
+                        .all(|v| v.is_finite())
+                })
+                .collect()
+        })
+        .collect();
+    let (active, n) = usable(&inliers);
+    need(&active, n, "")?;
+
+    let n_frames = active.iter().filter(|&&a| a).count();
+    let fit_pp = opts.fit_principal_point && n_frames >= MIN_FRAMES_FOR_PRINCIPAL_POINT;
+    let free_cam: Vec<usize> = (0..6)
+        .filter(|&q| match q {
+            2 | 3 => fit_pp,
+            5 => opts.fit_k2,
+            _ => true,
+        })
+        .collect();
+
+    // Start: each frame's attitude re-fitted alone with the initial camera.
+    let mut rots: Vec<Matrix3<f64>> = frames
+        .iter()
+        .zip(&inliers)
+        .map(|(f, inl)| refit_attitude(initial, f, inl, &f.r))
+        .collect();
+    // A star behind the camera under its frame's starting attitude is a gross mismatch; it can
+    // come back in a rejection round if the fitted attitude brings it in front.
+    for (f, frame) in frames.iter().enumerate() {
+        for (s, star) in frame.stars.iter().enumerate() {
+            if residual(initial, &rots[f], star).is_none() {
+                inliers[f][s] = false;
+            }
+        }
+    }
+    let (mut active, n) = usable(&inliers);
+    need(&active, n, "")?;
+    let mut p = params_of(initial);
+    let mut iterations = 0;
+    for round in 0..=MAX_REJECTION_ROUNDS {
+        let problem = Problem {
+            frames,
+            inliers: &inliers,
+            free_cam: &free_cam,
+            active: &active,
+        };
+        iterations += problem.solve(&mut p, initial, &mut rots, opts.max_iterations);
+        if round == MAX_REJECTION_ROUNDS
+            || !(opts.outlier_sigma.is_finite() && opts.outlier_sigma > 0.0)
+        {
+            break;
+        }
+        // Residual norms of all stars of the fitted frames, kept or not, so that a star
+        // rejected early under a poorer fit can come back.
+        let cam = camera_with(initial, &p);
+        let norms: Vec<Vec<f64>> = frames
+            .iter()
+            .zip(&rots)
+            .map(|(f, r)| {
+                f.stars
+                    .iter()
+                    .map(|s| residual(&cam, r, s).map_or(f64::INFINITY, |e| e[0].hypot(e[1])))
+                    .collect()
+            })
+            .collect();
+        let mut kept: Vec<f64> = Vec::new();
+        for f in (0..frames.len()).filter(|&f| active[f]) {
+            kept.extend(
+                norms[f]
+                    .iter()
+                    .zip(&inliers[f])
+                    .filter(|(_, k)| **k)
+                    .map(|(n, _)| *n),
+            );
+        }
+        kept.sort_by(f64::total_cmp);
+        let median = kept[kept.len() / 2];
+        let sigma = (median / 4f64.ln().sqrt()).max(MIN_ROBUST_SIGMA_PX);
+        let limit = opts.outlier_sigma * sigma;
+        let mut next = inliers.clone();
+        for f in (0..frames.len()).filter(|&f| active[f]) {
+            for (s, star) in frames[f].stars.iter().enumerate() {
+                let finite = [star.x, star.y, star.v.x, star.v.y, star.v.z]
+                    .iter()
+                    .all(|v| v.is_finite());
+                next[f][s] = finite && norms[f][s] <= limit;
+            }
+        }
+        if next == inliers {
+            break;
+        }
+        let (act, n) = usable(&next);
+        need(&act, n, " after rejecting outliers")?;
+        inliers = next;
+        active = act;
+    }
+    let camera = camera_with(initial, &p);
+    check_monotonic(&camera)?;
+
+    // Frames out of the joint fit keep only their own attitude fitted.
+    for f in (0..frames.len()).filter(|&f| !active[f]) {
+        rots[f] = refit_attitude(&camera, &frames[f], &inliers[f], &rots[f]);
+    }
+    let problem = Problem {
+        frames,
+        inliers: &inliers,
+        free_cam: &free_cam,
+        active: &active,
+    };
+    let sigmas = problem.sigmas(&p, initial, &rots);
+
+    let used = |f: usize, s: usize| active[f] && inliers[f][s];
+    let rms_after_px = rms(&camera, frames, &rots, used);
+    let before_rots: Vec<Matrix3<f64>> = frames
+        .iter()
+        .enumerate()
+        .map(|(f, fr)| {
+            if active[f] {
+                refit_attitude(initial, fr, &inliers[f], &fr.r)
+            } else {
+                fr.r
+            }
+        })
+        .collect();
+    let rms_before_px = rms(initial, frames, &before_rots, used);
+    let per_frame_rms_px = (0..frames.len())
+        .map(|f| rms(&camera, &frames[f..=f], &rots[f..=f], |_, s| inliers[f][s]))
+        .collect();
+    let rejected: Vec<(usize, usize)> = (0..frames.len())
+        .flat_map(|f| (0..frames[f].stars.len()).map(move |s| (f, s)))
+        .filter(|&(f, s)| !inliers[f][s])
+        .collect();
+    let stars_used = (0..frames.len())
+        .filter(|&f| active[f])
+        .map(|f| inliers[f].iter().filter(|&&k| k).count())
+        .sum();
+    Ok(Fit {
+        camera,
+        rotations: rots,
+        rms_before_px,
+        rms_after_px,
+        per_frame_rms_px,
+        stars_used,
+        stars_rejected: rejected.len(),
+        rejected,
+        iterations,
+        fitted: free_cam.iter().map(|&q| NAMES[q]).collect(),
+        sigmas,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::attitude::attitude_error;
+    use nalgebra::{Quaternion, UnitQuaternion};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+        // Box–Muller; 1 − u keeps the logarithm finite.
+        let (u, v): (f64, f64) = (rng.random(), rng.random());
+        (-2.0 * (1.0 - u).ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+    }
+
+    fn random_rotation(rng: &mut ChaCha8Rng) -> Matrix3<f64> {
+        // Shoemake's uniform unit quaternion.
+        let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
+        let tau = 2.0 * std::f64::consts::PI;
+        let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+        let q = Quaternion::new(
+            b * (tau * u3).cos(),
+            a * (tau * u2).sin(),
+            a * (tau * u2).cos(),
+            b * (tau * u3).sin(),
+        );
+        *UnitQuaternion::from_quaternion(q)
+            .to_rotation_matrix()
+            .matrix()
+    }
+
+    fn true_camera() -> Camera {
+        let mut c = Camera::from_fov(1280, 960, 50.0).unwrap();
+        c.fy = c.fx * 1.005;
+        c.cx += 7.0;
+        c.cy -= 5.0;
+        c.k1 = -0.15;
+        c.k2 = 0.02;
+        c
+    }
+
+    /// The rough camera a user starts from: the right fx only.
+    fn rough(truth: &Camera) -> Camera {
+        let mut c = Camera::from_fov(truth.width, truth.height, 50.0).unwrap();
+        c.fx = truth.fx;
+        c.fy = truth.fx;
+        c
+    }
+
+    /// Frames at random attitudes with `per_frame` stars each, σ 0.2 px of noise, attitudes
+    /// perturbed by 0.3° as a rough solve would leave them; returns frames and true attitudes.
+    fn synthetic(
+        cam: &Camera,
+        n_frames: usize,
+        per_frame: usize,
+        seed: u64,
+    ) -> (Vec<FrameStars>, Vec<Matrix3<f64>>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut frames = Vec::new();
+        let mut truth = Vec::new();
+        for f in 0..n_frames {
+            let r = random_rotation(&mut rng);
+            let stars = (0..per_frame)
+                .map(|_| {
+                    let x = rng.random::<f64>() * (cam.width as f64 - 1.0);
+                    let y = rng.random::<f64>() * (cam.height as f64 - 1.0);
+                    let v = r.transpose() * cam.pixel_to_vector(x, y);
+                    Star {
+                        x: x + 0.2 * gauss(&mut rng),
+                        y: y + 0.2 * gauss(&mut rng),
+                        v,
+                    }
+                })
+                .collect();
+            let axis = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)).normalize();
+            let start = Rotation3::new(axis * 0.3f64.to_radians()).into_inner() * r;
+            frames.push(FrameStars {
+                name: format!("f{f:02}"),
+                r: start,
+                stars,
+            });
+            truth.push(r);
+        }
+        (frames, truth)
+    }
+
+    /// Worst over the frames of (attitude error, error of the sky direction of the image centre
+    /// pixel), for the fitted camera and attitudes and for the oracle: the true camera with each
+    /// attitude fitted alone — the floor the noise sets (radians).
+    fn attitude_errors(
+        fit: &Fit,
+        truth: &Camera,
+        frames: &[FrameStars],
+        rots: &[Matrix3<f64>],
+    ) -> [f64; 4] {
+        let (xc, yc) = truth.centre_pixel();
+        let sky = |r: &Matrix3<f64>, c: &Camera| r.transpose() * c.pixel_to_vector(xc, yc);
+        let mut w = [0.0f64; 4];
+        for f in 0..frames.len() {
+            let inl: Vec<bool> = (0..frames[f].stars.len())
+                .map(|s| !fit.rejected.contains(&(f, s)))
+                .collect();
+            let oracle = refit_attitude(truth, &frames[f], &inl, &frames[f].r);
+            let t = sky(&rots[f], truth);
+            let e = [
+                attitude_error(&fit.rotations[f], &rots[f]),
+                sky(&fit.rotations[f], &fit.camera).angle(&t),
+                attitude_error(&oracle, &rots[f]),
+                sky(&oracle, truth).angle(&t),
+            ];
+            for k in 0..4 {
+                w[k] = w[k].max(e[k]);
+            }
+        }
+        w.map(|x| x.to_degrees() * 3600.0)
+    }
+
+    fn check_accuracy(fit: &Fit, truth: &Camera, frames: &[FrameStars], rots: &[Matrix3<f64>]) {
+        let c = &fit.camera;
+        assert!(
+            (c.fx / truth.fx - 1.0).abs() < 5e-4,
+            "fx {} vs {}",
+            c.fx,
+            truth.fx
+        );
+        assert!(
+            (c.fy / truth.fy - 1.0).abs() < 5e-4,
+            "fy {} vs {}",
+            c.fy,
+            truth.fy
+        );
+        assert!((c.cx - truth.cx).abs() < 0.5, "cx {} vs {}", c.cx, truth.cx);
+        assert!((c.cy - truth.cy).abs() < 0.5, "cy {} vs {}", c.cy, truth.cy);
+        let expected = 2f64.sqrt() * 0.2;
+        assert!(
+            fit.rms_after_px < 1.2 * expected,
+            "rms after {}",
+            fit.rms_after_px
+        );
+        assert!(
+            fit.rms_before_px > 5.0 * fit.rms_after_px,
+            "rms before {}",
+            fit.rms_before_px
+        );
+        // 40 stars at 0.2 px and 150″/px leave each attitude uncertain by ~10″ across and ~15″
+        // in roll even with the true camera, so the test is against that floor: where a frame
+        // puts its image centre on the sky must be as good as the oracle's; the full rotation
+        // also carries the principal point's error (0.5 px ≈ 75″ at most, by the check above).
+        let [rot, centre, rot_oracle, centre_oracle] = attitude_errors(fit, truth, frames, rots);
+        assert!(
+            centre < 1.3 * centre_oracle + 1.0,
+            "centre pixel {centre}″ vs oracle {centre_oracle}″"
+        );
+        assert!(
+            rot < rot_oracle + 75.0,
+            "attitude {rot}″ vs oracle {rot_oracle}″"
+        );
+    }
+
+    fn report(
+        label: &str,
+        fit: &Fit,
+        truth: &Camera,
+        frames: &[FrameStars],
+        rots: &[Matrix3<f64>],
+        secs: f64,
+    ) {
+        let c = &fit.camera;
+        let [rot, centre, rot_o, centre_o] = attitude_errors(fit, truth, frames, rots);
+        eprintln!(
+            "{label}: fx {:.3} ({:.3}) fy {:.3} ({:.3}) cx {:.3} ({:.3}) cy {:.3} ({:.3}) k1 {:.5} ({}) k2 {:.5} ({}) \
+             | rms {:.3} -> {:.3} px, used {} rejected {}, {} iterations, {:.1} ms | worst attitude {rot:.1}″ \
+             (oracle {rot_o:.1}″), centre pixel on the sky {centre:.1}″ (oracle {centre_o:.1}″) | fitted {:?} σ {:?}",
+            c.fx,
+            truth.fx,
+            c.fy,
+            truth.fy,
+            c.cx,
+            truth.cx,
+            c.cy,
+            truth.cy,
+            c.k1,
+            truth.k1,
+            c.k2,
+            truth.k2,
+            fit.rms_before_px,
+            fit.rms_after_px,
+            fit.stars_used,
+            fit.stars_rejected,
+            fit.iterations,
+            secs * 1e3,
+            fit.fitted,
+            fit.sigmas
+                .iter()
+                .map(|s| format!("{s:.4}"))
+                .collect::<Vec<_>>()
+        );
+    }
+
+    #[test]
+    fn jacobian_matches_central_differences() {
+        for mirrored in [false, true] {
+            let mut cam = true_camera();
+            cam.mirrored = mirrored;
+            let c = Vector3::new(0.31, -0.22, 1.0);
+            let (_, dcam, drot) = project(&cam, &c).unwrap();
+            let steps = [1e-3 * cam.fx, 1e-3 * cam.fy, 1e-2, 1e-2, 1e-6, 1e-6];
+            for q in 0..6 {
+                let mut p = params_of(&cam);
+                p[q] += steps[q];
+                let hi = project(&camera_with(&cam, &p), &c).unwrap().0;
+                p[q] -= 2.0 * steps[q];
+                let lo = project(&camera_with(&cam, &p), &c).unwrap().0;
+                for axis in 0..2 {
+                    let num = (hi[axis] - lo[axis]) / (2.0 * steps[q]);
+                    assert!(
+                        (num - dcam[axis][q]).abs() < 1e-6 * (1.0 + num.abs()),
+                        "cam {q} axis {axis}: {num} vs {}",
+                        dcam[axis][q]
+                    );
+                }
+            }
+            for k in 0..3 {
+                let mut w = Vector3::zeros();
+                w[k] = 1e-7;
+                let hi = project(&cam, &(Rotation3::new(w).into_inner() * c))
+                    .unwrap()
+                    .0;
+                let lo = project(&cam, &(Rotation3::new(-w).into_inner() * c))
+                    .unwrap()
+                    .0;
+                for axis in 0..2 {
+                    let num = (hi[axis] - lo[axis]) / 2e-7;
+                    assert!(
+                        (num - drot[axis][k]).abs() < 1e-4 * (1.0 + num.abs()),
+                        "rot {k} axis {axis}: {num} vs {}",
+                        drot[axis][k]
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn recovers_a_synthetic_camera() {
+        let truth = true_camera();
+        let (frames, rots) = synthetic(&truth, 12, 40, 1);
+        let t = std::time::Instant::now();
+        let fit = fit(&rough(&truth), &frames, &FitOptions::default()).unwrap();
+        report(
+            "clean",
+            &fit,
+            &truth,
+            &frames,
+            &rots,
+            t.elapsed().as_secs_f64(),
+        );
+        assert_eq!(fit.fitted, ["fx", "fy", "cx", "cy", "k1", "k2"]);
+        assert_eq!(fit.stars_used + fit.stars_rejected, 480);
+        assert!(fit.stars_rejected <= 1, "rejected {}", fit.stars_rejected);
+        check_accuracy(&fit, &truth, &frames, &rots);
+        assert!(
+            (fit.camera.k1 - truth.k1).abs() < 0.01,
+            "k1 {}",
+            fit.camera.k1
+        );
+        assert_eq!(fit.per_frame_rms_px.len(), 12);
+        // Deterministic.
+        let again = super::fit(&rough(&truth), &frames, &FitOptions::default()).unwrap();
+        assert_eq!(again.camera, fit.camera);
+        assert_eq!(again.rotations, fit.rotations);
+    }
+
+    #[test]
+    fn rejects_gross_outliers() {
+        let truth = true_camera();
+        let (mut frames, rots) = synthetic(&truth, 12, 40, 2);
+        let mut rng = ChaCha8Rng::seed_from_u64(99);
+        let mut planted = Vec::new();
+        // 3 % of the stars moved 20 px in a random direction.
+        while planted.len() < 480 * 3 / 100 {
+            let (f, s) = (rng.random_range(0..12), rng.random_range(0..40));
+            if planted.contains(&(f, s)) {
+                continue;
+            }
+            let a: f64 = rng.random::<f64>() * std::f64::consts::TAU;
+            frames[f].stars[s].x += 20.0 * a.cos();
+            frames[f].stars[s].y += 20.0 * a.sin();
+            planted.push((f, s));
+        }
+        planted.sort();
+        let t = std::time::Instant::now();
+        let fit = fit(&rough(&truth), &frames, &FitOptions::default()).unwrap();
+        report(
+            "outliers",
+            &fit,
+            &truth,
+            &frames,
+            &rots,
+            t.elapsed().as_secs_f64(),
+        );
+        for p in &planted {
+            assert!(fit.rejected.contains(p), "planted outlier {p:?} kept");
+        }
+        assert!(
+            fit.stars_rejected <= planted.len() + 1,
+            "rejected {}",
+            fit.stars_rejected
+        );
+        check_accuracy(&fit, &truth, &frames, &rots);
+    }
+
+    #[test]
+    fn one_frame_keeps_the_principal_point() {
+        let truth = true_camera();
+        let (frames, rots) = synthetic(&truth, 1, 60, 3);
+        let start = rough(&truth);
+        let fit = fit(&start, &frames, &FitOptions::default()).unwrap();
+        report("one frame", &fit, &truth, &frames, &rots, 0.0);
+        assert_eq!(fit.fitted, ["fx", "fy", "k1", "k2"]);
+        assert_eq!((fit.camera.cx, fit.camera.cy), (start.cx, start.cy));
+        assert!(fit.rms_after_px < fit.rms_before_px);
+    }
+
+    #[test]
+    fn too_few_stars_is_an_error() {
+        let truth = true_camera();
+        let (frames, _) = synthetic(&truth, 2, 8, 4);
+        let e = fit(&rough(&truth), &frames, &FitOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("at least 20") && e.contains("got 16 stars over 2 frames"),
+            "{e}"
+        );
+        let e = fit(&rough(&truth), &[], &FitOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("got 0 stars over 0 frames"), "{e}");
+    }
+
+    #[test]
+    fn folding_distortion_is_rejected() {
+        let mut cam = true_camera();
+        check_monotonic(&cam).unwrap();
+        cam.k1 = -1.5; // 1 − 4.5 r² vanishes at r ≈ 0.47, inside the corner (r_d ≈ 0.55)
+        cam.k2 = 0.0;
+        let e = check_monotonic(&cam).unwrap_err().to_string();
+        assert!(e.contains("folds the image"), "{e}");
+        cam.k1 = 0.3;
+        cam.k2 = -3.0;
+        assert!(check_monotonic(&cam).is_err());
+        cam.k2 = 0.0;
+        check_monotonic(&cam).unwrap();
+    }
+}
