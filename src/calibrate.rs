@@ -80,8 +80,10 @@ pub struct Fit {
     pub sigmas: Vec<f64>,
 }
 
-/// The least data a camera fit accepts: fewer stars leave six parameters poorly determined.
-pub const MIN_STARS: usize = 20;
+/// The least data a camera fit accepts: 24 equations for one frame's 6 unknowns (fx, fy, k1
+/// and its attitude), four times over; fewer leave them poorly determined. (cedar-solve's
+/// virgo.jpg, one 20° frame, shows 14 stars through its pinhole camera.)
+pub const MIN_STARS: usize = 12;
 /// A frame with fewer stars barely constrains its own attitude (3 unknowns) and tells
 /// nothing about the camera.
 pub const MIN_FRAME_STARS: usize = 3;
@@ -970,12 +972,12 @@ mod tests {
     #[test]
     fn too_few_stars_is_an_error() {
         let truth = true_camera();
-        let (frames, _) = synthetic(&truth, 2, 8, 4);
+        let (frames, _) = synthetic(&truth, 2, 5, 4);
         let e = fit(&rough(&truth), &frames, &FitOptions::default())
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("at least 20") && e.contains("got 16 stars over 2 frames"),
+            e.contains("at least 12") && e.contains("got 10 stars over 2 frames"),
             "{e}"
         );
         let e = fit(&rough(&truth), &[], &FitOptions::default())

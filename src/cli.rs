@@ -1211,6 +1211,9 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The largest 1σ (pixels) of a fitted principal point that calibration keeps.
+const CALIBRATE_CENTRE_SD_PX: f64 = 1.0;
+
 /// `gpustar calibrate`: solve DIR, fit the camera to every solved frame's identified stars,
 /// re-identify with the fitted camera and fit again, then write the camera file.
 fn calibrate_cmd(
@@ -1291,7 +1294,30 @@ fn calibrate_cmd(
     };
     let before = solve(&start, true)?;
     summary("with the camera given", &before);
-    let first = calibrate::fit(&start, &stars_of(&before), &opts)?;
+    // k2 only where the field is wide enough to tell it from k1 (r⁴ at the corner ≥ 1 % of
+    // r²'s reach: a half-diagonal of about 18°); the principal point only where the frames
+    // fix it to a pixel (a narrow field trades it for the attitudes).
+    let corner = (start.diagonal_rad() / 2.0).tan().powi(2);
+    let mut opts = calibrate::FitOptions {
+        fit_k2: opts.fit_k2 && corner >= 0.1,
+        ..opts
+    };
+    let mut first = calibrate::fit(&start, &stars_of(&before), &opts)?;
+    let centre_sd = first
+        .fitted
+        .iter()
+        .zip(&first.sigmas)
+        .filter(|(n, _)| **n == "cx" || **n == "cy")
+        .map(|(_, sd)| *sd)
+        .fold(0.0, f64::max);
+    if centre_sd > CALIBRATE_CENTRE_SD_PX {
+        eprintln!(
+            "gpustar: the principal point is only known to {centre_sd:.1} px from these frames: \
+             kept where the camera file puts it"
+        );
+        opts.fit_principal_point = false;
+        first = calibrate::fit(&start, &stars_of(&before), &opts)?;
+    }
     // Edge stars a rough camera missed come in with the fitted one: fit again.
     let again = solve(&first.camera, false)?;
     let fit = calibrate::fit(&first.camera, &stars_of(&again), &opts)?;
@@ -1313,9 +1339,9 @@ fn calibrate_cmd(
         eprintln!("  {name} = {v:.6} ± {sd:.2e}");
     }
     eprintln!(
-        "  pixel residuals rms: {:.3} px with the camera given (each frame's attitude fitted \
-         alone), {:.3} px fitted; {} stars used, {} rejected, {} frames",
-        fit.rms_before_px,
+        "  pixel residuals rms: {:.3} px with the camera given (its frames' stars, each \
+         frame's attitude fitted alone), {:.3} px fitted; {} stars used, {} rejected, {} frames",
+        first.rms_before_px,
         fit.rms_after_px,
         fit.stars_used,
         fit.stars_rejected,
