@@ -184,8 +184,11 @@ impl Band {
             return self.refs.clone();
         };
         let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
-        map.entry(epoch_day(e))
-            .or_insert_with(|| Arc::new(self.refs.at_epoch(e)))
+        let day = epoch_day(e);
+        // At the day's own epoch, not the first frame's of that day: the positions (and the
+        // records' epoch) must not depend on which frame of the day a thread reached first.
+        map.entry(day)
+            .or_insert_with(|| Arc::new(self.refs.at_epoch(day_epoch(day))))
             .clone()
     }
 }
@@ -207,6 +210,12 @@ const SAME_EPOCH_YEARS: f64 = 0.003;
 /// The day of an epoch (Julian year): what star positions are cached by.
 fn epoch_day(epoch: f64) -> i64 {
     (epoch * 365.25).round() as i64
+}
+
+/// The epoch star positions are computed at for a day (within half a day of any frame of it:
+/// proper motions move no star by a microarcsecond in that time).
+fn day_epoch(day: i64) -> f64 {
+    day as f64 / 365.25
 }
 
 /// Relative spacing of the focal-length factors of a scale search: each covers ±0.05 %, which
@@ -640,7 +649,10 @@ impl Solver {
         if mag_limit <= voted_with.mag_limit {
             return None;
         }
-        let epoch = epoch.unwrap_or(voted_with.epoch);
+        let epoch = match epoch {
+            Some(e) if (e - voted_with.epoch).abs() > SAME_EPOCH_YEARS => day_epoch(epoch_day(e)),
+            _ => voted_with.epoch,
+        };
         let key = ((mag_limit * 10.0).round() as i64, epoch_day(epoch));
         let refs = deeper
             .selections
