@@ -223,6 +223,32 @@ pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<R
     }
     let s = 2 * p.tile;
     let s2 = s * s;
+    scan(
+        pixels,
+        tiles,
+        p,
+        |t| (t.background + t.offset).min(65536),
+        |a, b, wy| (s - wy) * a + wy * b,
+        // Pixels at or below this are below every level between the two columns.
+        |c0, c1| (s * c0.min(c1) / s2).min(65535) as u16,
+        |_, _, v, wx, c0, c1| v as u32 * s2 > (s - wx) * c0 + wx * c1,
+    )
+}
+
+/// The mask's runs, row by row: `tile_level` of the tiles interpolated between tile rows by
+/// `between_rows(upper, lower, wy)` for each tile column; within each segment of columns that
+/// share a pair of tile columns (levels c0, c1), pixels at or below `floor(c0, c1)` cannot be
+/// set and are passed over 16 at a time (a branch-free maximum the compiler vectorises);
+/// `set(x, y, pixel, wx, c0, c1)` decides the others.
+fn scan(
+    pixels: &[u16],
+    tiles: &[TileStats],
+    p: &DetectParams,
+    tile_level: impl Fn(&TileStats) -> u32,
+    between_rows: impl Fn(u32, u32, u32) -> u32,
+    floor: impl Fn(u32, u32) -> u16,
+    set: impl Fn(u32, u32, u16, u32, u32, u32) -> bool,
+) -> Vec<Run> {
     // Column segments with the same pair of tile columns: (x0, x1, lower, upper tile column).
     let mut segments: Vec<(usize, usize, usize, usize)> = Vec::new();
     let mut weights = Vec::with_capacity(p.width as usize);
@@ -235,28 +261,24 @@ pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<R
             _ => segments.push((x as usize, x as usize + 1, tx as usize, t1)),
         }
     }
-    let level = |t: &TileStats| (t.background + t.offset).min(65536);
     let mut col_level = vec![0u32; p.tiles_x as usize];
     let mut runs = Vec::new();
     for y in 0..p.height {
         let (ty, wy) = axis_weight(y, p.tile, p.tiles_y);
         let ty1 = (ty + 1).min(p.tiles_y - 1);
         for (tx, c) in col_level.iter_mut().enumerate() {
-            let a = level(&tiles[(ty * p.tiles_x) as usize + tx]);
-            let b = level(&tiles[(ty1 * p.tiles_x) as usize + tx]);
-            *c = (s - wy) * a + wy * b;
+            let a = tile_level(&tiles[(ty * p.tiles_x) as usize + tx]);
+            let b = tile_level(&tiles[(ty1 * p.tiles_x) as usize + tx]);
+            *c = between_rows(a, b, wy);
         }
         let row = &pixels[(y * p.width) as usize..((y + 1) * p.width) as usize];
         let mut start: Option<u32> = None;
         for &(x0, x1, t0, t1) in &segments {
             let (c0, c1) = (col_level[t0], col_level[t1]);
-            // Pixels at or below `floor` are below every level of the segment.
-            let floor = (s * c0.min(c1) / s2).min(65535) as u16;
+            let floor = floor(c0, c1);
             let mut x = x0;
             while x < x1 {
                 if start.is_none() {
-                    // Skip ahead, 16 pixels at a time (a branch-free maximum the compiler
-                    // vectorises), to the next pixel that could be set.
                     while x + 16 <= x1 && row[x..x + 16].iter().fold(0, |m, &v| m.max(v)) <= floor {
                         x += 16;
                     }
@@ -265,9 +287,7 @@ pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<R
                         None => break,
                     }
                 }
-                let wx = weights[x];
-                let set = row[x] as u32 * s2 > (s - wx) * c0 + wx * c1;
-                match (set, start) {
+                match (set(x as u32, y, row[x], weights[x], c0, c1), start) {
                     (true, None) => start = Some(x as u32),
                     (false, Some(r0)) => {
                         runs.push(Run {
@@ -337,70 +357,19 @@ pub fn binomial3(pixels: &[u16], width: u32, height: u32, x: u32, y: u32) -> u32
 /// the same bit for bit.
 pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
     let s = 2 * p.tile;
-    // Column segments with the same pair of tile columns, as in `threshold`.
-    let mut segments: Vec<(usize, usize, usize, usize)> = Vec::new();
-    let mut weights = Vec::with_capacity(p.width as usize);
-    for x in 0..p.width {
-        let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
-        let t1 = (tx + 1).min(p.tiles_x - 1) as usize;
-        weights.push(wx);
-        match segments.last_mut() {
-            Some(seg) if seg.2 == tx as usize && seg.3 == t1 => seg.1 = x as usize + 1,
-            _ => segments.push((x as usize, x as usize + 1, tx as usize, t1)),
-        }
-    }
-    let mut runs = Vec::new();
-    let mut col = vec![0u32; p.tiles_x as usize];
-    for y in 0..p.height {
-        let (ty, wy) = axis_weight(y, p.tile, p.tiles_y);
-        let ty1 = (ty + 1).min(p.tiles_y - 1);
-        for (tx, c) in col.iter_mut().enumerate() {
-            let a = filtered_tile_level(&tiles[(ty * p.tiles_x) as usize + tx]);
-            let b = filtered_tile_level(&tiles[(ty1 * p.tiles_x) as usize + tx]);
-            *c = ((s - wy) * a + wy * b) / s;
-        }
-        let row = &pixels[(y * p.width) as usize..((y + 1) * p.width) as usize];
-        let mut start: Option<u32> = None;
-        for &(x0, x1, t0, t1) in &segments {
-            let (c0, c1) = (col[t0], col[t1]);
-            // The level is at least min(c0, c1), so a pixel at or below a sixteenth of it is
-            // below its level: most of a star field is, and is passed over 16 at a time.
-            let floor = (c0.min(c1) / 16).min(65535) as u16;
-            let mut x = x0;
-            while x < x1 {
-                if start.is_none() {
-                    while x + 16 <= x1 && row[x..x + 16].iter().fold(0, |m, &v| m.max(v)) <= floor {
-                        x += 16;
-                    }
-                    match row[x..x1].iter().position(|&v| v > floor) {
-                        Some(k) => x += k,
-                        None => break,
-                    }
-                }
-                let wx = weights[x];
-                let level = ((s - wx) * c0 + wx * c1) / s;
-                let set = 16 * row[x] as u32 > level
-                    && binomial3(pixels, p.width, p.height, x as u32, y) > level;
-                match (set, start) {
-                    (true, None) => start = Some(x as u32),
-                    (false, Some(r0)) => {
-                        runs.push(Run {
-                            y,
-                            x0: r0,
-                            x1: x as u32,
-                        });
-                        start = None;
-                    }
-                    _ => {}
-                }
-                x += 1;
-            }
-        }
-        if let Some(x0) = start {
-            runs.push(Run { y, x0, x1: p.width });
-        }
-    }
-    runs
+    scan(
+        pixels,
+        tiles,
+        p,
+        filtered_tile_level,
+        |a, b, wy| ((s - wy) * a + wy * b) / s,
+        // The level is at least min(c0, c1): a pixel at or below a sixteenth of it is below.
+        |c0, c1| (c0.min(c1) / 16).min(65535) as u16,
+        |x, y, v, wx, c0, c1| {
+            let level = ((s - wx) * c0 + wx * c1) / s;
+            16 * v as u32 > level && binomial3(pixels, p.width, p.height, x, y) > level
+        },
+    )
 }
 
 /// The mask as one value per pixel (1 = set), as the GPU stores it.
