@@ -252,7 +252,7 @@ impl Solvers {
             None => (detect::blobs_cpu(frame, &p), Vec::new()),
         };
         let sol = Solution {
-            detections: detect::star_list(&blobs, s),
+            detections: detect::stars(frame, &blobs, s),
             outcome: Outcome::Unsolved("no_camera"),
             epoch: d.epoch,
         };
@@ -366,7 +366,7 @@ impl GpuRunner {
                 Ok(blobs) => {
                     let ms = t0.elapsed().as_secs_f64() * 1e3 / group.len() as f64;
                     for (&i, b) in group.iter().zip(&blobs) {
-                        found[i] = Some((detect::star_list(b, s), ms));
+                        found[i] = Some((detect::stars(decoded_frame(&frames[i]), b, s), ms));
                     }
                 }
                 Err(e) => {
@@ -484,7 +484,8 @@ impl GpuRunner {
         };
         let detections: Vec<Vec<Detection>> = blobs
             .iter()
-            .map(|b| detect::star_list(b, settings))
+            .zip(frames)
+            .map(|(b, f)| detect::stars(f, b, settings))
             .collect();
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
@@ -555,7 +556,7 @@ impl GpuRunner {
                     .gpu
                     .detect(&subset, &detect::params(frames[0], &filtered))?;
                 for (&i, b) in unsolved.iter().zip(&blobs) {
-                    let again = solver.identify(detect::star_list(b, &filtered), epochs[i]);
+                    let again = solver.identify(detect::stars(frames[i], b, &filtered), epochs[i]);
                     if matches!(again.outcome, Outcome::Solved(..)) {
                         solutions[i] = again;
                     }
@@ -587,7 +588,7 @@ fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) ->
             let s = &solver.settings.detect;
             let p = detect::params(frame, s);
             let (blobs, found) = streaks::detect_cpu(frame, &p, &o.settings, s.k_sigma);
-            let dets = detect::star_list(&blobs, s);
+            let dets = detect::stars(frame, &blobs, s);
             let t1 = Instant::now();
             let sol = solver.identify(dets, d.epoch);
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;

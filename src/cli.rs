@@ -315,6 +315,11 @@ pub struct SolveOpts {
     /// that, which finds stars of about half the peak SNR; `none` thresholds the pixels alone.
     #[arg(long, value_enum, default_value_t = DetectFilter::None)]
     pub detect_filter: DetectFilter,
+    /// How star positions are measured: centre of gravity, or a maximum-likelihood fit of a
+    /// pixel-integrated Gaussian on a 9x9 window (the centre of gravity where it does not
+    /// settle).
+    #[arg(long, value_enum, default_value_t = crate::detect::Centroid::Cog)]
+    pub centroid: crate::detect::Centroid,
     /// Brightest detected stars that take part in the vote.
     #[arg(long, default_value_t = 40)]
     pub vote_stars: usize,
@@ -755,6 +760,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     let mut s = settings(&o.catalog, camera_mag);
     s.detect.k_sigma = o.sigma;
     s.detect.matched_filter = o.detect_filter == DetectFilter::Binomial;
+    s.detect.centroid = o.centroid;
     s.identify.vote_stars = o.vote_stars;
     s.retry = !o.no_retry;
     s.identify.pair_tol_px = o.pair_tol_px;
