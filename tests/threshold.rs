@@ -60,24 +60,32 @@ fn median_and_mad_ignore_a_bright_star() {
     assert_eq!(dense_mask(&runs, 8, 8).iter().sum::<u32>(), 2);
 }
 
-#[test]
-fn row_wise_runs_equal_the_per_pixel_definition() {
-    // Pseudo-random pixels and tile statistics: the runs must mark exactly the pixels with
-    // pixel · (2·tile)² > level_scaled(x, y), the definition the GPU kernel evaluates.
-    let (w, h) = (77u32, 51u32);
-    let p = DetectParams::new(w, h, 8, 3.0, 255);
-    let mut seed = 12345u32;
+/// Pseudo-random 8-bit pixels and tile statistics for the frame of `p`.
+fn random_pixels_and_tiles(p: &DetectParams, seed: u32) -> (Vec<u16>, Vec<TileStats>) {
+    let mut seed = seed;
     let mut next = || {
         seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
         seed >> 16
     };
-    let px: Vec<u16> = (0..w * h).map(|_| (next() % 256) as u16).collect();
+    let px: Vec<u16> = (0..p.width * p.height)
+        .map(|_| (next() % 256) as u16)
+        .collect();
     let tiles: Vec<TileStats> = (0..p.tiles_x * p.tiles_y)
         .map(|_| TileStats {
             background: next() % 200,
             offset: next() % 40,
         })
         .collect();
+    (px, tiles)
+}
+
+#[test]
+fn row_wise_runs_equal_the_per_pixel_definition() {
+    // Pseudo-random pixels and tile statistics: the runs must mark exactly the pixels with
+    // pixel · (2·tile)² > level_scaled(x, y), the definition the GPU kernel evaluates.
+    let (w, h) = (77u32, 51u32);
+    let p = DetectParams::new(w, h, 8, 3.0, 255);
+    let (px, tiles) = random_pixels_and_tiles(&p, 12345);
     let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
     let s2 = 4 * p.tile * p.tile;
     for y in 0..h {
@@ -149,18 +157,7 @@ fn filtered_runs_equal_the_per_pixel_definition() {
     // edges included.
     let (w, h) = (77u32, 51u32);
     let p = DetectParams::new(w, h, 8, 3.0, 255).with_filter(true);
-    let mut seed = 4321u32;
-    let mut next = || {
-        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
-        seed >> 16
-    };
-    let px: Vec<u16> = (0..w * h).map(|_| (next() % 256) as u16).collect();
-    let tiles: Vec<TileStats> = (0..p.tiles_x * p.tiles_y)
-        .map(|_| TileStats {
-            background: next() % 200,
-            offset: next() % 40,
-        })
-        .collect();
+    let (px, tiles) = random_pixels_and_tiles(&p, 4321);
     let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
     let mut set = 0;
     for y in 0..h {
