@@ -118,6 +118,17 @@ pub struct Record {
     /// otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub streaks: Option<Vec<StreakRecord>>,
+    /// Solved records: the attitude's 1σ (arcsec) from its matches' scatter (Shuster's
+    /// covariance σ²·[Σ(I − bbᵀ)]⁻¹ with σ the residuals' rms per axis): `boresight` about the two
+    /// axes across the line of sight together, `roll` about it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attitude_sigma_arcsec: Option<AttitudeSigma>,
+    /// Solved records: how far the rotation matrix is from a rotation, ‖RRᵀ − I‖ (Frobenius),
+    /// and its determinant (seed 003's check; a warning beyond 1e-9).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub orthogonality_error: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub determinant: Option<f64>,
     /// With `--sequence`: how the frame was identified, `tracking` (from the attitude the
     /// previous frames predict) or `lost_in_space`; absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -126,6 +137,13 @@ pub struct Record {
     /// stars; an empty list when none); absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub particles: Option<Vec<ParticleRecord>>,
+}
+
+/// The attitude's 1σ (arcsec).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AttitudeSigma {
+    pub boresight: f64,
+    pub roll: f64,
 }
 
 /// A detection judged to be a moving particle (`--sequence`).
@@ -166,6 +184,9 @@ impl Record {
             epoch: None,
             warnings: Vec::new(),
             streaks: None,
+            attitude_sigma_arcsec: None,
+            orthogonality_error: None,
+            determinant: None,
             sequence_mode: None,
             particles: None,
         }

@@ -847,6 +847,16 @@ impl Solver {
                 rec.p90_arcsec = Some(r.p90_arcsec);
                 rec.max_arcsec = Some(r.max_arcsec);
                 rec.false_match_prob = Some(r.false_match_prob);
+                let (sigma, ortho, det) = attitude_quality(r, refs);
+                rec.attitude_sigma_arcsec = sigma;
+                rec.orthogonality_error = Some(ortho);
+                rec.determinant = Some(det);
+                if ortho > ORTHOGONALITY_WARN || (det - 1.0).abs() > ORTHOGONALITY_WARN {
+                    rec.warnings.push(format!(
+                        "the rotation matrix is not orthonormal to 1e-9: ‖RRᵀ − I‖ = {ortho:.2e}, \
+                         det = {det:.12}"
+                    ));
+                }
                 let mut matches: Vec<MatchRecord> = r
                     .matches
                     .iter()
@@ -872,6 +882,43 @@ impl Solver {
         }
         rec
     }
+}
+
+/// Beyond this ‖RRᵀ − I‖ or |det R − 1| a record warns (Wahba's SVD gives 1e-15).
+pub const ORTHOGONALITY_WARN: f64 = 1e-9;
+
+/// The attitude's 1σ from its matches (Shuster: P = σ²·[Σ(I − b bᵀ)]⁻¹ in the camera frame,
+/// b the matched stars' directions, σ the residuals' rms per axis; boresight = √(Pxx + Pyy), roll =
+/// √Pzz), and ‖RRᵀ − I‖_F and det R. None for the 1σ with fewer than 3 matches.
+pub fn attitude_quality(
+    r: &refine::Refined,
+    refs: &RefCatalog,
+) -> (Option<crate::record::AttitudeSigma>, f64, f64) {
+    let ortho = (r.r * r.r.transpose() - nalgebra::Matrix3::identity()).norm();
+    let det = r.r.determinant();
+    if r.matches.len() < 3 {
+        return (None, ortho, det);
+    }
+    // The residuals' rms is of 2-D angles: per axis it is 1/√2 of it.
+    let sigma = r.rmse_arcsec / std::f64::consts::SQRT_2 / 3600.0 * std::f64::consts::PI / 180.0;
+    let info: nalgebra::Matrix3<f64> = r
+        .matches
+        .iter()
+        .map(|m| {
+            let b = r.r * refs.stars[m.ref_id as usize].v;
+            nalgebra::Matrix3::identity() - b * b.transpose()
+        })
+        .sum();
+    let Some(cov) = info.try_inverse() else {
+        return (None, ortho, det);
+    };
+    let p = cov * sigma * sigma;
+    let arcsec = |v: f64| v.max(0.0).sqrt().to_degrees() * 3600.0;
+    let s = crate::record::AttitudeSigma {
+        boresight: arcsec(p[(0, 0)] + p[(1, 1)]),
+        roll: arcsec(p[(2, 2)]),
+    };
+    (Some(s), ortho, det)
 }
 
 /// The camera with its focal lengths multiplied by `factor`.
