@@ -293,19 +293,23 @@ impl GpuRunner {
             return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
         }
         let mut records: Vec<Option<Record>> = (0..frames.len()).map(|_| None).collect();
-        let mut by_size: Vec<SizeGroup> = Vec::new();
-        for (i, d) in frames.into_iter().enumerate() {
-            match &d.frame {
-                Err(e) => records[i] = Some(Record::error(&d.name, e.clone(), &self.name())),
-                Ok(f) => {
-                    let size = (f.width, f.height, f.saturation);
-                    match by_size.iter_mut().find(|(s, _)| *s == size) {
-                        Some((_, v)) => v.push((i, d)),
-                        None => by_size.push((size, vec![(i, d)])),
-                    }
-                }
+        for (i, d) in frames.iter().enumerate() {
+            if let Err(e) = &d.frame {
+                records[i] = Some(Record::error(&d.name, e.clone(), &self.name()));
             }
         }
+        let groups = size_groups(&frames);
+        let mut frames: Vec<Option<Decoded>> = frames.into_iter().map(Some).collect();
+        let by_size: Vec<SizeGroup> = groups
+            .into_iter()
+            .map(|(size, idx)| {
+                let g = idx
+                    .into_iter()
+                    .map(|i| (i, frames[i].take().expect("each frame in one group")))
+                    .collect();
+                (size, g)
+            })
+            .collect();
         for ((w, h, _), group) in by_size {
             let indices: Vec<usize> = group.iter().map(|(i, _)| *i).collect();
             let solver = solvers.get(w, h);
@@ -339,16 +343,7 @@ impl GpuRunner {
         frames: Vec<Decoded>,
         max_stars: usize,
     ) -> Vec<Detected> {
-        let mut by_size: Vec<(DetectKey, Vec<usize>)> = Vec::new();
-        for (i, d) in frames.iter().enumerate() {
-            if let Ok(f) = &d.frame {
-                let size = (f.width, f.height, f.saturation);
-                match by_size.iter_mut().find(|(s, _)| *s == size) {
-                    Some((_, v)) => v.push(i),
-                    None => by_size.push((size, vec![i])),
-                }
-            }
-        }
+        let by_size = size_groups(&frames);
         let mut found: Vec<Option<(Vec<Detection>, f64)>> = vec![None; frames.len()];
         let s = &DetectSettings {
             max_stars,
@@ -548,10 +543,7 @@ impl GpuRunner {
                 .collect();
             if !unsolved.is_empty() {
                 let subset: Vec<&Frame> = unsolved.iter().map(|&i| frames[i]).collect();
-                let filtered = DetectSettings {
-                    matched_filter: true,
-                    ..*settings
-                };
+                let filtered = solver.filtered_settings();
                 let blobs = self
                     .gpu
                     .detect(&subset, &detect::params(frames[0], &filtered))?;
@@ -575,6 +567,22 @@ impl GpuRunner {
 /// What a GPU batch gives: solutions, streaks (with `--streaks`), detection and
 /// identification times (ms).
 type GroupOut = (Vec<Solution>, Vec<Option<Vec<StreakFit>>>, f64, f64);
+
+/// The decoded frames (by index) grouped by size and saturation, in order of first
+/// appearance; frames that failed to decode are in no group.
+fn size_groups(frames: &[Decoded]) -> Vec<(DetectKey, Vec<usize>)> {
+    let mut groups: Vec<(DetectKey, Vec<usize>)> = Vec::new();
+    for (i, d) in frames.iter().enumerate() {
+        if let Ok(f) = &d.frame {
+            let size = (f.width, f.height, f.saturation);
+            match groups.iter_mut().find(|(s, _)| *s == size) {
+                Some((_, v)) => v.push(i),
+                None => groups.push((size, vec![i])),
+            }
+        }
+    }
+    groups
+}
 
 /// Solve a decoded frame with a known solver on the CPU.
 fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) -> Record {

@@ -650,7 +650,6 @@ pub fn fit(initial: &Camera, frames: &[FrameStars], opts: &FitOptions) -> Result
 mod tests {
     use super::*;
     use crate::attitude::attitude_error;
-    use nalgebra::{Quaternion, UnitQuaternion};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -658,22 +657,6 @@ mod tests {
         // Box–Muller; 1 − u keeps the logarithm finite.
         let (u, v): (f64, f64) = (rng.random(), rng.random());
         (-2.0 * (1.0 - u).ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    }
-
-    fn random_rotation(rng: &mut ChaCha8Rng) -> Matrix3<f64> {
-        // Shoemake's uniform unit quaternion.
-        let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
-        let tau = 2.0 * std::f64::consts::PI;
-        let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
-        let q = Quaternion::new(
-            b * (tau * u3).cos(),
-            a * (tau * u2).sin(),
-            a * (tau * u2).cos(),
-            b * (tau * u3).sin(),
-        );
-        *UnitQuaternion::from_quaternion(q)
-            .to_rotation_matrix()
-            .matrix()
     }
 
     fn true_camera() -> Camera {
@@ -706,7 +689,7 @@ mod tests {
         let mut frames = Vec::new();
         let mut truth = Vec::new();
         for f in 0..n_frames {
-            let r = random_rotation(&mut rng);
+            let r = crate::simulate::random_rotation(&mut rng);
             let stars = (0..per_frame)
                 .map(|_| {
                     let x = rng.random::<f64>() * (cam.width as f64 - 1.0);

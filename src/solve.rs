@@ -422,12 +422,7 @@ impl Solver {
             .transpose()?;
         let main_bands = bands.len();
         bands.extend(shallow);
-        let band_of = |scale: f64| {
-            bands[..main_bands]
-                .iter()
-                .position(|b| scale <= b.hi * (1.0 + 1e-12))
-                .unwrap_or(main_bands - 1)
-        };
+        let band_of = |scale: f64| band_for(&bands[..main_bands], scale);
         let scales_at = |step| match settings.scale_range {
             Some((lo, hi)) => scale_hypotheses(lo, hi, step),
             None => vec![1.0],
@@ -807,13 +802,25 @@ impl Solver {
         }
     }
 
-    /// The frame's detections with the matched filter (the detection retry).
-    pub fn detect_filtered(&self, frame: &Frame) -> Vec<Detection> {
-        let s = DetectSettings {
+    /// Detection's settings with the matched filter on (the detection retry).
+    pub fn filtered_settings(&self) -> DetectSettings {
+        DetectSettings {
             matched_filter: true,
             ..self.settings.detect
-        };
-        detect::detect(frame, &s)
+        }
+    }
+
+    /// The frame's detections with the matched filter (the detection retry).
+    pub fn detect_filtered(&self, frame: &Frame) -> Vec<Detection> {
+        detect::detect(frame, &self.filtered_settings())
+    }
+
+    /// The band (of the scale search; never the shallow pass's) a focal-length factor falls in.
+    pub fn band_of(&self, scale: f64) -> usize {
+        band_for(
+            &self.bands[..self.shallow_band.unwrap_or(self.bands.len())],
+            scale,
+        )
     }
 
     /// The result record of a solution.
@@ -919,6 +926,15 @@ pub fn attitude_quality(
         roll: arcsec(p[(2, 2)]),
     };
     (Some(s), ortho, det)
+}
+
+/// The band of `bands` (in increasing focal length) that focal-length factor `scale` falls in:
+/// the first whose upper end reaches it, else the last.
+fn band_for(bands: &[Band], scale: f64) -> usize {
+    bands
+        .iter()
+        .position(|b| scale <= b.hi * (1.0 + 1e-12))
+        .unwrap_or(bands.len() - 1)
 }
 
 /// The camera with its focal lengths multiplied by `factor`.

@@ -100,7 +100,6 @@ struct Solved {
 /// Frames whose motion from one to the next is known: one reference frame for their tracks.
 struct Chain {
     id: u64,
-    camera: Camera,
     /// The last frame: its camera frame in the reference frame, time, pixels and directions.
     c: Matrix3<f64>,
     t: f64,
@@ -205,18 +204,9 @@ impl<'a> Sequencer<'a> {
                 ..sol
             };
             let identify_ms = t0.elapsed().as_secs_f64() * 1e3;
-            let timing = Timing {
-                decode: d.decode_ms,
-                detect: f.detect_ms,
-                identify: identify_ms,
-                total: d.decode_ms + f.detect_ms + identify_ms,
-            };
-            let mut rec =
-                self.solvers
-                    .record(Some(solver), d, frame, &sol, None, timing, &f.backend);
+            let mut rec = self.record(solver, &f, frame, &sol, identify_ms, warnings);
             rec.sequence_mode = Some(LOST_IN_SPACE.to_string());
             rec.particles = Some(Vec::new());
-            rec.warnings.extend(warnings);
             return rec;
         }
         st.last_t = Some(t);
@@ -282,22 +272,37 @@ impl<'a> Sequencer<'a> {
         // Identification's time includes the sequence work before it (motion, the particle
         // test): seed 003's pre-selection is part of its recognition time.
         let identify_ms = identify_ms + t_identify.duration_since(t_start).as_secs_f64() * 1e3;
+        let sol = Solution {
+            detections: dets.clone(),
+            outcome,
+            epoch: d.epoch,
+        };
+        let mut rec = self.record(solver, &f, frame, &sol, identify_ms, warnings);
+        rec.sequence_mode = Some(mode.to_string());
+        rec.particles = Some(particles);
+        rec
+    }
+
+    /// The record of a frame identified as `sol` in `identify_ms`, with its warnings (logged).
+    fn record(
+        &self,
+        solver: &Solver,
+        f: &Detected,
+        frame: &crate::frame::Frame,
+        sol: &Solution,
+        identify_ms: f64,
+        warnings: Vec<String>,
+    ) -> Record {
+        let d = &f.decoded;
         let timing = Timing {
             decode: d.decode_ms,
             detect: f.detect_ms,
             identify: identify_ms,
             total: d.decode_ms + f.detect_ms + identify_ms,
         };
-        let sol = Solution {
-            detections: dets.clone(),
-            outcome,
-            epoch: d.epoch,
-        };
         let mut rec = self
             .solvers
-            .record(Some(solver), d, frame, &sol, None, timing, &f.backend);
-        rec.sequence_mode = Some(mode.to_string());
-        rec.particles = Some(particles);
+            .record(Some(solver), d, frame, sol, None, timing, &f.backend);
         for w in &warnings {
             tracing::warn!("{}: {w}", d.name);
         }
@@ -377,7 +382,6 @@ impl<'a> Sequencer<'a> {
                 let judged = tracker.add(0, t, &c, None, &Seen { px, dirs, flux }, 0.0);
                 let ch = Chain {
                     id: self.chains,
-                    camera: camera.clone(),
                     c,
                     t,
                     px: Vec::new(),
@@ -390,7 +394,6 @@ impl<'a> Sequencer<'a> {
             }
         };
         let (mut ch, judged) = chain;
-        debug_assert_eq!(&ch.camera, camera);
         ch.t = t;
         ch.px = px.to_vec();
         ch.dirs = dirs.to_vec();

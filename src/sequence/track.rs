@@ -59,12 +59,7 @@ pub fn identify(
     if dets.len() < 3 {
         return None;
     }
-    let factor = pred.camera.fx / solver.camera.fx;
-    let band = solver
-        .bands
-        .iter()
-        .position(|b| factor <= b.hi * (1.0 + 1e-12))
-        .unwrap_or(solver.bands.len() - 1);
+    let band = solver.band_of(pred.camera.fx / solver.camera.fx);
     let refs = solver.bands[band].refs_at(epoch);
     let camera = &pred.camera;
     let cone = pred.cone_rad.max(0.0);
