@@ -5,6 +5,7 @@
 use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::dark::Darks;
+use crate::cpu::centroid::Blob;
 use crate::detect::{self, DetectSettings, Detection};
 use crate::frame::Frame;
 use crate::gpu::Gpu;
@@ -352,16 +353,18 @@ impl GpuRunner {
         for (_, group) in by_size {
             let batch: Vec<&Frame> = group.iter().map(|&i| decoded_frame(&frames[i])).collect();
             let t0 = Instant::now();
-            let blobs = if self.failed {
+            let stars = if self.failed {
                 Err(anyhow::anyhow!("the GPU failed earlier"))
             } else {
-                self.gpu.detect(&batch, &detect::params(batch[0], s))
+                self.gpu
+                    .detect(&batch, &detect::params(batch[0], s))
+                    .and_then(|blobs| gpu_stars(&self.gpu, &batch, &blobs, s))
             };
-            match blobs {
-                Ok(blobs) => {
+            match stars {
+                Ok(stars) => {
                     let ms = t0.elapsed().as_secs_f64() * 1e3 / group.len() as f64;
-                    for (&i, b) in group.iter().zip(&blobs) {
-                        found[i] = Some((detect::stars(decoded_frame(&frames[i]), b, s), ms));
+                    for (&i, d) in group.iter().zip(stars) {
+                        found[i] = Some((d, ms));
                     }
                 }
                 Err(e) => {
@@ -477,11 +480,7 @@ impl GpuRunner {
                 (kept, found)
             }
         };
-        let detections: Vec<Vec<Detection>> = blobs
-            .iter()
-            .zip(frames)
-            .map(|(b, f)| detect::stars(f, b, settings))
-            .collect();
+        let detections = gpu_stars(&self.gpu, frames, &blobs, settings)?;
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
         let mut outcomes: Vec<Outcome> = vec![Outcome::Unsolved("too_few_stars"); frames.len()];
@@ -547,8 +546,9 @@ impl GpuRunner {
                 let blobs = self
                     .gpu
                     .detect(&subset, &detect::params(frames[0], &filtered))?;
-                for (&i, b) in unsolved.iter().zip(&blobs) {
-                    let again = solver.identify(detect::stars(frames[i], b, &filtered), epochs[i]);
+                let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
+                for (&i, d) in unsolved.iter().zip(stars) {
+                    let again = solver.identify(d, epochs[i]);
                     if matches!(again.outcome, Outcome::Solved(..)) {
                         solutions[i] = again;
                     }
@@ -562,6 +562,18 @@ impl GpuRunner {
             t1.elapsed().as_secs_f64() * 1e3,
         ))
     }
+}
+
+/// The star lists of a GPU batch's frames from their blobs, the PSF fits (`--centroid ml`) by
+/// the GPU kernel in one submission.
+fn gpu_stars(
+    gpu: &Gpu,
+    frames: &[&Frame],
+    blobs: &[Vec<Blob>],
+    s: &DetectSettings,
+) -> Result<Vec<Vec<Detection>>> {
+    let blobs: Vec<&[Blob]> = blobs.iter().map(|b| b.as_slice()).collect();
+    detect::stars_with(frames, &blobs, s, |w| gpu.psf_fit(w))
 }
 
 /// What a GPU batch gives: solutions, streaks (with `--streaks`), detection and

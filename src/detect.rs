@@ -2,6 +2,7 @@
 
 use crate::cpu;
 use crate::cpu::centroid::Blob;
+use crate::cpu::psf_fit::{PsfFit, Window};
 use crate::cpu::threshold::DetectParams;
 use crate::frame::Frame;
 use serde::Serialize;
@@ -30,7 +31,8 @@ pub enum Centroid {
     /// Centre of gravity of the component's background-subtracted pixels (seed 000 eq. 3).
     Cog,
     /// Maximum-likelihood fit of a pixel-integrated Gaussian on a 9×9 window
-    /// (`cpu::psf_fit`); the centre of gravity where the fit does not settle.
+    /// (`psf_fit`: the GPU kernel or its CPU twin); the centre of gravity where the fit does not
+    /// settle.
     Ml,
 }
 
@@ -58,6 +60,9 @@ pub struct Detection {
     pub peak: u32,
     /// Some pixel reached the format's maximum: the centroid is less certain.
     pub saturated: bool,
+    /// The position's 1σ per axis (pixels) from the PSF fit's Fisher information (rms of x's
+    /// and y's); None for a centre of gravity.
+    pub sigma_px: Option<f64>,
 }
 
 /// The stage parameters for a frame under these settings.
@@ -107,23 +112,56 @@ pub fn star_list(blobs: &[Blob], s: &DetectSettings) -> Vec<Detection> {
                 area: b.area,
                 peak: b.peak,
                 saturated: b.saturated > 0,
+                sigma_px: None,
             }
         })
         .collect()
 }
 
-/// The star list of a frame's blobs, with each position measured as the settings say.
+/// The star list of a frame's blobs, with each position measured as the settings say (the
+/// PSF fits by the CPU twin).
 pub fn stars(frame: &Frame, blobs: &[Blob], s: &DetectSettings) -> Vec<Detection> {
-    let mut list = star_list(blobs, s);
-    if s.centroid == Centroid::Ml {
-        for d in &mut list {
-            let fit = cpu::psf_fit::psf_fit(&frame.pixels, frame.width, frame.height, d.x, d.y);
-            if let Some(f) = fit.filter(|_| !d.saturated) {
-                (d.x, d.y) = (f.x, f.y);
+    let fit_cpu = |w: &[Window]| Ok(w.iter().map(cpu::psf_fit::psf_fit).collect());
+    let mut out = stars_with(&[frame], &[blobs], s, fit_cpu).expect("the CPU fits");
+    out.pop().unwrap_or_default()
+}
+
+/// The star lists of a batch of frames (with their blobs), each position measured as the
+/// settings say: with `--centroid ml` every unsaturated star's window goes to `fit` in one call
+/// (the CPU twin, or the GPU kernel in one submission for the batch); a star whose window
+/// leaves the frame, or whose fit does not settle, keeps its centre of gravity.
+pub fn stars_with(
+    frames: &[&Frame],
+    blobs: &[&[Blob]],
+    s: &DetectSettings,
+    fit: impl FnOnce(&[Window]) -> anyhow::Result<Vec<Option<PsfFit>>>,
+) -> anyhow::Result<Vec<Vec<Detection>>> {
+    let mut lists: Vec<Vec<Detection>> = blobs.iter().map(|b| star_list(b, s)).collect();
+    if s.centroid != Centroid::Ml {
+        return Ok(lists);
+    }
+    // (frame, star) of each window, in order.
+    let mut at = Vec::new();
+    let mut windows = Vec::new();
+    for (f, (frame, list)) in frames.iter().zip(&lists).enumerate() {
+        for (k, d) in list.iter().enumerate().filter(|(_, d)| !d.saturated) {
+            let w = cpu::psf_fit::window(&frame.pixels, frame.width, frame.height, d.x, d.y);
+            if let Some(w) = w {
+                at.push((f, k));
+                windows.push(w);
             }
         }
     }
-    list
+    let fits = fit(&windows)?;
+    anyhow::ensure!(fits.len() == windows.len(), "one PSF fit per window");
+    for ((f, k), fit) in at.into_iter().zip(fits) {
+        if let Some(p) = fit {
+            let d = &mut lists[f][k];
+            (d.x, d.y) = (p.x, p.y);
+            d.sigma_px = Some(((p.sx * p.sx + p.sy * p.sy) / 2.0).sqrt());
+        }
+    }
+    Ok(lists)
 }
 
 /// Detect stars in a frame on the CPU.

@@ -17,6 +17,7 @@ fn detection(x: f64, y: f64, flux: f64) -> Detection {
         area: 5,
         peak: flux as u32,
         saturated: false,
+        sigma_px: None,
     }
 }
 

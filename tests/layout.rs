@@ -6,6 +6,7 @@ use gpustar::cpu::streak_filter::StreakParams;
 use gpustar::cpu::threshold::{DetectParams, TileStats};
 use gpustar::cpu::vote::PairRange;
 use gpustar::gpu::detect::{BatchParams, DetectUniform, StreakUniform};
+use gpustar::gpu::psf_fit::{FitOut, PsfUniform};
 use gpustar::gpu::vote::VoteUniform;
 use gpustar::gpu::{KERNELS, kernel_source};
 use std::mem::{offset_of, size_of};
@@ -103,6 +104,15 @@ fn host_and_wgsl_structs_have_the_same_layout() {
     assert_eq!(offset_of!(Blob, mx), offset_of!(Blob, m0) + 8);
     assert_eq!(offset_of!(Blob, my), offset_of!(Blob, m0) + 16);
     assert_eq!(span as usize, size_of::<Blob>());
+
+    let psf = module("psf_fit");
+    assert_layout!(psf, "PsfUniform", PsfUniform, [windows, pad0, pad1, pad2]);
+    assert_layout!(
+        psf,
+        "Fit",
+        FitOut,
+        [x, y, flux, background, sigma, sx, sy, settled]
+    );
 
     let vote = module("vote");
     assert_layout!(

@@ -16,6 +16,7 @@ fn det(x: f64, y: f64) -> Detection {
         area: 4,
         peak: 0,
         saturated: false,
+        sigma_px: None,
     }
 }
 

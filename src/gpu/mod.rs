@@ -7,6 +7,7 @@
 //! Each kernel in `shaders/` has its CPU twin in `src/cpu/` with the same name.
 
 pub mod detect;
+pub mod psf_fit;
 pub mod vote;
 
 use anyhow::{Context, Result, anyhow, bail};
@@ -77,6 +78,7 @@ pub const KERNELS: &[(&str, &str, &str)] = &[
         SHARED_VOTE,
         include_str!("../../shaders/select.wgsl"),
     ),
+    ("psf_fit", "", include_str!("../../shaders/psf_fit.wgsl")),
 ];
 
 /// The full WGSL source of a kernel (shared prelude + body).
@@ -135,6 +137,7 @@ struct Pipelines {
     streak_filter: wgpu::ComputePipeline,
     vote: wgpu::ComputePipeline,
     select: wgpu::ComputePipeline,
+    psf_fit: wgpu::ComputePipeline,
 }
 
 /// The GPU context: built once, used for every batch.
@@ -252,6 +255,7 @@ impl Gpu {
             streak_filter: pipeline(&device, "streak_filter"),
             vote: pipeline(&device, "vote"),
             select: pipeline(&device, "select"),
+            psf_fit: pipeline(&device, "psf_fit"),
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             bail!("building the GPU kernels failed on {}: {e}", info.name);
