@@ -29,6 +29,9 @@ const HALF: i32 = 4;
 const SIDE: u32 = 9u;
 const WINDOW: u32 = 81u;
 const ITERATIONS: u32 = 8u;
+// Keep in sync with src/cpu/psf_fit.rs.
+const MIN_WIDTH: f32 = 0.15;
+const WIDTH_CLAMP: f32 = 0.1;
 const SQRT_2: f32 = 1.4142135;
 const SQRT_2PI: f32 = 2.5066283;
 
@@ -228,7 +231,7 @@ fn fit_window(w: u32) -> Fit {
         if (!ok || t[2] <= 0.0) {
             return out;
         }
-        t[4] = clamp(t[4], 0.2, 5.0);
+        t[4] = clamp(t[4], WIDTH_CLAMP, 5.0);
     }
     var e0 = array<f32, 5>(1.0, 0.0, 0.0, 0.0, 0.0);
     var e1 = array<f32, 5>(0.0, 1.0, 0.0, 0.0, 0.0);
@@ -238,7 +241,7 @@ fn fit_window(w: u32) -> Fit {
         return out;
     }
     let settled = abs(t[0] - start.x) <= 1.0 && abs(t[1] - start.y) <= 1.0
-        && t[4] >= 0.3 && t[4] <= 4.0;
+        && t[4] >= MIN_WIDTH && t[4] <= 4.0;
     out = Fit(t[0], t[1], t[2], t[3], t[4], sqrt(max(cx[0], 0.0)), sqrt(max(cy[1], 0.0)),
               select(0u, 1u, settled));
     return out;

@@ -8,10 +8,25 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 /// equal weights): R = U diag(1, 1, det U · det V) Vᵀ for B = Σ cam·icrsᵀ = U S Vᵀ.
 /// None when fewer than two distinct directions are given.
 pub fn wahba(cam: &[Vector3<f64>], icrs: &[Vector3<f64>]) -> Option<Matrix3<f64>> {
-    if cam.len() < 2 || cam.len() != icrs.len() {
+    wahba_weighted(cam, icrs, &vec![1.0; cam.len()])
+}
+
+/// As [`wahba`], with weights: B = Σ w·cam·icrsᵀ (weights 1/σ² make it the maximum-likelihood
+/// attitude for independent isotropic errors; Shuster's QUEST model).
+pub fn wahba_weighted(
+    cam: &[Vector3<f64>],
+    icrs: &[Vector3<f64>],
+    weights: &[f64],
+) -> Option<Matrix3<f64>> {
+    if cam.len() < 2 || cam.len() != icrs.len() || weights.len() != cam.len() {
         return None;
     }
-    let b: Matrix3<f64> = cam.iter().zip(icrs).map(|(c, r)| c * r.transpose()).sum();
+    let b: Matrix3<f64> = cam
+        .iter()
+        .zip(icrs)
+        .zip(weights)
+        .map(|((c, r), w)| c * r.transpose() * *w)
+        .sum();
     let svd = b.svd(true, true);
     let (u, v_t) = (svd.u?, svd.v_t?);
     let d = (u.determinant() * v_t.determinant()).signum();

@@ -323,6 +323,7 @@ mod tests {
                         mag: 5.0,
                         flux: 1.0,
                         residual_arcsec: 0.0,
+                        sigma_px: None,
                     }
                 })
                 .collect(),

@@ -23,6 +23,10 @@ pub struct MatchRecord {
     pub mag: f64,
     pub flux: f64,
     pub residual_arcsec: f64,
+    /// With `--centroid ml`: the position's 1σ per axis (pixels) from the PSF fit's Fisher
+    /// information; absent for a centre of gravity.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_px: Option<f64>,
 }
 
 /// One end (or the midpoint) of a streak (spec/INTERFACE.md, "Streaks").
@@ -118,15 +122,21 @@ pub struct Record {
     /// otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub streaks: Option<Vec<StreakRecord>>,
-    /// Solved records: the attitude's 1σ (arcsec) from its matches' scatter (Shuster's
-    /// covariance σ²·[Σ(I − bbᵀ)]⁻¹ with σ the residuals' rms per axis): `boresight` about the two
-    /// axes across the line of sight together, `roll` about it.
+    /// Solved records: the attitude's 1σ (arcsec) from its matches (Shuster's covariance
+    /// [Σ(I − bbᵀ)/σ_i²]⁻¹, σ_i each match's 1σ: the residuals' rms per axis, or with
+    /// `--centroid ml` the PSF fit's with `sigma_floor_px` in quadrature): `boresight` about the
+    /// two axes across the line of sight together, `roll` about it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attitude_sigma_arcsec: Option<AttitudeSigma>,
     /// Solved records: how far the rotation matrix is from a rotation, ‖RRᵀ − I‖ (Frobenius),
     /// and its determinant (seed 003's check; a warning beyond 1e-9).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub orthogonality_error: Option<f64>,
+    /// With `--centroid ml`: the floor (pixels) added in quadrature to the PSF fits' 1σ so that
+    /// the residuals' χ² equals its degrees of freedom (what photon noise does not explain: the
+    /// camera model, the catalog); the matches are weighted by 1/(σ² + floor²).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_floor_px: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub determinant: Option<f64>,
     /// With `--sequence`: how the frame was identified, `tracking` (from the attitude the
@@ -186,6 +196,7 @@ impl Record {
             streaks: None,
             attitude_sigma_arcsec: None,
             orthogonality_error: None,
+            sigma_floor_px: None,
             determinant: None,
             sequence_mode: None,
             particles: None,

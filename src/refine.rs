@@ -2,7 +2,7 @@
 //! match detections to them one to one, refit, and judge the result by the probability that a
 //! wrong attitude would match as many stars by chance.
 
-use crate::attitude::wahba;
+use crate::attitude::{wahba, wahba_weighted};
 use crate::camera::{Camera, angle};
 use crate::catalog::RefCatalog;
 use crate::detect::Detection;
@@ -58,6 +58,10 @@ pub struct Match {
     pub residual_arcsec: f64,
     /// Distance between the detection and the projected star (pixels).
     pub residual_px: f64,
+    /// The weight's 1σ per axis (pixels): the PSF fit's, with the frame's floor added in
+    /// quadrature ([`match_sigmas`]); None when the detections carry no 1σ (centre of gravity)
+    /// and the fit weighs every match alike.
+    pub sigma_px: Option<f64>,
 }
 
 /// A refined solution.
@@ -78,6 +82,9 @@ pub struct Refined {
     /// 3 for a triangle). Refining again from another start counts the same.
     pub hypotheses: u64,
     pub fixed: usize,
+    /// The floor added in quadrature to the PSF fits' 1σ so that the residuals' χ² equals its
+    /// degrees of freedom (pixels; `--centroid ml` only).
+    pub sigma_floor_px: Option<f64>,
 }
 
 /// Reference stars projecting inside the image under `r`: (ref id, pixel).
@@ -164,16 +171,23 @@ pub fn refine(
             }
             _ => CameraFit::None,
         };
+        let weights = weights_at(&r, &camera, dets, &det_vectors, refs, &next);
         if fit == CameraFit::None {
-            r = fit_attitude(&next, &det_vectors, refs)?;
+            r = fit_attitude(&next, &det_vectors, refs, weights.as_deref())?;
         } else {
-            (r, camera) = fit_camera(r, &camera, dets, &next, refs, fit);
+            (r, camera) = fit_camera(r, &camera, dets, &next, refs, fit, weights.as_deref());
             det_vectors = vectors_of(&camera);
         }
         let stable = next == pairs;
         pairs = next;
         if stable {
             break;
+        }
+    }
+    // Weights from the final attitude's residuals (the loop's last fit used the previous one's).
+    if let Some(w) = weights_at(&r, &camera, dets, &det_vectors, refs, &pairs) {
+        if s.fit == CameraFit::None || pairs.len() < MIN_MATCHES_SCALE {
+            r = fit_attitude(&pairs, &det_vectors, refs, Some(&w))?;
         }
     }
     let (mut matches, scatter) = residuals(&r, &camera, dets, &det_vectors, refs, &pairs);
@@ -218,7 +232,8 @@ pub fn refine(
             if next.len() < pairs.len() {
                 break;
             }
-            let Some(r1) = fit_attitude(&next, &det_vectors, refs) else {
+            let w = weights_at(&r, &camera, dets, &det_vectors, refs, &next);
+            let Some(r1) = fit_attitude(&next, &det_vectors, refs, w.as_deref()) else {
                 break;
             };
             r = r1;
@@ -230,6 +245,7 @@ pub fn refine(
         }
         matches = residuals(&r, &camera, dets, &det_vectors, refs, &pairs).0;
     }
+    let sigma_floor_px = match_sigmas(dets, &mut matches);
     let mut res: Vec<f64> = matches.iter().map(|m| m.residual_arcsec).collect();
     res.sort_by(f64::total_cmp);
     let rmse = (res.iter().map(|x| x * x).sum::<f64>() / res.len() as f64).sqrt();
@@ -245,21 +261,86 @@ pub fn refine(
         false_match_prob,
         hypotheses,
         fixed,
+        sigma_floor_px,
     })
 }
 
-/// The attitude that best maps the matched stars onto their detections (Wahba).
+/// The attitude that best maps the matched stars onto their detections (Wahba, weighted when
+/// `weights` are given).
 fn fit_attitude(
     pairs: &[(usize, u32)],
     det_vectors: &[Vector3<f64>],
     refs: &RefCatalog,
+    weights: Option<&[f64]>,
 ) -> Option<Matrix3<f64>> {
     let cam: Vec<_> = pairs.iter().map(|&(d, _)| det_vectors[d]).collect();
     let icrs: Vec<_> = pairs
         .iter()
         .map(|&(_, id)| refs.stars[id as usize].v)
         .collect();
-    wahba(&cam, &icrs)
+    match weights {
+        Some(w) => wahba_weighted(&cam, &icrs, w),
+        None => wahba(&cam, &icrs),
+    }
+}
+
+/// The weights (1/σ², pixels⁻²) of matched pairs under an attitude, when the detections carry
+/// their 1σ: see [`match_sigmas`]. None when none does.
+fn weights_at(
+    r: &Matrix3<f64>,
+    camera: &Camera,
+    dets: &[Detection],
+    det_vectors: &[Vector3<f64>],
+    refs: &RefCatalog,
+    pairs: &[(usize, u32)],
+) -> Option<Vec<f64>> {
+    dets.iter().find(|d| d.sigma_px.is_some())?;
+    let mut matches = residuals(r, camera, dets, det_vectors, refs, pairs).0;
+    match_sigmas(dets, &mut matches)?;
+    Some(
+        matches
+            .iter()
+            .map(|m| m.sigma_px.map_or(0.0, |s| 1.0 / (s * s)))
+            .collect(),
+    )
+}
+
+/// Each match's 1σ per axis for weighting: the PSF fit's (a detection without one, a centre of
+/// gravity where the fit did not settle, takes the largest of the others'), with a floor σ_f
+/// added in quadrature so that Σ r²/(σ² + σ_f²) equals the 2n − 3 degrees of freedom: what
+/// the fit's photon noise does not explain (the camera model, the catalog, seeing) weighs
+/// every star alike, so the bright stars' tiny 1σ do not take the whole weight. Sets
+/// `sigma_px` of each match and returns σ_f; None (nothing set) without PSF fits.
+pub fn match_sigmas(dets: &[Detection], matches: &mut [Match]) -> Option<f64> {
+    let worst = matches
+        .iter()
+        .filter_map(|m| dets[m.det].sigma_px)
+        .fold(None, |a: Option<f64>, s| Some(a.map_or(s, |a| a.max(s))))?;
+    let fit: Vec<f64> = matches
+        .iter()
+        .map(|m| dets[m.det].sigma_px.unwrap_or(worst).powi(2))
+        .collect();
+    // A star that no longer projects has no residual to weigh: the fit stays unweighted.
+    let r2: Vec<f64> = matches.iter().map(|m| m.residual_px.powi(2)).collect();
+    if !r2.iter().all(|r| r.is_finite()) {
+        return None;
+    }
+    let dof = (2 * matches.len()).saturating_sub(3).max(1) as f64;
+    // χ²(f) = Σ r²/(σ² + f) falls with f; at f = Σr²/dof it is at most dof.
+    let chi2 = |f: f64| -> f64 { r2.iter().zip(&fit).map(|(r, s)| r / (s + f)).sum() };
+    let mut floor = 0.0;
+    if chi2(0.0) > dof {
+        let (mut lo, mut hi) = (0.0, r2.iter().sum::<f64>() / dof);
+        for _ in 0..100 {
+            let mid = 0.5 * (lo + hi);
+            if chi2(mid) > dof { lo = mid } else { hi = mid }
+        }
+        floor = hi;
+    }
+    for (m, s) in matches.iter_mut().zip(&fit) {
+        m.sigma_px = Some((s + floor).sqrt());
+    }
+    Some(floor.sqrt())
 }
 
 /// The polish's largest match radius, in match radii.
@@ -287,6 +368,7 @@ fn residuals(
                 ref_id,
                 residual_arcsec: angle(&det_vectors[det], &v).to_degrees() * 3600.0,
                 residual_px,
+                sigma_px: None,
             }
         })
         .collect();
@@ -306,7 +388,13 @@ fn fit_camera(
     pairs: &[(usize, u32)],
     refs: &RefCatalog,
     fit: CameraFit,
+    weights: Option<&[f64]>,
 ) -> (Matrix3<f64>, Camera) {
+    // Residuals scaled by √w: least squares weighted.
+    let root: Vec<f64> = match weights {
+        Some(w) => w.iter().map(|w| w.sqrt()).collect(),
+        None => vec![1.0; pairs.len()],
+    };
     let n_par = if fit == CameraFit::Distortion { 5 } else { 4 };
     let apply = |p: &[f64]| -> (Matrix3<f64>, Camera) {
         let rot = nalgebra::Rotation3::new(Vector3::new(p[0], p[1], p[2])).into_inner() * r;
@@ -321,10 +409,10 @@ fn fit_camera(
     let residuals = |p: &[f64]| -> Option<Vec<f64>> {
         let (rot, c) = apply(p);
         let mut out = Vec::with_capacity(2 * pairs.len());
-        for &(d, id) in pairs {
+        for (&(d, id), w) in pairs.iter().zip(&root) {
             let (x, y) = c.vector_to_pixel(&(rot * refs.stars[id as usize].v))?;
-            out.push(x - dets[d].x);
-            out.push(y - dets[d].y);
+            out.push(w * (x - dets[d].x));
+            out.push(w * (y - dets[d].y));
         }
         Some(out)
     };

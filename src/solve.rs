@@ -857,6 +857,7 @@ impl Solver {
                 let (sigma, ortho, det) = attitude_quality(r, refs);
                 rec.attitude_sigma_arcsec = sigma;
                 rec.orthogonality_error = Some(ortho);
+                rec.sigma_floor_px = r.sigma_floor_px;
                 rec.determinant = Some(det);
                 if ortho > ORTHOGONALITY_WARN || (det - 1.0).abs() > ORTHOGONALITY_WARN {
                     rec.warnings.push(format!(
@@ -880,6 +881,7 @@ impl Solver {
                             mag: star.mag,
                             flux: d.flux,
                             residual_arcsec: m.residual_arcsec,
+                            sigma_px: d.sigma_px,
                         }
                     })
                     .collect();
@@ -894,9 +896,11 @@ impl Solver {
 /// Beyond this ‖RRᵀ − I‖ or |det R − 1| a record warns (Wahba's SVD gives 1e-15).
 pub const ORTHOGONALITY_WARN: f64 = 1e-9;
 
-/// The attitude's 1σ from its matches (Shuster: P = σ²·[Σ(I − b bᵀ)]⁻¹ in the camera frame,
-/// b the matched stars' directions, σ the residuals' rms per axis; boresight = √(Pxx + Pyy), roll =
-/// √Pzz), and ‖RRᵀ − I‖_F and det R. None for the 1σ with fewer than 3 matches.
+/// The attitude's 1σ from its matches (Shuster: P = [Σ (1/σ_i²)(I − b bᵀ)]⁻¹ in the camera frame,
+/// b the matched stars' directions; σ_i each match's 1σ per axis (the PSF fit's with the frame's
+/// floor, `refine::match_sigmas`, at the mean focal length), or without PSF fits the residuals'
+/// rms per axis for all; boresight = √(Pxx + Pyy), roll = √Pzz), and ‖RRᵀ − I‖_F and det R. None
+/// for the 1σ with fewer than 3 matches.
 pub fn attitude_quality(
     r: &refine::Refined,
     refs: &RefCatalog,
@@ -907,19 +911,20 @@ pub fn attitude_quality(
         return (None, ortho, det);
     }
     // The residuals' rms is of 2-D angles: per axis it is 1/√2 of it.
-    let sigma = r.rmse_arcsec / std::f64::consts::SQRT_2 / 3600.0 * std::f64::consts::PI / 180.0;
+    let rms = r.rmse_arcsec / std::f64::consts::SQRT_2 / 3600.0 * std::f64::consts::PI / 180.0;
+    let focal = 0.5 * (r.camera.fx + r.camera.fy);
     let info: nalgebra::Matrix3<f64> = r
         .matches
         .iter()
         .map(|m| {
             let b = r.r * refs.stars[m.ref_id as usize].v;
-            nalgebra::Matrix3::identity() - b * b.transpose()
+            let sigma = m.sigma_px.map_or(rms, |s| s / focal);
+            (nalgebra::Matrix3::identity() - b * b.transpose()) / (sigma * sigma)
         })
         .sum();
-    let Some(cov) = info.try_inverse() else {
+    let Some(p) = info.try_inverse() else {
         return (None, ortho, det);
     };
-    let p = cov * sigma * sigma;
     let arcsec = |v: f64| v.max(0.0).sqrt().to_degrees() * 3600.0;
     let s = crate::record::AttitudeSigma {
         boresight: arcsec(p[(0, 0)] + p[(1, 1)]),
