@@ -1,4 +1,5 @@
-//! Per-stage time of the kernels on the GPU (lavapipe here) and of their CPU twins, for
+//! Per-stage time of the kernels on the GPU (lavapipe here) and of their CPU twins (psf_fit:
+//! the windows of each frame's star list, as `--centroid ml` fits them), for
 //! 1024² and 4096² frames in batches of 1, 8 and 64: `cargo bench --bench stages`.
 //!
 //! Frames come from the simulator (18° FOV, stars to magnitude 6, 3 false stars, 5 hot pixels;
@@ -147,6 +148,25 @@ fn main() {
                     })),
                 ),
             ];
+            // The PSF fits (`--centroid ml`) of each frame's star list.
+            let windows: Vec<_> = frames
+                .iter()
+                .flat_map(|f| {
+                    detect::star_list(&detect::blobs_cpu(f, &p), &settings)
+                        .into_iter()
+                        .filter_map(|d| {
+                            cpu::psf_fit::window(&f.pixels, f.width, f.height, d.x, d.y)
+                        })
+                })
+                .collect();
+            cpu_stages.push((
+                "psf_fit",
+                per(median_ms(runs, || {
+                    for w in &windows {
+                        std::hint::black_box(cpu::psf_fit::psf_fit(w));
+                    }
+                })),
+            ));
             let mut votes = Vec::new();
             cpu_stages.push((
                 "vote",
@@ -186,6 +206,13 @@ fn main() {
             for (k, name) in DETECT_KERNELS.iter().enumerate() {
                 stages.push((name, (prefix[k + 1] - prefix[k]).max(0.0)));
             }
+            // One submission for the batch's windows, upload and read-back included.
+            stages.push((
+                "psf_fit",
+                per(median_ms(runs, || {
+                    g.psf_fit(&windows).unwrap();
+                })),
+            ));
             let v: Vec<f64> = (0..=2)
                 .map(|k| per(median_ms(runs, || g.vote_prefix(table, &jobs, k).unwrap())))
                 .collect();
@@ -194,6 +221,7 @@ fn main() {
             stages.push(("select", (v[2] - v[1]).max(0.0)));
             let before = g.counters();
             g.detect(&frames, &p).unwrap();
+            g.psf_fit(&windows).unwrap();
             g.vote(table, &jobs).unwrap();
             let after = g.counters();
             rows.push(Row {

@@ -25,11 +25,11 @@ struct Fit {
     settled: u32,
 }
 
+// Keep in sync with src/cpu/psf_fit.rs (HALF, SIDE, WINDOW, ITERATIONS, MIN_WIDTH, WIDTH_CLAMP).
 const HALF: i32 = 4;
 const SIDE: u32 = 9u;
 const WINDOW: u32 = 81u;
-const ITERATIONS: u32 = 8u;
-// Keep in sync with src/cpu/psf_fit.rs.
+const ITERATIONS: u32 = 6u;
 const MIN_WIDTH: f32 = 0.15;
 const WIDTH_CLAMP: f32 = 0.1;
 const SQRT_2: f32 = 1.4142135;
@@ -49,26 +49,35 @@ fn erfc_pos(z: f32) -> f32 {
     return t * exp(-z * z + p);
 }
 
-// P(X > v) for X ~ N(0, s^2), from erfc of a non-negative argument only.
-fn upper(v: f32, s: f32) -> f32 {
-    let q = 0.5 * erfc_pos(abs(v) / (s * SQRT_2));
-    return select(1.0 - q, q, v >= 0.0);
-}
-
-// The Gaussian's share of the pixel [lo, hi]: differences of tails on one side.
-fn share(lo: f32, hi: f32, s: f32) -> f32 {
-    if (lo >= 0.0) {
-        return upper(lo, s) - upper(hi, s);
-    }
-    if (hi <= 0.0) {
-        return upper(-hi, s) - upper(-lo, s);
-    }
-    return 1.0 - upper(hi, s) - upper(-lo, s);
-}
-
 fn pdf(v: f32, s: f32) -> f32 {
     let r = v / s;
     return exp(-0.5 * r * r) / (s * SQRT_2PI);
+}
+
+// Per column (or row) k: (P_k, dP_k/dcentre, dP_k/dsigma) from the 10 pixel edges
+// e_j = j - 4.5 - centre, with q_j the tail beyond |e_j| (no cancellation) and g_j the density.
+fn axis(centre: f32, s: f32) -> array<vec3<f32>, 9> {
+    var e: array<f32, 10>;
+    var q: array<f32, 10>;
+    var g: array<f32, 10>;
+    for (var j = 0u; j <= SIDE; j++) {
+        e[j] = f32(i32(j) - HALF) - 0.5 - centre;
+        q[j] = 0.5 * erfc_pos(abs(e[j]) / (s * SQRT_2));
+        g[j] = pdf(e[j], s);
+    }
+    var out: array<vec3<f32>, 9>;
+    for (var k = 0u; k < SIDE; k++) {
+        var share: f32;
+        if (e[k] >= 0.0) {
+            share = q[k] - q[k + 1u];
+        } else if (e[k + 1u] <= 0.0) {
+            share = q[k + 1u] - q[k];
+        } else {
+            share = 1.0 - q[k + 1u] - q[k];
+        }
+        out[k] = vec3<f32>(share, g[k] - g[k + 1u], (e[k] * g[k] - e[k + 1u] * g[k + 1u]) / s);
+    }
+    return out;
 }
 
 // Solve F z = g (F symmetric, 5x5, row-major): Cholesky of D^-1/2 F D^-1/2; false when F is
@@ -178,21 +187,9 @@ fn fit_window(w: u32) -> Fit {
     var t = array<f32, 5>(start.x, start.y, flux0, b0, 1.0);
     var info: array<f32, 25>;
     for (var it = 0u; it < ITERATIONS; it++) {
-        // Per column and per row: the share P, dP/dcentre, dP/dsigma.
         let s = t[4];
-        var ax: array<vec3<f32>, 9>;
-        var ay: array<vec3<f32>, 9>;
-        for (var k = 0u; k < SIDE; k++) {
-            let c = f32(i32(k) - HALF);
-            let xlo = c - 0.5 - t[0];
-            let xhi = c + 0.5 - t[0];
-            ax[k] = vec3<f32>(share(xlo, xhi, s), pdf(xlo, s) - pdf(xhi, s),
-                              (xlo * pdf(xlo, s) - xhi * pdf(xhi, s)) / s);
-            let ylo = c - 0.5 - t[1];
-            let yhi = c + 0.5 - t[1];
-            ay[k] = vec3<f32>(share(ylo, yhi, s), pdf(ylo, s) - pdf(yhi, s),
-                              (ylo * pdf(ylo, s) - yhi * pdf(yhi, s)) / s);
-        }
+        var ax = axis(t[0], s);
+        var ay = axis(t[1], s);
         var score: array<f32, 5>;
         for (var a = 0u; a < 25u; a++) {
             info[a] = 0.0;
@@ -207,10 +204,16 @@ fn fit_window(w: u32) -> Fit {
             let j = array<f32, 5>(n * px.y * py.x, n * px.x * py.y, px.x * py.x, 1.0,
                                   n * (px.z * py.x + px.x * py.z));
             for (var a = 0u; a < 5u; a++) {
-                score[a] += j[a] * wt * (d[i] - mu);
-                for (var c = 0u; c < 5u; c++) {
-                    info[a * 5u + c] += j[a] * j[c] * wt;
+                let wa = j[a] * wt;
+                score[a] += wa * (d[i] - mu);
+                for (var c = a; c < 5u; c++) {
+                    info[a * 5u + c] += wa * j[c];
                 }
+            }
+        }
+        for (var a = 0u; a < 5u; a++) {
+            for (var c = 0u; c < a; c++) {
+                info[a * 5u + c] = info[c * 5u + a];
             }
         }
         var step: array<f32, 5>;

@@ -4,8 +4,8 @@
 
 use crate::camera::Camera;
 use crate::catalog::Catalog;
-use crate::dark::Darks;
 use crate::cpu::centroid::Blob;
+use crate::dark::Darks;
 use crate::detect::{self, DetectSettings, Detection};
 use crate::frame::Frame;
 use crate::gpu::Gpu;

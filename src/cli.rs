@@ -315,10 +315,10 @@ pub struct SolveOpts {
     /// that, which finds stars of about half the peak SNR; `none` thresholds the pixels alone.
     #[arg(long, value_enum, default_value_t = DetectFilter::None)]
     pub detect_filter: DetectFilter,
-    /// How star positions are measured: centre of gravity, or a maximum-likelihood fit of a
-    /// pixel-integrated Gaussian on a 9x9 window (the centre of gravity where it does not
-    /// settle).
-    #[arg(long, value_enum, default_value_t = crate::detect::Centroid::Cog)]
+    /// How star positions are measured: a maximum-likelihood fit of a pixel-integrated
+    /// Gaussian on a 9x9 window (the centre of gravity where it does not settle; matches then
+    /// carry their 1-sigma and weigh the attitude by it), or the centre of gravity.
+    #[arg(long, value_enum, default_value_t = crate::detect::Centroid::Ml)]
     pub centroid: crate::detect::Centroid,
     /// Brightest detected stars that take part in the vote.
     #[arg(long, default_value_t = 40)]

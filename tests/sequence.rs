@@ -179,7 +179,7 @@ fn gpu_records_equal_cpu_records() {
     };
     for (c, g) in cpu.into_iter().zip(gpu) {
         assert_ne!(g["backend"], "cpu");
-        assert_eq!(strip(c), strip(g));
+        common::assert_records_match(&strip(g), &strip(c));
     }
 }
 
@@ -272,8 +272,12 @@ fn shards_keep_a_sequence_whole() {
 
 /// swarm-a's real frames as sequences (one directory per satellite, head and day; 600 s
 /// apart, the attitude turning 25–39° between frames): frames from each series' third on are
-/// tracked at the rate of the last two solutions, and every frame is solved within 300″ of
-/// the truth (Swarm's pixels are 89″ × 171″; lost-in-space's median there is 56″).
+/// tracked at the rate of the last two solutions, and every frame is solved within 100″ of
+/// the truth across the line of sight (Swarm's pixels are 89″ × 171″; lost-in-space's median
+/// there is 15″) and within a pixel at the frame's ends in roll (1/376 rad = 549″: the
+/// truths' roll, astrometry.net's TAN-SIP on a 752×290 frame, differs from gpustar's k1 fit by
+/// up to 260″ with centres of gravity and 318″ with PSF fits on frame _152, and Swarm's own
+/// solution is 261″ from it there).
 #[test]
 fn swarm_a_series_are_tracked() {
     let Some(shared) = common::shared_dir("swarm_a_series_are_tracked") else {
@@ -319,13 +323,16 @@ fn swarm_a_series_are_tracked() {
         assert_eq!(r["status"], "solved", "{r}");
         let name = r["file"].as_str().unwrap().rsplit('/').next().unwrap();
         let t = truth.iter().find(|t| t["file"] == name).unwrap();
-        let err = attitude_error(
-            &matrix(&r["rotation_matrix"]),
-            &matrix(&t["rotation_matrix"]),
-        )
-        .to_degrees()
-            * 3600.0;
-        assert!(err < 300.0, "{name}: {err}″ from the truth");
+        // The error rotation's axis in the camera frame: z is the line of sight.
+        let d = matrix(&r["rotation_matrix"]) * matrix(&t["rotation_matrix"]).transpose();
+        let arcsec = |v: f64| (v / 2.0).asin().to_degrees() * 3600.0;
+        let across = arcsec((d[(2, 1)] - d[(1, 2)]).hypot(d[(0, 2)] - d[(2, 0)]));
+        let roll = arcsec(d[(1, 0)] - d[(0, 1)]).abs();
+        let edge = (1.0f64 / 376.0).to_degrees() * 3600.0;
+        assert!(
+            across < 100.0 && roll < edge,
+            "{name}: {across}″ across the line of sight, {roll}″ in roll from the truth"
+        );
         if r["sequence_mode"] == "tracking" {
             tracked += 1;
             // No fewer stars than alone.

@@ -77,7 +77,7 @@ impl Gpu {
             .iter()
             .zip(fits)
             .map(|(w, f)| {
-                (f.settled == 1).then(|| PsfFit {
+                (f.settled == 1).then_some(PsfFit {
                     x: w.cx as f64 + f.x as f64,
                     y: w.cy as f64 + f.y as f64,
                     flux: f.flux as f64,

@@ -277,3 +277,50 @@ pub fn assert_retry_adds(
         "{without}/{n} solved without it: {retry} adds little"
     );
 }
+
+/// GPU = CPU for records: everything equal but the floats that carry the PSF fit's f32
+/// (`--centroid ml`, the default): centroids within 1e-5 px (tests/psf_fit.rs measures 4.5e-7),
+/// RA/Dec/roll within 1e-6° (0.004″), rotation matrix and quaternion elements within 1e-8
+/// (0.002″), other floats within 1e-4 relative, plus 1e-5 px or 1e-4″ for pixel and arcsec
+/// values (residuals, rms, 1σ, the floor move with the centroids: a 0.02″ residual by 2e-6″).
+/// Integers, strings and the shapes of lists exactly.
+pub fn assert_records_match(a: &serde_json::Value, b: &serde_json::Value) {
+    fn walk(path: &str, key: &str, a: &serde_json::Value, b: &serde_json::Value) {
+        use serde_json::Value;
+        match (a, b) {
+            (Value::Object(x), Value::Object(y)) => {
+                let keys = |m: &serde_json::Map<String, Value>| -> Vec<String> {
+                    m.keys().cloned().collect()
+                };
+                assert_eq!(keys(x), keys(y), "{path}: fields");
+                for (k, v) in x {
+                    walk(&format!("{path}.{k}"), k, v, &y[k]);
+                }
+            }
+            (Value::Array(x), Value::Array(y)) => {
+                assert_eq!(x.len(), y.len(), "{path}: length");
+                for (i, (u, v)) in x.iter().zip(y).enumerate() {
+                    walk(&format!("{path}[{i}]"), key, u, v);
+                }
+            }
+            (Value::Number(x), Value::Number(y)) if x.is_f64() || y.is_f64() => {
+                let (u, v) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+                let rel = 1e-4 * u.abs().max(v.abs());
+                let tol = match key {
+                    "x" | "y" => 1e-5,
+                    "ra_deg" | "dec_deg" | "roll_deg" => 1e-6,
+                    "rotation_matrix" | "quaternion" => 1e-8,
+                    k if k.ends_with("_px") => rel + 1e-5,
+                    k if k.ends_with("_arcsec") || k == "boresight" || k == "roll" => rel + 1e-4,
+                    _ => rel + 1e-12,
+                };
+                assert!(
+                    (u - v).abs() <= tol,
+                    "{path}: {u} vs {v} (tolerance {tol:e})"
+                );
+            }
+            _ => assert_eq!(a, b, "{path}"),
+        }
+    }
+    walk("record", "", a, b);
+}
