@@ -9,8 +9,10 @@ use crate::dark::Darks;
 use crate::detect::{self, DetectSettings, Detection};
 use crate::frame::Frame;
 use crate::gpu::Gpu;
+use crate::gpu::radial::{GpuRadial, RadialJob};
 use crate::gpu::vote::{GpuTable, VoteJob};
 use crate::products::Products;
+use crate::radial;
 use crate::record::{Record, Timing};
 use crate::sequence::Detected;
 use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
@@ -273,6 +275,8 @@ pub struct GpuRunner {
     pub gpu: Gpu,
     /// By frame size and band of the solver for that size.
     tables: HashMap<(u32, u32, usize), std::result::Result<GpuTable, String>>,
+    /// The bands' radial features (`--method radial`), uploaded like the tables.
+    radial: HashMap<(u32, u32, usize), std::result::Result<GpuRadial, String>>,
     /// Set once the GPU failed: the rest of the run is on the CPU.
     failed: bool,
 }
@@ -282,6 +286,7 @@ impl GpuRunner {
         GpuRunner {
             gpu,
             tables: HashMap::new(),
+            radial: HashMap::new(),
             failed: false,
         }
     }
@@ -499,6 +504,29 @@ impl GpuRunner {
                 solver.camera.height,
                 solver.passes[h].band,
             );
+            if let Some(features) = &solver.bands[key.2].radial {
+                let table = self.radial.entry(key).or_insert_with(|| {
+                    self.gpu
+                        .upload_radial(features)
+                        .map_err(|e| format!("{e:#}"))
+                });
+                let table = match table {
+                    Ok(t) => t,
+                    Err(e) => anyhow::bail!("{e}"),
+                };
+                let jobs: Vec<RadialJob> = prepared
+                    .iter()
+                    .map(|(_, p)| RadialJob {
+                        features: radial::image_features(&p.vectors[..p.n_vote], features),
+                        k: radial::CANDIDATES,
+                    })
+                    .collect();
+                let found = self.gpu.radial(table, &jobs)?;
+                for ((i, p), f) in prepared.iter().zip(found) {
+                    outcomes[*i] = solver.finish_radial(&detections[*i], p, &f, epochs[*i]);
+                }
+                continue;
+            }
             if !self.tables.contains_key(&key) {
                 let band = &solver.bands[key.2];
                 let t = self

@@ -320,6 +320,11 @@ pub struct SolveOpts {
     /// carry their 1-sigma and weigh the attitude by it), or the centre of gravity.
     #[arg(long, value_enum, default_value_t = crate::detect::Centroid::Ml)]
     pub centroid: crate::detect::Centroid,
+    /// How stars are identified: geometric voting (triangles as its fallback), or radial
+    /// features as the candidate filter and triangles among the candidates (seed 002; for
+    /// narrow, deep fields).
+    #[arg(long, value_enum, default_value_t = crate::radial::Method::Vote)]
+    pub method: crate::radial::Method,
     /// Brightest detected stars that take part in the vote.
     #[arg(long, default_value_t = 40)]
     pub vote_stars: usize,
@@ -761,6 +766,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     s.detect.k_sigma = o.sigma;
     s.detect.matched_filter = o.detect_filter == DetectFilter::Binomial;
     s.detect.centroid = o.centroid;
+    s.method = o.method;
     s.identify.vote_stars = o.vote_stars;
     s.retry = !o.no_retry;
     s.identify.pair_tol_px = o.pair_tol_px;

@@ -27,6 +27,7 @@ pub mod identify;
 pub mod inputs;
 pub mod output;
 pub mod products;
+pub mod radial;
 pub mod record;
 pub mod refine;
 pub mod run;

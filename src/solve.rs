@@ -42,6 +42,8 @@ pub struct Settings {
     /// Frames that do not solve are detected again with the matched filter (fainter stars)
     /// and tried again, when the filter is not on already and `retry` is.
     pub detect_retry: bool,
+    /// How stars are identified: the vote, or radial features + triangles.
+    pub method: crate::radial::Method,
 }
 
 impl Default for Settings {
@@ -58,6 +60,7 @@ impl Default for Settings {
             scale_range: None,
             retry: true,
             detect_retry: true,
+            method: crate::radial::Method::Vote,
         }
     }
 }
@@ -136,6 +139,8 @@ pub struct Band {
     pub refs: Arc<RefCatalog>,
     pub table: PairTable,
     pub table_origin: TableOrigin,
+    /// The reference stars' radial features (`--method radial`), from `table`.
+    pub radial: Option<crate::radial::RadialTable>,
     /// `refs` moved to the epochs of frames that carry their own date, by day.
     epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
 }
@@ -167,12 +172,22 @@ impl Band {
             scaled(camera, lo).diagonal_rad(),
             settings.table_cache,
         );
+        let radial = (settings.method == crate::radial::Method::Radial).then(|| {
+            let s = &settings.identify;
+            crate::radial::RadialTable::build(
+                &refs,
+                &table,
+                s.pair_tol_px * middle.ifov_rad(),
+                s.scale_tol,
+            )
+        });
         Ok(Band {
             lo,
             hi,
             refs: Arc::new(refs),
             table,
             table_origin,
+            radial,
             epochs: Mutex::new(HashMap::new()),
         })
     }
@@ -556,6 +571,15 @@ impl Solver {
                 continue;
             };
             let band = &self.bands[p.band];
+            if let Some(t) = &band.radial {
+                let image = crate::radial::image_features(&p.vectors[..p.n_vote], t);
+                let found = crate::radial::candidates_cpu(t, &image, crate::radial::CANDIDATES);
+                outcome = self.finish_radial(&detections, &p, &found, epoch);
+                if matches!(outcome, Outcome::Solved(..)) {
+                    break;
+                }
+                continue;
+            }
             let voted = identify::vote_cpu(&band.table, &p.ranges, p.n_vote, band.refs.len(), p.k);
             outcome = self.finish(&detections, &p, &voted, epoch);
             if matches!(outcome, Outcome::Solved(..)) {
@@ -588,6 +612,61 @@ impl Solver {
                 None => return Outcome::Unsolved(reason),
             },
         };
+        self.conclude(detections, p, accepted, epoch)
+    }
+
+    /// `--method radial` after stages radial and select: triangles among the candidates
+    /// (`radial::triangles`), each refined in turn; the first that passes the false-match
+    /// test, which counts every triangle found (for every pass this frame can be tried with,
+    /// as the vote's does) and three stars as fixed. Then as the vote's solutions.
+    pub fn finish_radial(
+        &self,
+        detections: &[Detection],
+        p: &Prepared,
+        found: &identify::VoteResult,
+        epoch: Option<f64>,
+    ) -> Outcome {
+        let refs = self.bands[p.band].refs_at(epoch);
+        let vectors = &p.vectors[..p.n_vote];
+        let triangles = crate::radial::triangles(
+            &found.candidates,
+            found.k,
+            &p.ranges,
+            vectors,
+            &self.bands[p.band].refs,
+            crate::radial::TRIANGLE_STARS,
+        );
+        if triangles.is_empty() {
+            return Outcome::Unsolved("no_consistent_match");
+        }
+        let hypotheses = (triangles.len() as u64).saturating_mul(
+            STAGES * self.detection_stages() * self.passes_for(detections.len()) as u64,
+        );
+        let accepted = triangles.iter().find_map(|t| {
+            let cam = t.stars.map(|i| vectors[i]);
+            let icrs = t.refs.map(|id| refs.stars[id as usize].v);
+            let r0 = wahba(&cam, &icrs)?;
+            let refined =
+                refine::refine(r0, detections, &refs, &p.camera, hypotheses, 3, &p.refine)?;
+            (refined.false_match_prob <= self.settings.refine.max_false_prob)
+                .then_some((refined, hypotheses, 3))
+        });
+        match accepted {
+            Some(a) => self.conclude(detections, p, a, epoch),
+            None => Outcome::Unsolved("low_confidence"),
+        }
+    }
+
+    /// An accepted solution, refined again against the deeper selection its field calls for
+    /// (or from the shallow band against the main one).
+    fn conclude(
+        &self,
+        detections: &[Detection],
+        p: &Prepared,
+        accepted: (Refined, u64, usize),
+        epoch: Option<f64>,
+    ) -> Outcome {
+        let refs = self.bands[p.band].refs_at(epoch);
         let (refined, hypotheses, fixed) = accepted;
         if Some(p.band) == self.shallow_band {
             // Found against the shallow selection: the automatic one matches the fainter stars

@@ -7,6 +7,7 @@ use gpustar::cpu::threshold::{DetectParams, TileStats};
 use gpustar::cpu::vote::PairRange;
 use gpustar::gpu::detect::{BatchParams, DetectUniform, StreakUniform};
 use gpustar::gpu::psf_fit::{FitOut, PsfUniform};
+use gpustar::gpu::radial::RadialUniform;
 use gpustar::gpu::vote::VoteUniform;
 use gpustar::gpu::{KERNELS, kernel_source};
 use std::mem::{offset_of, size_of};
@@ -112,6 +113,14 @@ fn host_and_wgsl_structs_have_the_same_layout() {
         "Fit",
         FitOut,
         [x, y, flux, background, sigma, sx, sy, settled]
+    );
+
+    let radial = module("radial");
+    assert_layout!(
+        radial,
+        "RadialUniform",
+        RadialUniform,
+        [images, stars, refs, words]
     );
 
     let vote = module("vote");

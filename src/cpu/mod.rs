@@ -4,6 +4,7 @@
 pub mod centroid;
 pub mod components;
 pub mod psf_fit;
+pub mod radial;
 pub mod select;
 pub mod streak_filter;
 pub mod threshold;

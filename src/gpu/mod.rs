@@ -8,6 +8,7 @@
 
 pub mod detect;
 pub mod psf_fit;
+pub mod radial;
 pub mod vote;
 
 use anyhow::{Context, Result, anyhow, bail};
@@ -79,6 +80,7 @@ pub const KERNELS: &[(&str, &str, &str)] = &[
         include_str!("../../shaders/select.wgsl"),
     ),
     ("psf_fit", "", include_str!("../../shaders/psf_fit.wgsl")),
+    ("radial", "", include_str!("../../shaders/radial.wgsl")),
 ];
 
 /// The full WGSL source of a kernel (shared prelude + body).
@@ -138,6 +140,7 @@ struct Pipelines {
     vote: wgpu::ComputePipeline,
     select: wgpu::ComputePipeline,
     psf_fit: wgpu::ComputePipeline,
+    radial: wgpu::ComputePipeline,
 }
 
 /// The GPU context: built once, used for every batch.
@@ -256,6 +259,7 @@ impl Gpu {
             vote: pipeline(&device, "vote"),
             select: pipeline(&device, "select"),
             psf_fit: pipeline(&device, "psf_fit"),
+            radial: pipeline(&device, "radial"),
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             bail!("building the GPU kernels failed on {}: {e}", info.name);

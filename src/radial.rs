@@ -1,0 +1,213 @@
+//! Radial features + triangles (seed 002; notes/radial.md), `--method radial`: a second
+//! identifier for narrow, deep fields.
+//!
+//! Every reference star carries a bit vector of [`BITS`] rings of equal width Δr out to R
+//! around it: bit h is set when some other reference star lies at an angle in ring h, or within
+//! the pair tolerance of it (redundant coding: a neighbour near a ring's edge sets both rings,
+//! so centroid errors never clear a bit the image sets). R and Δr are fixed per band (R = half
+//! the widest field's diagonal, Δr = R / [`BITS`]), not per frame as the paper has it: a
+//! lost-in-space table cannot depend on the frame (notes/radial.md 1.5). Each image star's
+//! vector has one bit per other detection among the voting stars. Stage `radial` scores every
+//! (image star, catalog star) by AND + popcount, less what chance gives for their bit counts
+//! (`cpu::radial`, `shaders/radial.wgsl`); stage `select` keeps the best K. Triangles among
+//! those candidates only, side-side-side against the vote's pair ranges and the same
+//! handedness, give attitudes in turn; refinement and the false-match test (counting every
+//! triangle that matched) accept the first that holds.
+
+use crate::catalog::RefCatalog;
+use crate::cpu::vote::PairRange;
+use crate::table::{PairTable, angle_of_chord, chord_key};
+use nalgebra::Vector3;
+
+/// Rings per feature: chance sets few of them in common (a feature of 16 neighbours against a
+/// catalog star's 30 shares 0.5 rings by chance).
+pub const BITS: usize = 4096;
+/// u32 words per feature.
+pub const WORDS: usize = BITS / 32;
+/// Candidates kept per image star.
+pub const CANDIDATES: usize = 32;
+/// The brightest image stars whose candidates form triangles (220 triangles for 12): only
+/// they are scored.
+pub const TRIANGLE_STARS: usize = 12;
+/// The brightest image stars that make the features' rings: the catalog holds the brightest
+/// stars of the field, and fainter detections (uncatalogued stars, noise) would set rings no
+/// catalog star has.
+pub const FEATURE_STARS: usize = 16;
+
+/// The catalog's features for a band, word-major: word w of star id is
+/// `features[w · stars + id]` (a scan of one word over all stars reads memory in order, on the
+/// CPU and in the GPU's coalesced loads).
+#[derive(Clone, Debug)]
+pub struct RadialTable {
+    pub features: Vec<u32>,
+    /// Rings set per catalog star (|B|).
+    pub counts: Vec<u32>,
+    /// Ring width Δr and feature radius R (radians).
+    pub ring_rad: f64,
+    pub radius_rad: f64,
+    pub stars: usize,
+}
+
+impl RadialTable {
+    /// Features of `refs` from their pair table (which reaches the widest field's diagonal,
+    /// so R = half of it is inside), a neighbour within the vote's pair tolerance
+    /// (`pair_tol_rad` + `scale_tol` · θ) of a ring's edge setting both rings.
+    pub fn build(
+        refs: &RefCatalog,
+        table: &PairTable,
+        pair_tol_rad: f64,
+        scale_tol: f64,
+    ) -> RadialTable {
+        let radius_rad = table.max_sep_rad / 2.0;
+        let ring_rad = radius_rad / BITS as f64;
+        let n = refs.stars.len();
+        let mut features = vec![0u32; n * WORDS];
+        let top = table.lower_bound(chord_key(crate::table::chord_of_angle(radius_rad)) + 1);
+        for row in 0..top {
+            let (a, b) = table.pair(row);
+            let theta =
+                angle_of_chord((refs.stars[a as usize].v - refs.stars[b as usize].v).norm());
+            let tol_rad = pair_tol_rad + scale_tol * theta;
+            let lo = ((theta - tol_rad) / ring_rad).floor().max(0.0) as usize;
+            let hi = (((theta + tol_rad) / ring_rad).floor() as usize).min(BITS - 1);
+            for h in lo..=hi {
+                for s in [a, b] {
+                    features[(h / 32) * n + s as usize] |= 1 << (h % 32);
+                }
+            }
+        }
+        let counts = (0..n)
+            .map(|id| (0..WORDS).map(|w| features[w * n + id].count_ones()).sum())
+            .collect();
+        RadialTable {
+            features,
+            counts,
+            ring_rad,
+            radius_rad,
+            stars: n,
+        }
+    }
+
+    /// Bytes the features and their counts take.
+    pub fn bytes(&self) -> usize {
+        4 * (self.features.len() + self.counts.len())
+    }
+}
+
+/// The features of the first [`TRIANGLE_STARS`] of `vectors` (brightest first),
+/// `out[star · WORDS ..]`: bit h for every other star among the first [`FEATURE_STARS`] at an
+/// angle in ring h (within R).
+pub fn image_features(vectors: &[Vector3<f64>], t: &RadialTable) -> Vec<u32> {
+    let m = vectors.len().min(FEATURE_STARS);
+    let n = vectors.len().min(TRIANGLE_STARS);
+    let mut out = vec![0u32; n * WORDS];
+    for i in 0..n {
+        for j in 0..m {
+            if i == j {
+                continue;
+            }
+            let theta = angle_of_chord((vectors[i] - vectors[j]).norm());
+            if theta < t.radius_rad {
+                let h = ((theta / t.ring_rad) as usize).min(BITS - 1);
+                out[i * WORDS + h / 32] |= 1 << (h % 32);
+            }
+        }
+    }
+    out
+}
+
+/// A triangle hypothesis: image stars `stars` are catalog stars `refs`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Triangle {
+    pub stars: [usize; 3],
+    pub refs: [u32; 3],
+}
+
+/// Triangles among the candidates: for each triple of the first `n` image stars (by the sum of
+/// their places, then lexicographically) and each triple of their candidates (best first), the
+/// three catalog distances inside the image pairs' ranges and the same handedness. `candidates`
+/// are `select`'s packed lists (`k` per star); `ranges` the vote's pair ranges of these stars.
+/// Returns the hypotheses in order.
+pub fn triangles(
+    candidates: &[u32],
+    k: usize,
+    ranges: &[PairRange],
+    vectors: &[Vector3<f64>],
+    refs: &RefCatalog,
+    n: usize,
+) -> Vec<Triangle> {
+    let n = n.min(vectors.len()).min(candidates.len() / k.max(1));
+    let mut range = vec![None; n * n];
+    for r in ranges {
+        let (i, j) = (r.i as usize, r.j as usize);
+        if i < n && j < n {
+            range[i * n + j] = Some((r.lo, r.hi));
+            range[j * n + i] = Some((r.lo, r.hi));
+        }
+    }
+    let ids = |s: usize| -> Vec<u32> {
+        candidates[s * k..(s + 1) * k]
+            .iter()
+            .filter_map(|&c| crate::cpu::select::unpack_candidate(c).map(|(_, id)| id))
+            .collect()
+    };
+    let lists: Vec<Vec<u32>> = (0..n).map(ids).collect();
+    let v = |id: u32| refs.stars[id as usize].v;
+    let fits = |i: usize, j: usize, a: u32, b: u32| -> bool {
+        let Some((lo, hi)) = range[i * n + j] else {
+            return false;
+        };
+        let key = chord_key((v(a) - v(b)).norm());
+        a != b && lo <= key && key <= hi
+    };
+    let mut order: Vec<[usize; 3]> = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            for l in j + 1..n {
+                order.push([i, j, l]);
+            }
+        }
+    }
+    order.sort_by_key(|t| (t[0] + t[1] + t[2], *t));
+    let mut out = Vec::new();
+    for [i, j, l] in order {
+        let handed = vectors[i].cross(&vectors[j]).dot(&vectors[l]) > 0.0;
+        for &a in &lists[i] {
+            for &b in lists[j].iter().filter(|&&b| fits(i, j, a, b)) {
+                for &c in lists[l]
+                    .iter()
+                    .filter(|&&c| fits(i, l, a, c) && fits(j, l, b, c))
+                {
+                    if (v(a).cross(&v(b)).dot(&v(c)) > 0.0) == handed {
+                        out.push(Triangle {
+                            stars: [i, j, l],
+                            refs: [a, b, c],
+                        });
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// How stars are identified (`--method`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// Geometric voting against the distance table (seed 000), triangles as the fallback.
+    #[default]
+    Vote,
+    /// Radial features as the candidate filter, triangles among the candidates (seed 002).
+    Radial,
+}
+
+/// The CPU twins of the radial stages: score (`cpu::radial`) and select.
+pub fn candidates_cpu(t: &RadialTable, image: &[u32], k: usize) -> crate::identify::VoteResult {
+    let n = image.len() / WORDS;
+    let scores = crate::cpu::radial::radial(&t.features, &t.counts, image, n);
+    crate::identify::VoteResult {
+        candidates: crate::cpu::select::select(&scores, n, t.stars, k),
+        k,
+        hypotheses: 0,
+    }
+}
