@@ -53,6 +53,8 @@ Model
 * False stars: --false-stars (default 3) point sources, same PSF, centre uniform on the
   detector area [-0.5, W-0.5) x [-0.5, H-0.5), flux that of a star of magnitude uniform in
   [mag_limit-3, mag_limit] times its own exp(N(0, 0.2)).
+* Position noise: --position-noise PX (default 0) draws each catalogue star N(0, PX) px off
+  its place in x and y (the truth lists the place), as centroid errors would.
 * Hot pixels: --hot-pixels (default 5) distinct pixels, uniform, each with 500..5000 e-
   (uniform) added to the expected charge (no PSF).
 * Detector: sky uniform 100..400 e-/px per frame (flat); expected charge = sky + sources + hot
@@ -71,7 +73,7 @@ Model
   [-0.5, H-0.5], brightest Hp first), stars_snr_ge_5 (how many of those have peak_snr >= 5),
   false_stars [[x, y], ...] (+ false_star_flux_e, false_star_peak_snr), hot_pixels
   [[x, y], ...] (+ hot_pixel_e), sky_e, zero_point, psf_sigma_px, bias_adu, read_noise_e,
-  gain, mag_limit, faint_snr, date_obs.
+  gain, mag_limit, faint_snr, position_noise_px, date_obs.
 """
 import argparse
 import csv
@@ -412,9 +414,12 @@ def simulate_frame(i, args):
     # a generous pre-selection; render_source decides whether the window touches the frame
     rmax = window_radius(float(flux.max()), sigma, noise) + 2
     near = np.nonzero((z > 0.1) & (x > -rmax) & (x < W + rmax) & (y > -rmax) & (y < H + rmax))[0]
+    # --position-noise: each star drawn off its catalogue place (the truth keeps the place),
+    # as centroid errors would put it (the study's positional-noise sweep).
+    jitter = rng.normal(0.0, args.position_noise, (2, len(x))) if args.position_noise > 0 else np.zeros((2, len(x)))
     stars = []
     for k in near:
-        peak = render_source(signal, float(x[k]), float(y[k]), float(flux[k]), sigma, noise)
+        peak = render_source(signal, float(x[k] + jitter[0, k]), float(y[k] + jitter[1, k]), float(flux[k]), sigma, noise)
         if peak is None or not cam.in_frame(x[k], y[k]):
             continue
         stars.append({"hip": int(CAT["hip"][k]), "x": round(float(x[k]), 4), "y": round(float(y[k]), 4),
@@ -471,6 +476,7 @@ def simulate_frame(i, args):
         "hot_pixel_e": [round(float(e), 1) for e in hot_e],
         "sky_e": sky, "zero_point": zp, "psf_sigma_px": sigma, "bias_adu": BIAS,
         "read_noise_e": READ_NOISE, "gain": GAIN, "mag_limit": args.mag_limit, "faint_snr": args.faint_snr,
+        "position_noise_px": args.position_noise,
     }
 
 
@@ -498,6 +504,8 @@ def main(argv=None):
     ap.add_argument("--faint-snr", type=float, default=6.0)
     ap.add_argument("--false-stars", type=int, default=3)
     ap.add_argument("--hot-pixels", type=int, default=5)
+    ap.add_argument("--position-noise", type=float, default=0.0,
+                    help="draw each catalogue star N(0, PX) px off its place per axis; the truth keeps the place")
     ap.add_argument("--format", choices=("fits", "png"), default="fits")
     ap.add_argument("--catalog", default=str(DEFAULT_CATALOG))
     ap.add_argument("-j", "--jobs", type=int, default=1, help="worker processes (default 1)")

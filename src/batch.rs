@@ -504,6 +504,13 @@ impl GpuRunner {
                 solver.camera.height,
                 solver.passes[h].band,
             );
+            if solver.settings.method == radial::Method::Triangle {
+                // Triangles read the distance table on the CPU: no GPU stage.
+                for (i, p) in &prepared {
+                    outcomes[*i] = solver.finish_triangle_method(&detections[*i], p, epochs[*i]);
+                }
+                continue;
+            }
             if let Some(features) = &solver.bands[key.2].radial {
                 let table = self.radial.entry(key).or_insert_with(|| {
                     self.gpu

@@ -320,9 +320,9 @@ pub struct SolveOpts {
     /// carry their 1-sigma and weigh the attitude by it), or the centre of gravity.
     #[arg(long, value_enum, default_value_t = crate::detect::Centroid::Ml)]
     pub centroid: crate::detect::Centroid,
-    /// How stars are identified: geometric voting (triangles as its fallback), or radial
+    /// How stars are identified: geometric voting (triangles as its fallback), radial
     /// features as the candidate filter and triangles among the candidates (seed 002; for
-    /// narrow, deep fields).
+    /// narrow, deep fields), or triangles alone (seed 002's baseline).
     #[arg(long, value_enum, default_value_t = crate::radial::Method::Vote)]
     pub method: crate::radial::Method,
     /// Brightest detected stars that take part in the vote.
@@ -1121,6 +1121,24 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
         if let Some(n) = &origin.cache_note {
             writeln!(out, "  note: {n}")?;
         }
+        // What `--method radial` would keep besides: built here from the table.
+        let t0 = std::time::Instant::now();
+        let middle = scaled(&camera, 0.5 * (band.lo + band.hi));
+        let radial = crate::radial::RadialTable::build(
+            refs,
+            t,
+            s.identify.pair_tol_px * middle.ifov_rad(),
+            s.identify.scale_tol,
+        );
+        writeln!(
+            out,
+            "radial features (--method radial): {} bytes ({} rings of {:.2} arcsec to {:.4} deg), built in {:.1} ms",
+            radial.bytes(),
+            crate::radial::BITS,
+            radial.ring_rad.to_degrees() * 3600.0,
+            radial.radius_rad.to_degrees(),
+            t0.elapsed().as_secs_f64() * 1e3
+        )?;
     }
     print_all(&out)
 }

@@ -199,6 +199,10 @@ pub enum Method {
     Vote,
     /// Radial features as the candidate filter, triangles among the candidates (seed 002).
     Radial,
+    /// Triangles alone, no candidate filter: side-side-side matches of the 8 brightest
+    /// stars' triangles through the distance table, each confirmed by a fourth star (the
+    /// vote's fallback on its own; seed 002's baseline).
+    Triangle,
 }
 
 /// The CPU twins of the radial stages: score (`cpu::radial`) and select.

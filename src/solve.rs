@@ -571,6 +571,13 @@ impl Solver {
                 continue;
             };
             let band = &self.bands[p.band];
+            if self.settings.method == crate::radial::Method::Triangle {
+                outcome = self.finish_triangle_method(&detections, &p, epoch);
+                if matches!(outcome, Outcome::Solved(..)) {
+                    break;
+                }
+                continue;
+            }
             if let Some(t) = &band.radial {
                 let image = crate::radial::image_features(&p.vectors[..p.n_vote], t);
                 let found = crate::radial::candidates_cpu(t, &image, crate::radial::CANDIDATES);
@@ -654,6 +661,23 @@ impl Solver {
         match accepted {
             Some(a) => self.conclude(detections, p, a, epoch),
             None => Outcome::Unsolved("low_confidence"),
+        }
+    }
+
+    /// `--method triangle`: the triangle fallback's hypotheses on their own (no vote).
+    pub fn finish_triangle_method(
+        &self,
+        detections: &[Detection],
+        p: &Prepared,
+        epoch: Option<f64>,
+    ) -> Outcome {
+        if p.triangle_stars < 4 {
+            return Outcome::Unsolved("too_few_stars");
+        }
+        let refs = self.bands[p.band].refs_at(epoch);
+        match self.finish_triangles(detections, p, &refs) {
+            Some(a) => self.conclude(detections, p, a, epoch),
+            None => Outcome::Unsolved("no_consistent_match"),
         }
     }
 

@@ -72,24 +72,46 @@ fn radial_gpu_matches_cpu() {
     );
 }
 
-#[test]
-fn narrow_frames_solve_with_radial_features_on_both_backends() {
+/// Frames solved within 60″ of the truth by a method (and none beyond it).
+fn solved_by(
+    method: Method,
+    frames: &[(gpustar::frame::Frame, gpustar::simulate::Truth)],
+) -> usize {
     let s = sim();
-    let frames = common::rendered(&s, 6);
-    let solver = radial_solver(&s);
+    let settings = Settings {
+        mag_limit: Some(8.0),
+        method,
+        table_cache: false,
+        ..Settings::default()
+    };
+    let solver = Solver::new(&Catalog::builtin(), s.camera().unwrap(), settings).unwrap();
     let mut solved = 0;
-    for (frame, truth) in &frames {
+    for (frame, truth) in frames {
         let (sol, _, _) = solver.solve_frame(frame);
         if let Outcome::Solved(r, _) = &sol.outcome {
             let err = gpustar::attitude::attitude_error(
                 &r.r,
                 &nalgebra::Matrix3::from_fn(|i, j| truth.rotation_matrix[i][j]),
             );
-            assert!(err.to_degrees() * 3600.0 < 60.0, "{err} rad from the truth");
+            assert!(
+                err.to_degrees() * 3600.0 < 60.0,
+                "{method:?}: {err} rad from the truth"
+            );
             solved += 1;
         }
     }
+    solved
+}
+
+#[test]
+fn narrow_frames_solve_with_radial_features_on_both_backends() {
+    let s = sim();
+    let frames = common::rendered(&s, 6);
+    let solved = solved_by(Method::Radial, &frames);
+    let triangles = solved_by(Method::Triangle, &frames);
+    println!("4° frames: radial solves {solved} of 6, triangles alone {triangles}");
     assert!(solved >= 5, "{solved} of 6 solved");
+    assert!(triangles >= 4, "triangles alone solve {triangles} of 6");
     // The same records through the GPU pipeline (lavapipe in CI).
     let Some(g) = common::gpu("narrow_frames_solve_with_radial_features_on_both_backends") else {
         return;
