@@ -131,6 +131,19 @@ fn solve(f: ptr<function, array<f32, 25>>, g: ptr<function, array<f32, 5>>,
     return true;
 }
 
+// Insertion sort of the 32 border values.
+fn sort32(a: ptr<function, array<f32, 32>>) {
+    for (var i = 1u; i < 32u; i++) {
+        let v = (*a)[i];
+        var j = i;
+        while (j > 0u && (*a)[j - 1u] > v) {
+            (*a)[j] = (*a)[j - 1u];
+            j--;
+        }
+        (*a)[j] = v;
+    }
+}
+
 fn finite(v: f32) -> bool {
     // NaN fails every comparison; f32 max is 3.4e38.
     return abs(v) <= 3.0e38;
@@ -153,28 +166,12 @@ fn fit_window(w: u32) -> Fit {
             nb++;
         }
     }
-    for (var i = 1u; i < 32u; i++) {
-        let v = border[i];
-        var j = i;
-        while (j > 0u && border[j - 1u] > v) {
-            border[j] = border[j - 1u];
-            j--;
-        }
-        border[j] = v;
-    }
+    sort32(&border);
     let b0 = border[16];
     for (var i = 0u; i < 32u; i++) {
         border[i] = abs(border[i] - b0);
     }
-    for (var i = 1u; i < 32u; i++) {
-        let v = border[i];
-        var j = i;
-        while (j > 0u && border[j - 1u] > v) {
-            border[j] = border[j - 1u];
-            j--;
-        }
-        border[j] = v;
-    }
+    sort32(&border);
     let sb = max(1.4826 * border[16], 0.5);
     let var_b = sb * sb;
     let kappa = select(1.0, var_b / b0, b0 > var_b);

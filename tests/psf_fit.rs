@@ -5,11 +5,10 @@
 mod common;
 
 use gpustar::detect::{self, Centroid, DetectSettings};
-use gpustar::simulate::{SimSettings, render};
+use gpustar::simulate::SimSettings;
 
 #[test]
 fn ml_positions_beat_the_centre_of_gravity() {
-    let catalog = gpustar::catalog::Catalog::builtin();
     let s = SimSettings {
         psf_sigma_px: 1.2,
         bits: 16,
@@ -19,14 +18,7 @@ fn ml_positions_beat_the_centre_of_gravity() {
         ..Default::default()
     };
     let (mut cog, mut ml) = (Vec::new(), Vec::new());
-    for k in 0..s.frames {
-        let (pixels, truth) = render(&catalog, &s, k).unwrap();
-        let frame = gpustar::frame::Frame {
-            width: truth.width,
-            height: truth.height,
-            pixels,
-            saturation: 65535,
-        };
+    for (frame, truth) in common::rendered(&s, s.frames) {
         let errors = |c: Centroid| -> Vec<f64> {
             let ds = DetectSettings {
                 centroid: c,
@@ -73,7 +65,6 @@ fn psf_fit_gpu_matches_cpu() {
     let Some(gpu) = common::gpu("psf_fit_gpu_matches_cpu") else {
         return;
     };
-    let catalog = gpustar::catalog::Catalog::builtin();
     let mut windows = Vec::new();
     for (bits, psf, seed) in [(16u8, 1.2, 5u64), (16, 0.8, 6), (8, 1.2, 7)] {
         let s = SimSettings {
@@ -83,14 +74,7 @@ fn psf_fit_gpu_matches_cpu() {
             seed,
             ..Default::default()
         };
-        for k in 0..s.frames {
-            let (pixels, truth) = render(&catalog, &s, k).unwrap();
-            let frame = gpustar::frame::Frame {
-                width: truth.width,
-                height: truth.height,
-                pixels,
-                saturation: if bits == 8 { 255 } else { 65535 },
-            };
+        for (frame, _) in common::rendered(&s, s.frames) {
             let ds = DetectSettings::default();
             for d in detect::detect(&frame, &ds) {
                 windows.extend(gpustar::cpu::psf_fit::window(

@@ -149,14 +149,8 @@ impl Gpu {
             .enumerate()
             .map(|(f, job)| {
                 let own = job.features.len() / WORDS;
-                let mut candidates = Vec::with_capacity(own * job.k);
-                for s in 0..own {
-                    let row = &cands[(f * stars + s) * k..][..k];
-                    candidates.extend_from_slice(&row[..job.k.min(k)]);
-                    candidates.extend(std::iter::repeat_n(0, job.k.saturating_sub(k)));
-                }
                 VoteResult {
-                    candidates,
+                    candidates: super::vote::frame_candidates(&cands, f, stars, k, own, job.k),
                     k: job.k,
                     hypotheses: 0,
                 }

@@ -204,19 +204,10 @@ impl Gpu {
         let results = jobs
             .iter()
             .enumerate()
-            .map(|(f, job)| {
-                // The k best of a best-first list of K ≥ k are its first k.
-                let mut candidates = Vec::with_capacity(job.stars * job.k);
-                for s in 0..job.stars {
-                    let row = &cands[(f * stars + s) * k..][..k];
-                    candidates.extend_from_slice(&row[..job.k.min(k)]);
-                    candidates.extend(std::iter::repeat_n(0, job.k.saturating_sub(k)));
-                }
-                VoteResult {
-                    candidates,
-                    k: job.k,
-                    hypotheses: hyp[2 * f] as u64 | (hyp[2 * f + 1] as u64) << 32,
-                }
+            .map(|(f, job)| VoteResult {
+                candidates: frame_candidates(&cands, f, stars, k, job.stars, job.k),
+                k: job.k,
+                hypotheses: hyp[2 * f] as u64 | (hyp[2 * f + 1] as u64) << 32,
             })
             .collect();
         let votes_out = match bytes.get(2) {
@@ -232,4 +223,24 @@ impl Gpu {
         };
         Ok((results, votes_out))
     }
+}
+
+/// Frame `f`'s candidate lists from select's output (`k` slots per star, `stars` stars per
+/// frame), for its own `own` stars, `want` per star: the k best of a best-first list of
+/// K ≥ k are its first k (empty slots beyond K).
+pub(super) fn frame_candidates(
+    cands: &[u32],
+    f: usize,
+    stars: usize,
+    k: usize,
+    own: usize,
+    want: usize,
+) -> Vec<u32> {
+    let mut out = Vec::with_capacity(own * want);
+    for s in 0..own {
+        let row = &cands[(f * stars + s) * k..][..k];
+        out.extend_from_slice(&row[..want.min(k)]);
+        out.extend(std::iter::repeat_n(0, want.saturating_sub(k)));
+    }
+    out
 }
