@@ -90,10 +90,104 @@ impl RadialTable {
         }
     }
 
+    /// [`RadialTable::build`], or the features a previous run cached for the same table and
+    /// tolerances (in `table::cache_dir()`, as `radial-<key>.bin`; `use_cache` false: built
+    /// every time). Returns also whether they were read from the cache.
+    pub fn load_or_build(
+        refs: &RefCatalog,
+        table: &PairTable,
+        table_key: u64,
+        pair_tol_rad: f64,
+        scale_tol: f64,
+        use_cache: bool,
+    ) -> (RadialTable, bool) {
+        let text = format!(
+            "gpustar-radial-v1|{table_key:016x}|{BITS}|{pair_tol_rad}|{scale_tol}|{}",
+            table.max_sep_rad
+        );
+        let key = crate::catalog::fnv1a(text.as_bytes());
+        let file = crate::table::cache_dir()
+            .filter(|_| use_cache)
+            .map(|d| d.join(format!("radial-{key:016x}.bin")));
+        if let Some(t) = file
+            .as_ref()
+            .and_then(|f| read_features(f, key, refs.stars.len(), table))
+        {
+            return (t, true);
+        }
+        let t = RadialTable::build(refs, table, pair_tol_rad, scale_tol);
+        if let Some(f) = &file {
+            if let Err(e) = write_features(f, key, &t) {
+                tracing::warn!(
+                    "could not cache the radial features in {}: {e:#}",
+                    f.display()
+                );
+            }
+        }
+        (t, false)
+    }
+
     /// Bytes the features and their counts take.
     pub fn bytes(&self) -> usize {
         4 * (self.features.len() + self.counts.len())
     }
+}
+
+const MAGIC: &[u8; 8] = b"GPSRAD01";
+
+fn write_features(path: &std::path::Path, key: u64, t: &RadialTable) -> anyhow::Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let mut buf = Vec::with_capacity(24 + 4 * t.features.len());
+    buf.extend_from_slice(MAGIC);
+    buf.extend_from_slice(&key.to_le_bytes());
+    buf.extend_from_slice(&(t.stars as u64).to_le_bytes());
+    for w in &t.features {
+        buf.extend_from_slice(&w.to_le_bytes());
+    }
+    // A temporary name and a rename: a concurrent reader never sees half a file.
+    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
+    std::fs::write(&tmp, &buf)?;
+    std::fs::rename(&tmp, path)?;
+    Ok(())
+}
+
+/// The cached features, if the file is whole and made for this key and catalog size.
+fn read_features(
+    path: &std::path::Path,
+    key: u64,
+    stars: usize,
+    table: &PairTable,
+) -> Option<RadialTable> {
+    let buf = std::fs::read(path).ok()?;
+    let u64_at = |o: usize| Some(u64::from_le_bytes(buf.get(o..o + 8)?.try_into().ok()?));
+    if buf.get(..8)? != MAGIC.as_slice() || u64_at(8)? != key || u64_at(16)? != stars as u64 {
+        return None;
+    }
+    let body = buf.get(24..)?;
+    if body.len() != 4 * WORDS * stars {
+        return None;
+    }
+    let features: Vec<u32> = body
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    let counts = (0..stars)
+        .map(|id| {
+            (0..WORDS)
+                .map(|w| features[w * stars + id].count_ones())
+                .sum()
+        })
+        .collect();
+    let radius_rad = table.max_sep_rad / 2.0;
+    Some(RadialTable {
+        features,
+        counts,
+        ring_rad: radius_rad / BITS as f64,
+        radius_rad,
+        stars,
+    })
 }
 
 /// The features of the first [`TRIANGLE_STARS`] of `vectors` (brightest first),
@@ -215,5 +309,40 @@ pub fn candidates_cpu(t: &RadialTable, image: &[u32], k: usize) -> crate::identi
         candidates: crate::cpu::select::select(&scores, n, t.stars, k),
         k,
         hypotheses: 0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Features written to the cache read back the same, and a file for another key or a
+    /// truncated one is refused.
+    #[test]
+    fn cached_features_read_back_and_bad_files_are_refused() {
+        let refs = RefCatalog::select(
+            &crate::catalog::Catalog::builtin(),
+            crate::catalog::Selection {
+                epoch: 2000.0,
+                mag_limit: 4.0,
+                double_stars: crate::catalog::DoubleStars::Merge,
+                double_sep_rad: 0.0,
+            },
+        )
+        .unwrap();
+        let table = PairTable::build(&refs, 0.2);
+        let t = RadialTable::build(&refs, &table, 1e-5, 2e-4);
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("radial.bin");
+        write_features(&f, 7, &t).unwrap();
+        let back = read_features(&f, 7, refs.stars.len(), &table).unwrap();
+        assert_eq!(back.features, t.features);
+        assert_eq!(back.counts, t.counts);
+        assert_eq!(back.ring_rad, t.ring_rad);
+        assert!(t.counts.iter().any(|&c| c > 0));
+        assert!(read_features(&f, 8, refs.stars.len(), &table).is_none());
+        let bytes = std::fs::read(&f).unwrap();
+        std::fs::write(&f, &bytes[..bytes.len() - 4]).unwrap();
+        assert!(read_features(&f, 7, refs.stars.len(), &table).is_none());
     }
 }

@@ -174,12 +174,15 @@ impl Band {
         );
         let radial = (settings.method == crate::radial::Method::Radial).then(|| {
             let s = &settings.identify;
-            crate::radial::RadialTable::build(
+            crate::radial::RadialTable::load_or_build(
                 &refs,
                 &table,
+                table::cache_key(&refs, catalog.content_hash, table.max_sep_rad),
                 s.pair_tol_px * middle.ifov_rad(),
                 s.scale_tol,
+                settings.table_cache,
             )
+            .0
         });
         Ok(Band {
             lo,
