@@ -17,6 +17,7 @@
 use crate::catalog::RefCatalog;
 use crate::cpu::vote::PairRange;
 use crate::table::{PairTable, angle_of_chord, chord_key};
+use crate::triangle::{Triangle, triangle_order};
 use nalgebra::Vector3;
 
 /// Rings per feature: chance sets few of them in common (a feature of 16 neighbours against a
@@ -78,15 +79,26 @@ impl RadialTable {
                 }
             }
         }
-        let counts = (0..n)
-            .map(|id| (0..WORDS).map(|w| features[w * n + id].count_ones()).sum())
+        RadialTable::from_features(features, n, table)
+    }
+
+    /// The table of word-major `features` of `stars` stars for `table`'s band: the rings'
+    /// geometry and each star's count.
+    fn from_features(features: Vec<u32>, stars: usize, table: &PairTable) -> RadialTable {
+        let counts = (0..stars)
+            .map(|id| {
+                (0..WORDS)
+                    .map(|w| features[w * stars + id].count_ones())
+                    .sum()
+            })
             .collect();
+        let radius_rad = table.max_sep_rad / 2.0;
         RadialTable {
             features,
             counts,
-            ring_rad,
+            ring_rad: radius_rad / BITS as f64,
             radius_rad,
-            stars: n,
+            stars,
         }
     }
 
@@ -173,21 +185,7 @@ fn read_features(
         .chunks_exact(4)
         .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
         .collect();
-    let counts = (0..stars)
-        .map(|id| {
-            (0..WORDS)
-                .map(|w| features[w * stars + id].count_ones())
-                .sum()
-        })
-        .collect();
-    let radius_rad = table.max_sep_rad / 2.0;
-    Some(RadialTable {
-        features,
-        counts,
-        ring_rad: radius_rad / BITS as f64,
-        radius_rad,
-        stars,
-    })
+    Some(RadialTable::from_features(features, stars, table))
 }
 
 /// The features of the first [`TRIANGLE_STARS`] of `vectors` (brightest first),
@@ -210,13 +208,6 @@ pub fn image_features(vectors: &[Vector3<f64>], t: &RadialTable) -> Vec<u32> {
         }
     }
     out
-}
-
-/// A triangle hypothesis: image stars `stars` are catalog stars `refs`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Triangle {
-    pub stars: [usize; 3],
-    pub refs: [u32; 3],
 }
 
 /// Triangles among the candidates: for each triple of the first `n` image stars (by the sum of
@@ -256,17 +247,8 @@ pub fn triangles(
         let key = chord_key((v(a) - v(b)).norm());
         a != b && lo <= key && key <= hi
     };
-    let mut order: Vec<[usize; 3]> = Vec::new();
-    for i in 0..n {
-        for j in i + 1..n {
-            for l in j + 1..n {
-                order.push([i, j, l]);
-            }
-        }
-    }
-    order.sort_by_key(|t| (t[0] + t[1] + t[2], *t));
     let mut out = Vec::new();
-    for [i, j, l] in order {
+    for [i, j, l] in triangle_order(n) {
         let handed = vectors[i].cross(&vectors[j]).dot(&vectors[l]) > 0.0;
         for &a in &lists[i] {
             for &b in lists[j].iter().filter(|&&b| fits(i, j, a, b)) {

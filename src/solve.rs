@@ -574,24 +574,21 @@ impl Solver {
                 continue;
             };
             let band = &self.bands[p.band];
-            if self.settings.method == crate::radial::Method::Triangle {
-                outcome = self.finish_triangle_method(&detections, &p, epoch);
-                if matches!(outcome, Outcome::Solved(..)) {
-                    break;
+            outcome = match (self.settings.method, &band.radial) {
+                (crate::radial::Method::Triangle, _) => {
+                    self.finish_triangle_method(&detections, &p, epoch)
                 }
-                continue;
-            }
-            if let Some(t) = &band.radial {
-                let image = crate::radial::image_features(&p.vectors[..p.n_vote], t);
-                let found = crate::radial::candidates_cpu(t, &image, crate::radial::CANDIDATES);
-                outcome = self.finish_radial(&detections, &p, &found, epoch);
-                if matches!(outcome, Outcome::Solved(..)) {
-                    break;
+                (_, Some(t)) => {
+                    let image = crate::radial::image_features(&p.vectors[..p.n_vote], t);
+                    let found = crate::radial::candidates_cpu(t, &image, crate::radial::CANDIDATES);
+                    self.finish_radial(&detections, &p, &found, epoch)
                 }
-                continue;
-            }
-            let voted = identify::vote_cpu(&band.table, &p.ranges, p.n_vote, band.refs.len(), p.k);
-            outcome = self.finish(&detections, &p, &voted, epoch);
+                _ => {
+                    let voted =
+                        identify::vote_cpu(&band.table, &p.ranges, p.n_vote, band.refs.len(), p.k);
+                    self.finish(&detections, &p, &voted, epoch)
+                }
+            };
             if matches!(outcome, Outcome::Solved(..)) {
                 break;
             }
@@ -649,19 +646,7 @@ impl Solver {
         if triangles.is_empty() {
             return Outcome::Unsolved("no_consistent_match");
         }
-        let hypotheses = (triangles.len() as u64).saturating_mul(
-            STAGES * self.detection_stages() * self.passes_for(detections.len()) as u64,
-        );
-        let accepted = triangles.iter().find_map(|t| {
-            let cam = t.stars.map(|i| vectors[i]);
-            let icrs = t.refs.map(|id| refs.stars[id as usize].v);
-            let r0 = wahba(&cam, &icrs)?;
-            let refined =
-                refine::refine(r0, detections, &refs, &p.camera, hypotheses, 3, &p.refine)?;
-            (refined.false_match_prob <= self.settings.refine.max_false_prob)
-                .then_some((refined, hypotheses, 3))
-        });
-        match accepted {
+        match self.first_accepted(detections, p, &refs, &triangles, triangles.len() as u64) {
             Some(a) => self.conclude(detections, p, a, epoch),
             None => Outcome::Unsolved("low_confidence"),
         }
@@ -845,14 +830,28 @@ impl Solver {
         p: &Prepared,
         refs: &RefCatalog,
     ) -> Option<(Refined, u64, usize)> {
-        let vectors = &p.vectors[..p.n_vote];
         let band = &self.bands[p.band];
         let (hyps, matched) = triangle::triangles(
             &band.table,
             &p.ranges,
-            &vectors[..p.triangle_stars],
+            &p.vectors[..p.triangle_stars],
             &band.refs,
         );
+        self.first_accepted(detections, p, refs, &hyps, matched)
+    }
+
+    /// The first triangle hypothesis whose refined attitude passes the false-match test, which
+    /// counts `matched` triangles for every pass this frame can be tried with (with its share
+    /// of the error budget, see `STAGES`) and three stars as fixed.
+    fn first_accepted(
+        &self,
+        detections: &[Detection],
+        p: &Prepared,
+        refs: &RefCatalog,
+        hyps: &[triangle::Triangle],
+        matched: u64,
+    ) -> Option<(Refined, u64, usize)> {
+        let vectors = &p.vectors[..p.n_vote];
         let hypotheses = matched.saturating_mul(
             STAGES * self.detection_stages() * self.passes_for(detections.len()) as u64,
         );

@@ -81,6 +81,21 @@ impl Side {
     }
 }
 
+/// Every triple of `n` stars (in brightness order), first triangles first: by the sum of the
+/// stars' places, then lexicographically.
+pub fn triangle_order(n: usize) -> Vec<[usize; 3]> {
+    let mut order: Vec<[usize; 3]> = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            for k in j + 1..n {
+                order.push([i, j, k]);
+            }
+        }
+    }
+    order.sort_by_key(|t| (t[0] + t[1] + t[2], *t));
+    order
+}
+
 /// Triangle hypotheses among `vectors` (the brightest [`TRIANGLE_STARS`] voting stars, or the
 /// spread retry's first stars), first triangles first (by the sum of the stars' places in
 /// `vectors`, then lexicographically), each confirmed by a fourth star whose three distances
@@ -107,18 +122,9 @@ pub fn triangles(
         .collect();
     let side = |a: usize, b: usize| sides.get(&(a.min(b), a.max(b)));
     let v = |id: u32| refs.stars[id as usize].v;
-    let mut order: Vec<[usize; 3]> = Vec::new();
-    for i in 0..n {
-        for j in i + 1..n {
-            for k in j + 1..n {
-                order.push([i, j, k]);
-            }
-        }
-    }
-    order.sort_by_key(|t| (t[0] + t[1] + t[2], *t));
     let mut out = Vec::new();
     let mut matched = 0u64;
-    for [i, j, k] in order {
+    for [i, j, k] in triangle_order(n) {
         let (Some(ij), Some(ik), Some(jk)) = (side(i, j), side(i, k), side(j, k)) else {
             continue;
         };

@@ -71,11 +71,6 @@ pub fn window(pixels: &[u16], width: u32, height: u32, x0: f64, y0: f64) -> Opti
     Some(w)
 }
 
-/// Fit the star whose centre of gravity is (x0, y0) (see [`psf_fit`]).
-pub fn fit_at(pixels: &[u16], width: u32, height: u32, x0: f64, y0: f64) -> Option<PsfFit> {
-    psf_fit(&window(pixels, width, height, x0, y0)?)
-}
-
 /// The fit of one window; None when the fit does not settle (it strays over a pixel from the
 /// start, its width leaves [`MIN_WIDTH`]–4 px, or the information is singular): the centre of gravity
 /// then stands.
@@ -244,6 +239,10 @@ fn solve(f: &[[f64; 5]; 5], g: &[f64; 5]) -> Option<[f64; 5]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn fit_at(pixels: &[u16], width: u32, height: u32, x0: f64, y0: f64) -> Option<PsfFit> {
+        psf_fit(&window(pixels, width, height, x0, y0)?)
+    }
 
     /// A noise-free pixel-integrated Gaussian: the fit returns its centre, width and flux.
     #[test]
