@@ -86,6 +86,8 @@ pub struct Decoded {
     pub epoch: Option<f64>,
     /// The file's FITS header keywords (times and station of streak frames).
     pub keywords: std::collections::BTreeMap<String, String>,
+    /// Warnings from reading the file, for its record.
+    pub warnings: Vec<String>,
     pub frame: std::result::Result<Frame, String>,
     pub decode_ms: f64,
 }
@@ -105,6 +107,13 @@ impl Solvers {
 
     /// Read and decode one file, and remove its fixed pattern when asked.
     pub fn decode(&self, path: &Path, name: &str) -> Decoded {
+        // Fault injection (tests/faults.rs): the input of this name never finishes, as a
+        // frame stuck in a bug would; the stop request must end the run all the same.
+        if std::env::var_os("GPUSTAR_FAULT_STALL").is_some_and(|v| v == name) {
+            loop {
+                std::thread::sleep(std::time::Duration::from_secs(1));
+            }
+        }
         let t0 = Instant::now();
         let (frame, info) = match Frame::read_info(path) {
             Ok((f, info)) => (self.darks.apply(path, f), info),
@@ -115,6 +124,7 @@ impl Solvers {
             path: path.to_path_buf(),
             epoch: info.epoch,
             keywords: info.keywords,
+            warnings: info.warnings,
             frame,
             decode_ms: t0.elapsed().as_secs_f64() * 1e3,
         }
@@ -146,6 +156,7 @@ impl Solvers {
                 ..Record::empty(&d.name, backend)
             },
         };
+        r.warnings.extend(d.warnings.iter().cloned());
         self.add_streaks(&mut r, d, sol, found);
         let drawn = found.unwrap_or_default();
         if let Err(e) = self.products.write(&d.path, &d.name, frame, sol, drawn) {

@@ -375,10 +375,10 @@ fn refit_attitude(
     let mut best = *start;
     let cam_dirs: Vec<Vector3<f64>> = kept.iter().map(|s| cam.pixel_to_vector(s.x, s.y)).collect();
     let icrs: Vec<Vector3<f64>> = kept.iter().map(|s| s.v.normalize()).collect();
-    if let Some(w) = wahba(&cam_dirs, &icrs) {
-        if problem.cost(&p, cam, &[w]) < problem.cost(&p, cam, &[best]) {
-            best = w;
-        }
+    if let Some(w) = wahba(&cam_dirs, &icrs)
+        && problem.cost(&p, cam, &[w]) < problem.cost(&p, cam, &[best])
+    {
+        best = w;
     }
     let mut rots = [best];
     problem.solve(&mut p, cam, &mut rots, 10);

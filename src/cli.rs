@@ -106,9 +106,14 @@ pub enum Command {
     Merge {
         /// The shard outputs (JSON Lines).
         parts: Vec<PathBuf>,
-        /// The directory the shards ran over: its inputs must each appear exactly once.
-        #[arg(long)]
+        /// The directory the shards ran over: its inputs must each appear exactly once
+        /// (required unless --no-check).
+        #[arg(long, required_unless_present = "no_check")]
         dir: Option<PathBuf>,
+        /// Combine the parts without a directory to check them against (duplicates are still
+        /// refused; a missing input goes unnoticed).
+        #[arg(long, conflicts_with = "dir")]
+        no_check: bool,
         /// The shards ran with --recursive.
         #[arg(long)]
         recursive: bool,
@@ -155,9 +160,14 @@ pub struct BatchOpts {
     #[arg(short, long)]
     pub recursive: bool,
     /// Skip inputs that already have a complete record in --output and append the rest (an
-    /// incomplete last line, left by a crash, is cut off first).
+    /// incomplete last line, left by a crash, is cut off first). A file that is not gpustar
+    /// output of this --format is refused untouched. Error records already there count in the
+    /// exit status.
     #[arg(long, requires = "output")]
     pub resume: bool,
+    /// With --resume: take the error records out of --output and try their inputs again.
+    #[arg(long, requires = "resume")]
+    pub retry_errors: bool,
     /// Only the inputs whose stable hash of the relative path falls in shard K of N (0-based),
     /// e.g. 3/16: run N processes (a job array) and `gpustar merge` their outputs.
     #[arg(long, value_name = "K/N")]
@@ -579,6 +589,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             let run = BatchOpts {
                 recursive: false,
                 resume: false,
+                retry_errors: false,
                 shard: None,
                 threads: Some(1),
                 sequence: false,
@@ -589,6 +600,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Merge {
             parts,
             dir,
+            no_check: _,
             recursive,
             output,
         } => {
@@ -613,10 +625,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 }
             };
             let out: Box<dyn Write + Send> = match &output {
-                Some(p) => Box::new(
-                    std::fs::File::create(p)
-                        .with_context(|| format!("cannot create {}", p.display()))?,
-                ),
+                Some(p) => Box::new(output::open_output(p, Format::Jsonl, false, false)?.file),
                 None => Box::new(std::io::stdout()),
             };
             let mut w = RecordWriter::new(out, Format::Jsonl, false);
@@ -775,40 +784,55 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     s.refine.max_false_prob = o.max_false_prob;
     s.refine.fit = o.camera.fit;
     s.scale_range = scale_range;
+    let so = &o.streaks;
+    let mut exports = Exports::new(
+        so.tdm.clone(),
+        so.iod.clone(),
+        so.iod_station,
+        so.station.map_or_else(
+            || "STATION".to_string(),
+            |s| format!("{:.5},{:.5},{:.1}", s.lat_deg, s.lon_deg, s.height_m),
+        ),
+    );
+    exports.check_paths()?;
     // The output, and what an earlier run already wrote to it.
     let mut inputs = inputs;
     let mut header = true;
+    let mut errors_before = 0;
     let out: Box<dyn Write + Send> = match &o.output {
-        Some(p) if b.resume => {
-            let prev = output::resume_from(p, o.format)?;
-            if prev.truncated > 0 && !o.quiet {
+        Some(p) => {
+            let opened = output::open_output(p, o.format, b.resume, b.retry_errors)?;
+            let prev = opened.previous;
+            if b.resume && !o.quiet {
+                if prev.truncated > 0 {
+                    eprintln!(
+                        "gpustar: cut an incomplete last record ({} bytes) off {}",
+                        prev.truncated,
+                        p.display()
+                    );
+                }
+                let before = inputs.len();
+                inputs.retain(|i| !prev.done.contains(&i.name));
                 eprintln!(
-                    "gpustar: cut an incomplete last record ({} bytes) off {}",
-                    prev.truncated,
-                    p.display()
-                );
-            }
-            let before = inputs.len();
-            inputs.retain(|i| !prev.done.contains(&i.name));
-            if !o.quiet {
-                eprintln!(
-                    "gpustar: resuming: {} of {} inputs already have a record",
+                    "gpustar: resuming: {} of {} inputs already have a record{}{}",
                     before - inputs.len(),
-                    before
+                    before,
+                    match prev.errors {
+                        0 => String::new(),
+                        n => format!(" ({n} of them errors; --retry-errors tries them again)"),
+                    },
+                    match prev.retried {
+                        0 => String::new(),
+                        n => format!("; {n} error records taken out to be tried again"),
+                    }
                 );
+            } else {
+                inputs.retain(|i| !prev.done.contains(&i.name));
             }
+            errors_before = prev.errors;
             header = !prev.has_header;
-            Box::new(
-                std::fs::OpenOptions::new()
-                    .append(true)
-                    .create(true)
-                    .open(p)
-                    .with_context(|| format!("cannot append to {}", p.display()))?,
-            )
+            Box::new(opened.file)
         }
-        Some(p) => Box::new(
-            std::fs::File::create(p).with_context(|| format!("cannot create {}", p.display()))?,
-        ),
         None => Box::new(std::io::stdout()),
     };
     let (mut backend, note) = Backend::open(o.backend)?;
@@ -827,7 +851,6 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         wcs_dir: o.wcs_dir.clone(),
         annotate_dir: o.annotate_dir.clone(),
     };
-    let so = &o.streaks;
     solvers.streaks = so.streaks.then_some(StreakOptions {
         settings: StreakSettings {
             k_sigma: so.streak_sigma,
@@ -837,18 +860,10 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         dut1_s: so.dut1,
         astrometry: so.astrometry,
     });
-    let mut exports = Exports::new(
-        so.tdm.clone(),
-        so.iod.clone(),
-        so.iod_station,
-        so.station.map_or_else(
-            || "STATION".to_string(),
-            |s| format!("{:.5},{:.5},{:.1}", s.lat_deg, s.lon_deg, s.height_m),
-        ),
-    );
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
-    let bar = progress_bar(inputs.len() as u64, o.quiet);
+    let to_do = inputs.len();
+    let bar = progress_bar(to_do as u64, o.quiet);
     let threads = b
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -896,34 +911,50 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
             summary.seconds,
             c.total() as f64 / summary.seconds.max(1e-9),
             backend.name(),
-            if summary.interrupted {
-                "; interrupted: rerun with --resume to finish"
-            } else {
-                ""
+            match (summary.interrupted, c.total() < to_do) {
+                (true, true) => "; interrupted: rerun with --resume to finish",
+                (true, false) => "; interrupted after the last input: every input has a record",
+                (false, _) => "",
             }
         );
     }
     Ok(if summary.interrupted {
         ExitCode::from(130)
-    } else if c.errors > 0 {
+    } else if c.errors + errors_before > 0 {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS
     })
 }
 
-/// Set by Ctrl-C (SIGINT) or SIGTERM: the run stops handing out inputs, finishes those in
-/// flight and writes their records. A second signal exits at once.
+/// How long frames in flight may take to finish after a stop request before the process ends
+/// without them (their inputs get no record; `--resume` does them).
+const STOP_GRACE: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Set by Ctrl-C (SIGINT) or SIGTERM: the run stops handing out inputs, leaves queued ones
+/// without a record, and writes the records of frames in flight that finish within
+/// [`STOP_GRACE`]; after that the process ends with 130 whatever a frame is doing, as it does
+/// at once on a second signal. Either way it ends between two whole lines of the output.
 fn interrupt_flag() -> &'static std::sync::atomic::AtomicBool {
     static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
     static ONCE: std::sync::Once = std::sync::Once::new();
+    fn exit_between_lines(why: &str) -> ! {
+        let _writing = output::WRITING.lock().unwrap_or_else(|e| e.into_inner());
+        eprintln!("gpustar: {why}; inputs without a record are done by --resume");
+        std::process::exit(130);
+    }
     ONCE.call_once(|| {
         let _ = ctrlc::set_handler(|| {
-            // A second signal ends the process at once (a worker may be stuck in a read).
             if STOP.swap(true, std::sync::atomic::Ordering::SeqCst) {
-                eprintln!("gpustar: interrupted again: exiting without waiting");
-                std::process::exit(130);
+                exit_between_lines("interrupted again: exiting without waiting");
             }
+            std::thread::spawn(|| {
+                std::thread::sleep(STOP_GRACE);
+                exit_between_lines(&format!(
+                    "interrupted: frames still in flight after {} s were abandoned",
+                    STOP_GRACE.as_secs()
+                ));
+            });
         });
     });
     &STOP
@@ -1267,13 +1298,11 @@ fn calibrate_cmd(
     let catalog = Catalog::load(c.catalog.as_deref())?;
     let solve = |camera: &Camera, search: bool| -> Result<Vec<Record>> {
         let mut s = settings(c, camera_mag);
-        if search {
-            if let Some(t) = fov_tolerance {
-                if !(t > 0.0 && t < 0.5) {
-                    bail!("--fov-tolerance must be between 0 and 0.5");
-                }
-                s.scale_range = Some((1.0 - t, 1.0 + t));
+        if search && let Some(t) = fov_tolerance {
+            if !(t > 0.0 && t < 0.5) {
+                bail!("--fov-tolerance must be between 0 and 0.5");
             }
+            s.scale_range = Some((1.0 - t, 1.0 + t));
         }
         let mut p = Pipeline::new(
             catalog.clone(),

@@ -40,8 +40,12 @@ pub struct FitsFrame {
     pub pixels: Vec<u16>,
     /// Pixels at this value are saturated.
     pub saturation: u16,
-    /// Observation epoch as a Julian year (e.g. 2019.57), from DATE-OBS when present and parseable.
+    /// Observation epoch as a Julian year (e.g. 2019.57), from DATE-BEG, DATE-OBS, MJD-BEG or
+    /// MJD-OBS when present, parseable and plausible.
     pub epoch: Option<f64>,
+    /// What a person should know about how the file was read (a time passed over, pixels
+    /// taken as bad).
+    pub warnings: Vec<String>,
     /// Every keyword with a value, as text: strings without their quotes and trailing blanks,
     /// numbers as written back by Rust, logicals as T or F. The image's own header wins over
     /// the primary header of a multi-extension file.
@@ -170,13 +174,18 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
         Some(Value::Integer { value, .. }) if image.bitpix > 0 => Some(*value),
         _ => None,
     };
+    let (epoch, mut warnings) = epoch(headers.iter().rev());
+    let with_warning = |(p, s, w): (Vec<u16>, u16, Option<String>), all: &mut Vec<String>| {
+        all.extend(w);
+        (p, s)
+    };
     let (pixels, saturation) = match image.bitpix {
         8 => convert_int::<u8>(data, scaling, blank, count)?,
         16 => convert_int::<i16>(data, scaling, blank, count)?,
         32 => convert_int::<i32>(data, scaling, blank, count)?,
         64 => convert_int::<i64>(data, scaling, blank, count)?,
-        -32 => convert_float::<f32>(data, scaling, count)?,
-        -64 => convert_float::<f64>(data, scaling, count)?,
+        -32 => with_warning(convert_float::<f32>(data, scaling, count)?, &mut warnings),
+        -64 => with_warning(convert_float::<f64>(data, scaling, count)?, &mut warnings),
         b => bail!("FITS BITPIX = {b} is not supported"),
     };
     Ok(FitsFrame {
@@ -186,7 +195,8 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
         saturation,
         // The image's own header first; DATE-OBS often sits only in the primary header of
         // multi-extension files.
-        epoch: epoch(headers.iter().rev()),
+        epoch,
+        warnings,
         keywords: keywords(&headers),
     })
 }
@@ -525,26 +535,44 @@ fn number(header: &Header<Image>, key: &str) -> Result<Option<f64>> {
     Ok(Some(v))
 }
 
-/// The epoch from the first header with a parseable DATE-OBS, else from MJD-OBS.
-fn epoch<'a>(headers: impl Iterator<Item = &'a Header<Image>> + Clone) -> Option<f64> {
-    let from_date = |h: &Header<Image>| match h.get("DATE-OBS") {
-        Some(Value::String { value, .. }) => julian_year(value),
-        _ => None,
-    };
-    let from_mjd = |h: &Header<Image>| {
-        let mjd = match h.get("MJD-OBS") {
-            Some(Value::Float { value, .. }) => *value,
-            Some(Value::Integer { value, .. }) => *value as f64,
-            _ => return None,
+/// The epoch of proper motion (Julian year) from the first of DATE-BEG, DATE-OBS, MJD-BEG and
+/// MJD-OBS (the order the exposure times are read in) that a header holds in a form read and
+/// within the years any time is taken from (`sky::plausible_mjd`); a value outside them (a
+/// 9999-12-31 placeholder, a JD in MJD-OBS) is passed over with a warning.
+fn epoch<'a>(
+    headers: impl Iterator<Item = &'a Header<Image>> + Clone,
+) -> (Option<f64>, Vec<String>) {
+    // MJD 51544.5 = JD 2451545.0 = J2000.0.
+    const J2000_MJD: f64 = 51_544.5;
+    let mut warnings = Vec::new();
+    for key in ["DATE-BEG", "DATE-OBS", "MJD-BEG", "MJD-OBS"] {
+        let read = |h: &Header<Image>| -> Option<(f64, String)> {
+            match (h.get(key), key.starts_with("MJD")) {
+                (Some(Value::String { value, .. }), false) => {
+                    julian_year(value).map(|y| (y, value.clone()))
+                }
+                (Some(Value::Float { value, .. }), true) => {
+                    Some((2000.0 + (value - J2000_MJD) / 365.25, value.to_string()))
+                }
+                (Some(Value::Integer { value, .. }), true) => Some((
+                    2000.0 + (*value as f64 - J2000_MJD) / 365.25,
+                    value.to_string(),
+                )),
+                _ => None,
+            }
         };
-        // MJD 51544.5 = JD 2451545.0 = J2000.0.
-        let year = 2000.0 + (mjd - 51_544.5) / 365.25;
-        year.is_finite().then_some(year)
-    };
-    headers
-        .clone()
-        .find_map(from_date)
-        .or_else(|| headers.clone().find_map(from_mjd))
+        let Some((year, text)) = headers.clone().find_map(read) else {
+            continue;
+        };
+        let mjd = J2000_MJD + (year - 2000.0) * 365.25;
+        if year.is_finite() && crate::streaks::sky::plausible_mjd(mjd) {
+            return (Some(year), warnings);
+        }
+        warnings.push(format!(
+            "{key} = '{text}' is outside 1960-2100: not used as the epoch of proper motion"
+        ));
+    }
+    (None, warnings)
 }
 
 /// BZERO and BSCALE. `int` holds them as integers when both are integral and small enough
@@ -657,19 +685,24 @@ fn convert_int<T: IntSample>(
 
 /// Floating-point data to u16 pixels: always the linear map, on stored values as above.
 /// NaN and ±inf are blanks.
-fn convert_float<T: FloatSample>(data: &[u8], s: Scaling, count: u64) -> Result<(Vec<u16>, u16)> {
+/// Float data to u16 pixels over the range of the valid values (see [`float_range`]): values
+/// outside it (sentinels) and non-finite ones are bad pixels, given the median. Returns a
+/// warning when sentinels were found.
+fn convert_float<T: FloatSample>(
+    data: &[u8],
+    s: Scaling,
+    count: u64,
+) -> Result<(Vec<u16>, u16, Option<String>)> {
     let stored = || data.chunks_exact(T::BYTES).map(T::read);
-    let (mut lo, mut hi, mut blanks) = (f64::INFINITY, f64::NEG_INFINITY, 0u64);
+    let (lo, hi) = float_range(stored);
+    let bad = |v: f64| !(v >= lo && v <= hi);
+    let (mut blanks, mut sentinels, mut example) = (0u64, 0u64, 0.0);
     for v in stored() {
-        if !v.is_finite() {
+        if bad(v) {
             blanks += 1;
-        } else {
-            // Comparisons rather than f64::min/max, which spend time on NaN.
-            if v < lo {
-                lo = v;
-            }
-            if v > hi {
-                hi = v;
+            if v.is_finite() {
+                sentinels += 1;
+                example = v;
             }
         }
     }
@@ -686,12 +719,92 @@ fn convert_float<T: FloatSample>(data: &[u8], s: Scaling, count: u64) -> Result<
     } else {
         0.0
     };
-    // Non-finite values become 0 (`as` saturates, NaN → 0) and are replaced below.
+    // Bad values become anything (`as` saturates, NaN → 0) and are replaced below.
     pixels.extend(stored().map(|v| ((v * 0.5 - from) * sign * k + 0.5) as u16));
     if blanks > 0 {
-        fill_blanks(&mut pixels, data, T::BYTES, |b| !T::read(b).is_finite());
+        fill_blanks(&mut pixels, data, T::BYTES, |b| bad(T::read(b)));
     }
-    Ok((pixels, u16::MAX))
+    let warning = (sentinels > 0).then(|| {
+        format!(
+            "{sentinels} pixels far outside the others' values (e.g. {example:e}; the rest lie \
+             in {lo:e}..{hi:e}) were taken as bad pixels (sentinel values?)"
+        )
+    });
+    Ok((pixels, u16::MAX, warning))
+}
+
+/// How far (in the spread of the 0.1–99.9 % quantiles) values may lie beyond those quantiles
+/// and still be mapped whatever follows them; beyond it, see [`float_range`].
+const FLOAT_TAIL_SPREADS: f64 = 1000.0;
+/// A jump in the sorted tail by more than this factor (distances from the quantile) starts the
+/// sentinels.
+const FLOAT_SENTINEL_JUMP: f64 = 100.0;
+
+/// The range of the finite values, less sentinels: a bad-pixel marker such as 1e9 or −1e30
+/// stretched over the u16 range would leave the sky and every star in a level or two. Beyond
+/// FLOAT_TAIL_SPREADS of the quantiles' spread, the tail's values are walked outward and cut
+/// at the first jump by FLOAT_SENTINEL_JUMP: the peaks of bright and saturated stars rise by
+/// degrees, sentinels jump. A tail of more than 1 % of the values is data, not sentinels.
+fn float_range<I: Iterator<Item = f64>>(stored: impl Fn() -> I) -> (f64, f64) {
+    let (mut lo, mut hi, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0usize);
+    for v in stored() {
+        if v.is_finite() {
+            // Comparisons rather than f64::min/max, which spend time on NaN.
+            if v < lo {
+                lo = v;
+            }
+            if v > hi {
+                hi = v;
+            }
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return (lo, hi);
+    }
+    // Quantiles of a strided sample of at most ~65536 values.
+    let stride = (n / 65_536).max(1);
+    let mut sample: Vec<f64> = stored().filter(|v| v.is_finite()).step_by(stride).collect();
+    sample.sort_unstable_by(f64::total_cmp);
+    let cut = sample.len() / 1000;
+    let (q_lo, q_hi) = (sample[cut], sample[sample.len() - 1 - cut]);
+    let reach = FLOAT_TAIL_SPREADS * (q_hi - q_lo);
+    if reach.is_nan() || reach <= 0.0 || reach.is_infinite() {
+        return (lo, hi);
+    }
+    // Each tail: distances beyond the quantile, ascending; the last before a jump is the end.
+    let end_of = |distances: Vec<f64>| -> Option<f64> {
+        if distances.len() > n / 100 {
+            return None;
+        }
+        let mut d = distances;
+        d.sort_unstable_by(f64::total_cmp);
+        let mut last = reach;
+        for &x in &d {
+            if x > FLOAT_SENTINEL_JUMP * last {
+                return Some(last);
+            }
+            last = x;
+        }
+        None
+    };
+    let far = |keep: &dyn Fn(f64) -> Option<f64>| -> Vec<f64> {
+        stored()
+            .filter(|v| v.is_finite())
+            .filter_map(keep)
+            .collect()
+    };
+    if let Some(d) = end_of(far(&|v| (v - q_hi > reach).then_some(v - q_hi))) {
+        hi = stored()
+            .filter(|&v| v.is_finite() && v - q_hi <= d)
+            .fold(f64::NEG_INFINITY, f64::max);
+    }
+    if let Some(d) = end_of(far(&|v| (q_lo - v > reach).then_some(q_lo - v))) {
+        lo = stored()
+            .filter(|&v| v.is_finite() && q_lo - v <= d)
+            .fold(f64::INFINITY, f64::min);
+    }
+    (lo, hi)
 }
 
 /// The pixel buffer, or an error when there is no memory for it or nothing valid to put in.

@@ -23,6 +23,8 @@ pub struct FileInfo {
     pub epoch: Option<f64>,
     /// FITS header keywords and their values as text (empty for other formats).
     pub keywords: std::collections::BTreeMap<String, String>,
+    /// What a person should know about how the file was read (its record carries them).
+    pub warnings: Vec<String>,
 }
 
 /// File extensions `batch` treats as images (lower case).
@@ -87,10 +89,10 @@ impl Frame {
             .with_context(|| format!("cannot open {shown}"))?
             .with_guessed_format()
             .with_context(|| format!("cannot read {shown}"))?;
-        if reader.format() == Some(ImageFormat::Png) {
-            if let Some(frame) = read_grey_png(path, &shown, meta.len())? {
-                return Ok((frame, FileInfo::default()));
-            }
+        if reader.format() == Some(ImageFormat::Png)
+            && let Some(frame) = read_grey_png(path, &shown, meta.len())?
+        {
+            return Ok((frame, FileInfo::default()));
         }
         let img = if reader.format() == Some(ImageFormat::Jpeg) {
             // The JPEG decoder reads the whole file anyway.
@@ -167,6 +169,7 @@ fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, FileInfo
         FileInfo {
             epoch: f.epoch,
             keywords: f.keywords,
+            warnings: f.warnings,
         },
     ))
 }

@@ -12,13 +12,36 @@ pub struct Input {
     pub name: String,
 }
 
-/// The name of a path relative to the directory: components joined by '/'. Names that are
-/// not UTF-8 are shown with U+FFFD for the bytes that are not.
+/// The name of a path relative to the directory: components joined by '/'. A component that
+/// is not UTF-8 is escaped reversibly: each byte that is not part of a UTF-8 character as
+/// `\xNN` (two lower-case hex digits) and each backslash as `\\`, so that names differing
+/// only in such bytes stay different. UTF-8 components are kept as they are.
 fn relative_name(rel: &Path) -> String {
     rel.components()
-        .map(|c| c.as_os_str().to_string_lossy())
+        .map(|c| escape_component(c.as_os_str()))
         .collect::<Vec<_>>()
         .join("/")
+}
+
+#[cfg(not(unix))]
+fn escape_component(c: &std::ffi::OsStr) -> String {
+    c.to_string_lossy().into_owned()
+}
+
+#[cfg(unix)]
+fn escape_component(c: &std::ffi::OsStr) -> String {
+    if let Some(s) = c.to_str() {
+        return s.to_string();
+    }
+    use std::os::unix::ffi::OsStrExt;
+    let mut out = String::new();
+    for chunk in c.as_bytes().utf8_chunks() {
+        out.push_str(&chunk.valid().replace('\\', "\\\\"));
+        for b in chunk.invalid() {
+            out.push_str(&format!("\\x{b:02x}"));
+        }
+    }
+    out
 }
 
 /// Every file under `dir` (in subdirectories too with `recursive`) whose extension is an image
@@ -48,8 +71,10 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
                 continue;
             }
         };
+        // Anything but a directory with an image's name is an input: a FIFO, a socket or a
+        // broken link gets an error record rather than no record.
         let ft = entry.file_type();
-        let is_file = ft.is_file() || (ft.is_symlink() && !entry.path().is_dir());
+        let is_file = !(ft.is_dir() || ft.is_symlink() && entry.path().is_dir());
         if is_file && is_image_path(entry.path()) {
             let rel = entry
                 .path()
@@ -64,6 +89,17 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
     // walkdir sorts each directory by file name; sort the whole list by record name so the
     // order is the same whatever the file system.
     out.sort_by(|a, b| a.name.cmp(&b.name));
+    // Escaped names are unique but for a UTF-8 name spelling out another's escape
+    // (`a\xff.png` beside a file whose name holds the byte 0xff): refuse rather than give
+    // two inputs one record.
+    if let Some(w) = out.windows(2).find(|w| w[0].name == w[1].name) {
+        bail!(
+            "{} and {} would have the same record name {:?}: rename one",
+            w[0].path.display(),
+            w[1].path.display(),
+            w[0].name
+        );
+    }
     Ok(out)
 }
 

@@ -18,6 +18,11 @@ pub enum Format {
 
 pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1,streaks,sequence_mode,particles";
 
+/// Held while records are handed to a file: a process that must end before its run does
+/// (a stop request that frames in flight do not heed) takes it first, so that it never ends
+/// in the middle of a line.
+pub static WRITING: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Writes records as whole lines: lines are collected and handed to the file in one write
 /// per flush, so a crash leaves at most one incomplete last line (which `--resume` drops).
 pub struct RecordWriter {
@@ -52,8 +57,9 @@ impl RecordWriter {
         self.pending.push(b'\n');
     }
 
-    /// Hand the queued whole lines to the file.
+    /// Hand the queued whole lines to the file (holding [`WRITING`]).
     pub fn flush(&mut self) -> Result<()> {
+        let _writing = WRITING.lock().unwrap_or_else(|e| e.into_inner());
         if !self.pending.is_empty() {
             self.out
                 .write_all(&self.pending)
@@ -123,27 +129,55 @@ fn csv_row(r: &Record) -> String {
     .join(",")
 }
 
-/// The first field of a CSV line (the file name), unquoted.
-fn csv_first_field(line: &str) -> Option<String> {
-    if let Some(rest) = line.strip_prefix('"') {
-        let mut out = String::new();
-        let mut chars = rest.chars().peekable();
-        while let Some(c) = chars.next() {
-            if c == '"' {
-                if chars.peek() == Some(&'"') {
-                    out.push('"');
-                    chars.next();
-                } else {
-                    return Some(out);
-                }
-            } else {
-                out.push(c);
+/// The fields of one CSV record (quotes removed, `""` unescaped), or None when a quote is
+/// left open or stray text follows a closing quote.
+fn csv_fields(record: &str) -> Option<Vec<String>> {
+    let mut fields = vec![String::new()];
+    let mut chars = record.chars().peekable();
+    let mut quoted = false;
+    let mut after_quote = false;
+    while let Some(c) = chars.next() {
+        let field = fields.last_mut().expect("one field at least");
+        match (quoted, c) {
+            (true, '"') if chars.peek() == Some(&'"') => {
+                field.push('"');
+                chars.next();
             }
+            (true, '"') => {
+                quoted = false;
+                after_quote = true;
+            }
+            (true, c) => field.push(c),
+            (false, ',') => {
+                fields.push(String::new());
+                after_quote = false;
+            }
+            (false, '"') if field.is_empty() && !after_quote => quoted = true,
+            (false, _) if after_quote => return None,
+            (false, c) => field.push(c),
         }
-        None
-    } else {
-        line.split(',').next().map(str::to_string)
     }
+    (!quoted).then_some(fields)
+}
+
+/// Ends of the CSV records in `bytes`: a newline outside quotes ends one (names may hold
+/// newlines inside quotes).
+fn csv_record_ends(bytes: &[u8]) -> Vec<usize> {
+    let mut ends = Vec::new();
+    let mut quoted = false;
+    for (i, &b) in bytes.iter().enumerate() {
+        match b {
+            b'"' => quoted = !quoted,
+            b'\n' if !quoted => ends.push(i),
+            _ => {}
+        }
+    }
+    ends
+}
+
+/// Is this line the CSV header, or that of an earlier version (columns are only ever added)?
+fn is_csv_header(line: &str) -> bool {
+    line == CSV_HEADER || line.starts_with("file,status,") && CSV_HEADER.starts_with(line)
 }
 
 /// What an earlier run left in an output file.
@@ -151,79 +185,305 @@ fn csv_first_field(line: &str) -> Option<String> {
 pub struct Previous {
     /// Files with a complete record.
     pub done: HashSet<String>,
+    /// Error records kept in the file (not retried): they count in the run's exit status.
+    pub errors: usize,
+    /// Error records taken out of the file to be tried again (`--retry-errors`).
+    pub retried: usize,
     /// Bytes of an incomplete last line that were cut off.
     pub truncated: u64,
     /// The file already has a CSV header.
     pub has_header: bool,
 }
 
-/// Read the complete records of an output file and cut off an incomplete last line (one not
-/// ended by a newline, or that does not parse), so that appending continues on a clean line.
-pub fn resume_from(path: &Path, format: Format) -> Result<Previous> {
-    let mut file = match std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(path)
-    {
-        Ok(f) => f,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Previous::default()),
-        Err(e) => {
-            return Err(e).with_context(|| format!("cannot open {} to resume", path.display()));
-        }
-    };
-    let mut bytes = Vec::new();
-    file.read_to_end(&mut bytes)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    let mut prev = Previous::default();
-    let mut good_end = 0usize;
-    let mut start = 0usize;
-    while let Some(nl) = bytes[start..].iter().position(|&b| b == b'\n') {
-        let line = &bytes[start..start + nl];
-        let text = String::from_utf8_lossy(line);
-        let name = match format {
-            Format::Jsonl => serde_json::from_str::<Record>(&text).ok().map(|r| r.file),
-            // The header, or that of an earlier version (columns are only ever added).
-            Format::Csv
-                if text == CSV_HEADER
-                    || CSV_HEADER.starts_with(&*text) && text.starts_with("file,status,") =>
-            {
-                prev.has_header = true;
-                start += nl + 1;
-                good_end = start;
-                continue;
-            }
-            Format::Csv => csv_first_field(&text),
-        };
-        match name {
-            Some(n) => {
-                prev.done.insert(n);
-                start += nl + 1;
-                good_end = start;
-            }
-            // A line that does not parse can only be a torn write followed by more output:
-            // stop there, and cut it and everything after it.
-            None => break,
-        }
-    }
-    if good_end < bytes.len() {
-        prev.truncated = (bytes.len() - good_end) as u64;
-        file.set_len(good_end as u64)
-            .with_context(|| format!("cannot truncate {}", path.display()))?;
-        file.seek(std::io::SeekFrom::End(0))?;
-    }
-    Ok(prev)
+/// One complete line (JSON Lines) or record (CSV) of an earlier output.
+struct Line {
+    /// Byte range in the file, newline included.
+    range: std::ops::Range<usize>,
+    /// The input it is the record of; None for the CSV header.
+    file: Option<String>,
+    error: bool,
 }
 
-/// Read every complete record of a JSON Lines file (an incomplete last line is ignored).
+/// An output file opened for a run: locked against a second writer for as long as it is
+/// held, positioned at its end.
+pub struct Output {
+    pub file: std::fs::File,
+    pub previous: Previous,
+}
+
+/// The marks of gpustar's output at the start of a line: a record's first key, or the CSV
+/// header's first columns.
+const JSONL_START: &str = "{\"file\":";
+const CSV_START: &str = "file,status,";
+
+/// Does this (possibly torn) first line start like gpustar output of either format?
+fn looks_like_output(first: &[u8]) -> bool {
+    [JSONL_START, CSV_START].iter().any(|m| {
+        let n = first.len().min(m.len());
+        n > 0 && first[..n] == m.as_bytes()[..n]
+    })
+}
+
+/// Open `-o PATH` for a run and lock it, so that a second process on the same file refuses
+/// to start instead of writing every record twice.
+///
+/// Without `resume` the file is emptied, but only when it is empty or holds gpustar output
+/// (its first line a record or the CSV header): anything else (a notes file, an input image
+/// named by mistake) is refused untouched.
+///
+/// With `resume` every complete line must be a record of `format` (after the header, for
+/// CSV); only an unterminated last line of that format, a write torn by a crash, is cut off.
+/// A file of the other format, or one that is not gpustar output, is refused untouched.
+/// `retry_errors` takes the error records out (through a new file renamed over the old one),
+/// so that their inputs are tried again.
+pub fn open_output(
+    path: &Path,
+    format: Format,
+    resume: bool,
+    retry_errors: bool,
+) -> Result<Output> {
+    use std::fs::OpenOptions;
+    let shown = path.display();
+    // Not a regular file (a terminal, /dev/null, a pipe): written as it is, nothing to read
+    // or lock. Opening a FIFO to read would wait forever for a writer.
+    if let Ok(m) = std::fs::metadata(path)
+        && !m.is_file()
+    {
+        if resume {
+            bail!("cannot resume into {shown}: it is not a regular file");
+        }
+        let file = OpenOptions::new()
+            .append(true)
+            .open(path)
+            .with_context(|| format!("cannot open {shown} to write the results"))?;
+        return Ok(Output {
+            file,
+            previous: Previous::default(),
+        });
+    }
+    let mut file = OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .with_context(|| format!("cannot open {shown} to write the results"))?;
+    lock(&file, path)?;
+    let mut bytes = Vec::new();
+    file.read_to_end(&mut bytes)
+        .with_context(|| format!("cannot read {shown}"))?;
+    if !resume {
+        let first = bytes.split(|&b| b == b'\n').next().unwrap_or_default();
+        if !bytes.is_empty() && !looks_like_output(first) {
+            bail!(
+                "{shown} exists and does not hold gpustar results (its first line is neither a \
+                 record nor the CSV header): not overwritten; remove it or choose another \
+                 --output"
+            );
+        }
+        file.set_len(0)
+            .with_context(|| format!("cannot empty {shown}"))?;
+        file.seek(std::io::SeekFrom::Start(0))?;
+        return Ok(Output {
+            file,
+            previous: Previous::default(),
+        });
+    }
+    let (lines, complete) = parse_lines(&bytes, format, path)?;
+    let tail = &bytes[complete..];
+    if !tail.is_empty() && lines.is_empty() && !looks_like_output(tail) {
+        bail!(
+            "{shown} does not hold gpustar results (no complete line, and it does not start \
+             like a record): not resumed, not touched"
+        );
+    }
+    let mut previous = Previous {
+        truncated: tail.len() as u64,
+        has_header: lines.iter().any(|l| l.file.is_none()),
+        ..Previous::default()
+    };
+    for l in &lines {
+        match &l.file {
+            Some(_) if l.error && retry_errors => previous.retried += 1,
+            Some(name) => {
+                previous.errors += usize::from(l.error);
+                previous.done.insert(name.clone());
+            }
+            None => {}
+        }
+    }
+    if previous.retried > 0 {
+        // Keep every line but the retried error records, in a new file locked before it
+        // takes the name: a crash leaves the old file or the new one, never half of either.
+        let mut kept = Vec::with_capacity(complete);
+        for l in lines.iter().filter(|l| !(l.error && retry_errors)) {
+            kept.extend_from_slice(&bytes[l.range.clone()]);
+        }
+        let tmp = path.with_file_name(format!(
+            ".{}.gpustar-retry-{}",
+            path.file_name()
+                .map_or_else(Default::default, |n| n.to_string_lossy()),
+            std::process::id()
+        ));
+        let mut new = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+            .with_context(|| format!("cannot create {}", tmp.display()))?;
+        lock(&new, &tmp)?;
+        let written = new
+            .write_all(&kept)
+            .and_then(|_| new.sync_all())
+            .and_then(|_| std::fs::rename(&tmp, path));
+        if let Err(e) = written {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e).with_context(|| format!("cannot rewrite {shown} without its errors"));
+        }
+        file = new;
+    } else if !tail.is_empty() {
+        file.set_len(complete as u64)
+            .with_context(|| format!("cannot cut the torn last line off {shown}"))?;
+    }
+    file.seek(std::io::SeekFrom::End(0))?;
+    Ok(Output { file, previous })
+}
+
+/// Hold `file`'s exclusive lock (advisory, released when the file is closed), or say who
+/// has it.
+fn lock(file: &std::fs::File, path: &Path) -> Result<()> {
+    match file.try_lock() {
+        Ok(()) => Ok(()),
+        Err(std::fs::TryLockError::WouldBlock) => bail!(
+            "{} is being written by another gpustar process (it holds the file's lock): \
+             not touched; wait for that run to end, or write elsewhere",
+            path.display()
+        ),
+        // File systems without locks (some network mounts): go on as before.
+        Err(std::fs::TryLockError::Error(e)) => {
+            tracing::warn!("cannot lock {}: {e}; going on unlocked", path.display());
+            Ok(())
+        }
+    }
+}
+
+/// The complete lines of an earlier output of `format`, and where they end; an error, naming
+/// the line, when one is not a record of that format.
+fn parse_lines(bytes: &[u8], format: Format, path: &Path) -> Result<(Vec<Line>, usize)> {
+    let shown = path.display();
+    let other = |text: &str| -> &'static str {
+        match format {
+            Format::Jsonl if is_csv_header(text) => " (it holds CSV results: add --format csv)",
+            Format::Csv if serde_json::from_str::<Record>(text).is_ok() => {
+                " (it holds JSON Lines results: leave out --format csv)"
+            }
+            _ => "",
+        }
+    };
+    let ends = match format {
+        Format::Jsonl => bytes
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| **b == b'\n')
+            .map(|(i, _)| i)
+            .collect(),
+        Format::Csv => csv_record_ends(bytes),
+    };
+    let mut lines = Vec::with_capacity(ends.len());
+    let mut start = 0;
+    let mut columns = 0;
+    for (n, end) in ends.into_iter().enumerate() {
+        let text = std::str::from_utf8(&bytes[start..end]).ok();
+        let parsed = text.and_then(|text| match format {
+            Format::Jsonl => serde_json::from_str::<Record>(text)
+                .ok()
+                .map(|r| (Some(r.file), r.status == Status::Error)),
+            Format::Csv if n == 0 => {
+                columns = text.split(',').count();
+                is_csv_header(text).then_some((None, false))
+            }
+            Format::Csv => csv_fields(text)
+                .filter(|f| f.len() == columns)
+                .map(|f| (Some(f[0].clone()), f[1] == "error")),
+        });
+        let Some((file, error)) = parsed else {
+            let text = String::from_utf8_lossy(&bytes[start..end]);
+            let what = if n == 0 && format == Format::Csv {
+                "the CSV header"
+            } else {
+                "a gpustar record"
+            };
+            bail!(
+                "{shown}: line {} is not {what}{}: not resumed, not touched",
+                n + 1,
+                other(&text)
+            );
+        };
+        lines.push(Line {
+            range: start..end + 1,
+            file,
+            error,
+        });
+        start = end + 1;
+    }
+    Ok((lines, start))
+}
+
+/// Refuse `path` as a file to write at a run's end unless it can be: its directory exists and
+/// takes files, and it is absent, empty, or `ours` (text gpustar writes there).
+pub fn check_replaceable(path: &Path, ours: impl Fn(&str) -> bool, what: &str) -> Result<()> {
+    let shown = path.display();
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    tempfile::NamedTempFile::new_in(dir).with_context(|| {
+        format!(
+            "cannot write {shown}: cannot create a file in {}",
+            dir.display()
+        )
+    })?;
+    match std::fs::read(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e).with_context(|| format!("cannot read {shown}")),
+        Ok(b) if b.is_empty() || std::str::from_utf8(&b).is_ok_and(&ours) => Ok(()),
+        Ok(_) => bail!(
+            "{shown} exists and does not hold {what}: not replaced; remove it or choose \
+             another path"
+        ),
+    }
+}
+
+/// Write a whole file through a new file in the same directory renamed over `path`: a crash
+/// or a full disk leaves the old file or the new one, never a part.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    tmp.write_all(bytes)
+        .and_then(|_| tmp.as_file().sync_all())
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    tmp.persist(path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
+/// Read the records of a JSON Lines file. A last line without its newline is a shard that
+/// did not finish (a crash mid-write): an error, not a record quietly dropped.
 pub fn read_records(path: &Path) -> Result<Vec<Record>> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read results {}", path.display()))?;
-    let complete = match text.rfind('\n') {
-        Some(i) => &text[..=i],
-        None => "",
-    };
-    complete
-        .lines()
+    if !text.is_empty() && !text.ends_with('\n') {
+        bail!(
+            "{} ends with an incomplete record: that run did not finish; run it again with \
+             --resume",
+            path.display()
+        );
+    }
+    text.lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(n, l)| {

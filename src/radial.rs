@@ -128,13 +128,13 @@ impl RadialTable {
             return (t, true);
         }
         let t = RadialTable::build(refs, table, pair_tol_rad, scale_tol);
-        if let Some(f) = &file {
-            if let Err(e) = write_features(f, key, &t) {
-                tracing::warn!(
-                    "could not cache the radial features in {}: {e:#}",
-                    f.display()
-                );
-            }
+        if let Some(f) = &file
+            && let Err(e) = write_features(f, key, &t)
+        {
+            tracing::warn!(
+                "could not cache the radial features in {}: {e:#}",
+                f.display()
+            );
         }
         (t, false)
     }
@@ -145,47 +145,40 @@ impl RadialTable {
     }
 }
 
-const MAGIC: &[u8; 8] = b"GPSRAD01";
+/// Version 2 adds the checksum.
+const MAGIC: &[u8; 8] = b"GPSRAD02";
 
 fn write_features(path: &std::path::Path, key: u64, t: &RadialTable) -> anyhow::Result<()> {
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir)?;
-    }
-    let mut buf = Vec::with_capacity(24 + 4 * t.features.len());
-    buf.extend_from_slice(MAGIC);
-    buf.extend_from_slice(&key.to_le_bytes());
-    buf.extend_from_slice(&(t.stars as u64).to_le_bytes());
-    for w in &t.features {
-        buf.extend_from_slice(&w.to_le_bytes());
-    }
-    // A temporary name and a rename: a concurrent reader never sees half a file.
-    let tmp = path.with_extension(format!("tmp{}", std::process::id()));
-    std::fs::write(&tmp, &buf)?;
-    std::fs::rename(&tmp, path)?;
-    Ok(())
+    crate::table::write_cache(path, MAGIC, key, &[t.stars as u64], &t.features)
 }
 
-/// The cached features, if the file is whole and made for this key and catalog size.
+/// The cached features, if the file is whole (its checksum), made for this key and catalog
+/// size; else None, with a warning when a file was there.
 fn read_features(
     path: &std::path::Path,
     key: u64,
     stars: usize,
     table: &PairTable,
 ) -> Option<RadialTable> {
-    let buf = std::fs::read(path).ok()?;
-    let u64_at = |o: usize| Some(u64::from_le_bytes(buf.get(o..o + 8)?.try_into().ok()?));
-    if buf.get(..8)? != MAGIC.as_slice() || u64_at(8)? != key || u64_at(16)? != stars as u64 {
+    if !path.exists() {
         return None;
     }
-    let body = buf.get(24..)?;
-    if body.len() != 4 * WORDS * stars {
-        return None;
+    let read = crate::table::read_cache(path, MAGIC, key, 1).and_then(|(head, features)| {
+        if head[0] != stars as u64 || features.len() != WORDS * stars {
+            anyhow::bail!("made for another catalog");
+        }
+        Ok(features)
+    });
+    match read {
+        Ok(features) => Some(RadialTable::from_features(features, stars, table)),
+        Err(e) => {
+            tracing::warn!(
+                "the cached radial features {} cannot be used ({e:#}): building them again",
+                path.display()
+            );
+            None
+        }
     }
-    let features: Vec<u32> = body
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
-        .collect();
-    Some(RadialTable::from_features(features, stars, table))
 }
 
 /// The features of the first [`TRIANGLE_STARS`] of `vectors` (brightest first),

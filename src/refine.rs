@@ -185,10 +185,10 @@ pub fn refine(
         }
     }
     // Weights from the final attitude's residuals (the loop's last fit used the previous one's).
-    if let Some(w) = weights_at(&r, &camera, dets, &det_vectors, refs, &pairs) {
-        if s.fit == CameraFit::None || pairs.len() < MIN_MATCHES_SCALE {
-            r = fit_attitude(&pairs, &det_vectors, refs, Some(&w))?;
-        }
+    if let Some(w) = weights_at(&r, &camera, dets, &det_vectors, refs, &pairs)
+        && (s.fit == CameraFit::None || pairs.len() < MIN_MATCHES_SCALE)
+    {
+        r = fit_attitude(&pairs, &det_vectors, refs, Some(&w))?;
     }
     let (mut matches, scatter) = residuals(&r, &camera, dets, &det_vectors, refs, &pairs);
     // The evidence of a match is how close it is: chance places a star within r of one of the

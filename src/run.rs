@@ -85,7 +85,7 @@ pub fn run(
                     for _ in 0..threads {
                         let (rx, tx) = (work_rx.clone(), det_tx.clone());
                         scope.spawn(move || {
-                            for (i, input) in rx {
+                            for (i, input) in until_stop(&rx, stop) {
                                 let d = guarded_detect(&input, || {
                                     solvers.detect_cpu(
                                         solvers.decode(&input.path, &input.name),
@@ -100,7 +100,7 @@ pub fn run(
                     }
                 }
                 Backend::Gpu(runner) => {
-                    let frame_rx = spawn_decoders(scope, solvers, &work_rx, threads, window);
+                    let frame_rx = spawn_decoders(scope, solvers, &work_rx, threads, window, stop);
                     let tx = det_tx.clone();
                     scope.spawn(move || {
                         gpu_detect_loop(runner, solvers, frame_rx, tx, batch, seq.detect_stars)
@@ -116,7 +116,7 @@ pub fn run(
                     for _ in 0..threads {
                         let (rx, tx) = (work_rx.clone(), done_tx.clone());
                         scope.spawn(move || {
-                            for (i, input) in rx {
+                            for (i, input) in until_stop(&rx, stop) {
                                 let r = guarded(&input.name, || {
                                     solvers.solve_cpu(solvers.decode(&input.path, &input.name))
                                 });
@@ -128,7 +128,7 @@ pub fn run(
                     }
                 }
                 Backend::Gpu(runner) => {
-                    let frame_rx = spawn_decoders(scope, solvers, &work_rx, threads, window);
+                    let frame_rx = spawn_decoders(scope, solvers, &work_rx, threads, window, stop);
                     let tx = done_tx.clone();
                     scope.spawn(move || gpu_loop(runner, solvers, frame_rx, tx, batch));
                 }
@@ -136,7 +136,14 @@ pub fn run(
         }
         drop(work_rx);
         drop(done_tx);
-        summary = write_in_order(done_rx, ticket_tx, writer, opts.flush_every, &mut on_record)?;
+        summary = write_in_order(
+            done_rx,
+            ticket_tx,
+            writer,
+            opts.flush_every,
+            stop,
+            &mut on_record,
+        )?;
         Ok(())
     })?;
     summary.seconds = t0.elapsed().as_secs_f64();
@@ -196,12 +203,13 @@ fn spawn_decoders<'s, 'e: 's>(
     work: &Receiver<(usize, Input)>,
     threads: usize,
     window: usize,
+    stop: &'e AtomicBool,
 ) -> Receiver<(usize, Decoded)> {
     let (frame_tx, frame_rx) = bounded::<(usize, Decoded)>(window);
     for _ in 0..threads {
         let (rx, tx) = (work.clone(), frame_tx.clone());
         scope.spawn(move || {
-            for (i, input) in rx {
+            for (i, input) in until_stop(&rx, stop) {
                 let d = std::panic::catch_unwind(|| solvers.decode(&input.path, &input.name))
                     .unwrap_or_else(|p| panicked_decode(&input, &p));
                 if tx.send((i, d)).is_err() {
@@ -220,6 +228,7 @@ fn panicked_decode(input: &Input, p: &Box<dyn std::any::Any + Send>) -> Decoded 
         path: input.path.clone(),
         epoch: None,
         keywords: Default::default(),
+        warnings: Vec::new(),
         frame: Err(panic_message(p)),
         decode_ms: 0.0,
     }
@@ -320,12 +329,21 @@ fn panic_message(p: &Box<dyn std::any::Any + Send>) -> String {
     format!("internal error while processing this file ({what}); please report it with the file")
 }
 
-/// The writer: records come in any order; they leave in input order.
+/// The inputs of a worker until a stop is asked: queued inputs are then left without a
+/// record (`--resume` does them) rather than making the user wait for them.
+fn until_stop<'a, T>(rx: &'a Receiver<T>, stop: &'a AtomicBool) -> impl Iterator<Item = T> + 'a {
+    rx.iter().take_while(move |_| !stop.load(Ordering::SeqCst))
+}
+
+/// The writer: records come in any order; they leave in input order. Whole lines are handed
+/// to the file at least every `flush_every`, and at once after a stop is asked, so that the
+/// process can be ended soon after without losing a record it finished.
 fn write_in_order(
     done: Receiver<(usize, Record)>,
     tickets: Sender<()>,
     writer: &mut RecordWriter,
     flush_every: Duration,
+    stop: &AtomicBool,
     on_record: &mut impl FnMut(&Record, &Counts),
 ) -> Result<RunSummary> {
     let mut summary = RunSummary::default();
@@ -333,8 +351,14 @@ fn write_in_order(
     let mut next = 0usize;
     let mut last_flush = Instant::now();
     let mut unflushed = 0usize;
-    for (i, r) in done {
-        waiting.insert(i, r);
+    loop {
+        match done.recv_timeout(flush_every) {
+            Ok((i, r)) => {
+                waiting.insert(i, r);
+            }
+            Err(crossbeam_channel::RecvTimeoutError::Timeout) => {}
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
+        }
         while let Some(r) = waiting.remove(&next) {
             summary.counts.add(&r);
             writer.write(&r);
@@ -344,7 +368,10 @@ fn write_in_order(
             // The feeder may hand out one more input.
             let _ = tickets.try_send(());
         }
-        if unflushed >= FLUSH_RECORDS || last_flush.elapsed() >= flush_every {
+        let stopping = stop.load(Ordering::SeqCst);
+        if unflushed > 0
+            && (stopping || unflushed >= FLUSH_RECORDS || last_flush.elapsed() >= flush_every)
+        {
             writer.flush()?;
             last_flush = Instant::now();
             unflushed = 0;

@@ -173,7 +173,8 @@ pub fn cache_key(cat: &RefCatalog, catalog_hash: u64, max_sep_rad: f64) -> u64 {
 }
 
 const FORMAT_VERSION: u32 = 1;
-const MAGIC: &[u8; 8] = b"GPSTBL01";
+/// Version 2 adds the checksum.
+const MAGIC: &[u8; 8] = b"GPSTBL02";
 
 /// Where cached tables live: `$GPUSTAR_CACHE_DIR`, else `$XDG_CACHE_HOME/gpustar`, else
 /// `~/.cache/gpustar`.
@@ -213,31 +214,36 @@ pub fn load_or_build(
         .filter(|_| use_cache)
         .map(|d| d.join(format!("table-{key:016x}.bin")));
     let mut note = None;
-    if let Some(f) = &file {
-        if f.exists() {
-            match read_table(f, key) {
-                Ok(mut t) => {
-                    t.max_sep_rad = max_sep_rad;
-                    return (
-                        t,
-                        TableOrigin {
-                            built: false,
-                            seconds: t0.elapsed().as_secs_f64(),
-                            cache_file: file.clone(),
-                            cache_note: None,
-                        },
-                    );
-                }
-                Err(e) => note = Some(format!("ignored cache {}: {e:#}", f.display())),
+    if let Some(f) = &file
+        && f.exists()
+    {
+        match read_table(f, key, cat.stars.len(), max_sep_rad) {
+            Ok(t) => {
+                return (
+                    t,
+                    TableOrigin {
+                        built: false,
+                        seconds: t0.elapsed().as_secs_f64(),
+                        cache_file: file.clone(),
+                        cache_note: None,
+                    },
+                );
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "the cached distance table {} cannot be used ({e:#}): building it again",
+                    f.display()
+                );
+                note = Some(format!("ignored cache {}: {e:#}", f.display()));
             }
         }
     }
     let table = PairTable::build(cat, max_sep_rad);
     let seconds = t0.elapsed().as_secs_f64();
-    if let Some(f) = &file {
-        if let Err(e) = write_table(f, key, &table) {
-            note = Some(format!("could not write cache {}: {e:#}", f.display()));
-        }
+    if let Some(f) = &file
+        && let Err(e) = write_table(f, key, &table)
+    {
+        note = Some(format!("could not write cache {}: {e:#}", f.display()));
     }
     (
         table,
@@ -251,25 +257,42 @@ pub fn load_or_build(
 }
 
 fn write_table(path: &Path, key: u64, t: &PairTable) -> Result<()> {
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
-    }
-    let mut buf = Vec::with_capacity(64 + t.bytes());
-    buf.extend_from_slice(MAGIC);
-    buf.extend_from_slice(&key.to_le_bytes());
-    for v in [
+    let head = [
         t.keys.len() as u64,
         t.kvector.len() as u64,
         t.shift as u64,
         t.max_key as u64,
-    ] {
+    ];
+    let mut body = Vec::with_capacity(t.bytes() / 4);
+    for arr in [&t.keys, &t.pairs, &t.kvector] {
+        body.extend_from_slice(arr);
+    }
+    write_cache(path, MAGIC, key, &head, &body)
+}
+
+/// Write a cache file: magic, key, header words, body words, and a CRC-32 of all that (a
+/// file scribbled on or cut short is found out when it is read back, and rebuilt).
+pub(crate) fn write_cache(
+    path: &Path,
+    magic: &[u8; 8],
+    key: u64,
+    head: &[u64],
+    body: &[u32],
+) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+    }
+    let mut buf = Vec::with_capacity(16 + 8 * head.len() + 4 * body.len() + 4);
+    buf.extend_from_slice(magic);
+    buf.extend_from_slice(&key.to_le_bytes());
+    for v in head {
         buf.extend_from_slice(&v.to_le_bytes());
     }
-    for arr in [&t.keys, &t.pairs, &t.kvector] {
-        for v in arr.iter() {
-            buf.extend_from_slice(&v.to_le_bytes());
-        }
+    for v in body {
+        buf.extend_from_slice(&v.to_le_bytes());
     }
+    let crc = crc32fast::hash(&buf);
+    buf.extend_from_slice(&crc.to_le_bytes());
     // Write to a temporary name and rename, so a concurrent reader never sees half a file.
     let tmp = path.with_extension(format!("tmp{}", std::process::id()));
     std::fs::write(&tmp, &buf)?;
@@ -277,40 +300,75 @@ fn write_table(path: &Path, key: u64, t: &PairTable) -> Result<()> {
     Ok(())
 }
 
-fn read_table(path: &Path, key: u64) -> Result<PairTable> {
+/// Read a cache file written by [`write_cache`] with `heads` header words: the header and the
+/// body, or why the file cannot be used (another magic or key, a length that disagrees, a
+/// checksum that does not match).
+pub(crate) fn read_cache(
+    path: &Path,
+    magic: &[u8; 8],
+    key: u64,
+    heads: usize,
+) -> Result<(Vec<u64>, Vec<u32>)> {
     let buf = std::fs::read(path)?;
-    let u64_at = |o: usize| -> Result<u64> {
-        let b = buf.get(o..o + 8).context("truncated")?;
-        Ok(u64::from_le_bytes(b.try_into().unwrap()))
-    };
-    if buf.get(0..8) != Some(MAGIC.as_slice()) {
-        bail!("not a gpustar table");
+    let fixed = 16 + 8 * heads;
+    if buf.len() < fixed + 4 || !(buf.len() - fixed - 4).is_multiple_of(4) {
+        bail!("truncated ({} bytes)", buf.len());
     }
-    if u64_at(8)? != key {
+    if &buf[..8] != magic.as_slice() {
+        bail!("not a gpustar cache file of this version");
+    }
+    let u64_at = |o: usize| u64::from_le_bytes(buf[o..o + 8].try_into().expect("8 bytes"));
+    if u64_at(8) != key {
         bail!("key mismatch");
     }
-    let rows = u64_at(16)? as usize;
-    let kvlen = u64_at(24)? as usize;
-    let shift = u64_at(32)? as u32;
-    let max_key = u64_at(40)? as u32;
-    let body = &buf[48..];
-    if body.len() != 4 * (2 * rows + kvlen) {
-        bail!("truncated");
+    let (data, crc) = buf.split_at(buf.len() - 4);
+    if crc32fast::hash(data) != u32::from_le_bytes(crc.try_into().expect("4 bytes")) {
+        bail!("checksum mismatch (the file was changed or damaged)");
     }
-    let words: Vec<u32> = body
+    let head = (0..heads).map(|i| u64_at(16 + 8 * i)).collect();
+    let body = data[fixed..]
         .chunks_exact(4)
-        .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+        .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
         .collect();
+    Ok((head, body))
+}
+
+/// The table of a cache file, checked whole: the checksum, then every bound the range
+/// queries and the GPU rely on (a file that passes cannot make a frame fail).
+fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<PairTable> {
+    let (head, words) = read_cache(path, MAGIC, key, 4)?;
+    let (rows, kvlen) = (head[0] as usize, head[1] as usize);
+    if words.len() != 2 * rows + kvlen {
+        bail!(
+            "{} words where {rows} rows and a k-vector of {kvlen} need {}",
+            words.len(),
+            2 * rows + kvlen
+        );
+    }
     let t = PairTable {
         keys: words[..rows].to_vec(),
         pairs: words[rows..2 * rows].to_vec(),
         kvector: words[2 * rows..].to_vec(),
-        shift,
-        max_sep_rad: 0.0,
-        max_key,
+        shift: u32::try_from(head[2])?,
+        max_sep_rad,
+        max_key: u32::try_from(head[3])?,
     };
-    if !t.keys.windows(2).all(|w| w[0] <= w[1]) {
-        bail!("keys not sorted");
+    if t.max_key != chord_key(chord_of_angle(max_sep_rad))
+        || t.shift != kvector_shift(t.max_key, rows)
+    {
+        bail!("made for another separation");
+    }
+    if !t.keys.windows(2).all(|w| w[0] <= w[1]) || t.keys.last().is_some_and(|&k| k > t.max_key) {
+        bail!("keys not sorted or beyond the largest separation");
+    }
+    if !t.pairs.iter().all(|&p| {
+        let (a, b) = (p & 0xFFFF, p >> 16);
+        a < b && (b as usize) < stars
+    }) {
+        bail!("a pair names a star the catalog does not have");
+    }
+    if t.kvector != build_kvector(&t.keys, t.shift, t.max_key) {
+        bail!("the k-vector does not index the keys");
     }
     Ok(t)
 }

@@ -42,6 +42,8 @@ pub const SIP_FIT_TARGET_PX: f64 = 0.005;
 const SIP_MIN_ORDER: usize = 5;
 /// astrometry.net's tools accept SIP orders below 10.
 const SIP_MAX_ORDER: usize = 9;
+/// Highest SIP order read from a header (astrometry.net writes up to 9 as well).
+const SIP_READ_MAX_ORDER: i32 = 9;
 /// Within this distance (radians) of a celestial pole the RA of the boresight is undefined.
 const POLE_EPS: f64 = 1e-9;
 
@@ -989,9 +991,17 @@ impl HeaderWcs {
             if !sip {
                 return Ok(Vec::new());
             }
-            let order = num(&format!("{name}_ORDER"))?.unwrap_or(0.0) as i32;
+            // Both loops are bounded by the order, so it is checked first: an absurd
+            // A_ORDER once kept a frame busy for hours.
+            let v = num(&format!("{name}_ORDER"))?.unwrap_or(0.0);
+            if !(0.0..=SIP_READ_MAX_ORDER as f64).contains(&v) || v.fract() != 0.0 {
+                return Err(format!(
+                    "{name}_ORDER = {v}: SIP orders 0 to {SIP_READ_MAX_ORDER} are read"
+                ));
+            }
+            let order = v as i32;
             let mut t = Vec::new();
-            for p in 0..=order.clamp(0, 9) {
+            for p in 0..=order {
                 for q in 0..=(order - p) {
                     if let Some(c) = num(&format!("{name}_{p}_{q}"))? {
                         t.push((p, q, c));
@@ -1025,5 +1035,47 @@ impl HeaderWcs {
         let dec = (d0.sin() + eta * d0.cos()).atan2((xi * xi + den * den).sqrt());
         dec.is_finite()
             .then(|| (ra.to_degrees().rem_euclid(360.0), dec.to_degrees()))
+    }
+}
+
+#[cfg(test)]
+mod header_tests {
+    use super::HeaderWcs;
+
+    fn keywords(order: &str) -> std::collections::BTreeMap<String, String> {
+        [
+            ("CTYPE1", "RA---TAN-SIP"),
+            ("CTYPE2", "DEC--TAN-SIP"),
+            ("CRPIX1", "512"),
+            ("CRPIX2", "512"),
+            ("CRVAL1", "10"),
+            ("CRVAL2", "20"),
+            ("CD1_1", "0.001"),
+            ("CD2_2", "0.001"),
+            ("A_ORDER", order),
+            ("B_ORDER", "2"),
+            ("A_2_0", "1e-6"),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect()
+    }
+
+    /// Issue 22, item 3: an absurd SIP order is refused at once (it once ran a loop of 2^31
+    /// squared steps); orders 0 to 9 are read.
+    #[test]
+    fn sip_orders_are_bounded() {
+        for bad in ["2147483647", "10", "-1", "2.5", "1e300"] {
+            let t = std::time::Instant::now();
+            let e = HeaderWcs::from_keywords(&keywords(bad)).unwrap_err();
+            assert!(e.contains("A_ORDER"), "{bad}: {e}");
+            assert!(
+                t.elapsed().as_secs_f64() < 1.0,
+                "{bad}: took {:?}",
+                t.elapsed()
+            );
+        }
+        let w = HeaderWcs::from_keywords(&keywords("2")).unwrap().unwrap();
+        assert_eq!(w.sip_a, vec![(2, 0, 1e-6)]);
     }
 }

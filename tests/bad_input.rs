@@ -293,8 +293,17 @@ fn corpus() -> Corpus {
             "fifo_link.png",
             error(&["fifo_link.png", "not a regular file"]),
         );
+        // A FIFO named as an image gets its record too (it once got none).
+        assert!(
+            Command::new("mkfifo")
+                .arg(dir.join("fifo.png"))
+                .status()
+                .unwrap()
+                .success()
+        );
+        add("fifo.png", error(&["fifo.png", "not a regular file"]));
     } else {
-        eprintln!("bad_input: no mkfifo here; the link-to-FIFO case is left out");
+        eprintln!("bad_input: no mkfifo here; the FIFO cases are left out");
     }
     // An unreadable file: mode 000. Root (or CAP_DAC_OVERRIDE) reads it anyway; then the
     // unreadable case is a dangling link of the same name instead.
@@ -316,11 +325,13 @@ fn corpus() -> Corpus {
             error(&["unreadable.png", "permission denied"]),
         );
     }
-    // A file name that is not UTF-8 (byte 0xFF), holding a good frame: solved, named with
-    // U+FFFD in the record.
-    let odd = OsStr::from_bytes(b"\xff.png");
-    std::fs::write(dir.join(odd), &good_png).unwrap();
-    add("\u{FFFD}.png", Expect::Solved);
+    // File names that are not UTF-8 and differ only in such a byte (0xFF, 0xFE), holding a
+    // good frame: solved, each under its own name, the byte escaped as \xNN (issue 22, item
+    // 7: both were once "\u{FFFD}.png").
+    for (bytes, name) in [(b"\xff.png", "\\xff.png"), (b"\xfe.png", "\\xfe.png")] {
+        std::fs::write(dir.join(OsStr::from_bytes(bytes)), &good_png).unwrap();
+        add(name, Expect::Solved);
+    }
     // The good frame, sorted after every bad one: the run goes on to it and solves it.
     std::fs::write(dir.join("zz_good.png"), &good_png).unwrap();
     add("zz_good.png", Expect::Solved);

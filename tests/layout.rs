@@ -24,14 +24,14 @@ fn module(kernel: &str) -> naga::Module {
 /// (member name, offset) and size of a WGSL struct.
 fn layout(m: &naga::Module, name: &str) -> (Vec<(String, u32)>, u32) {
     for (_, ty) in m.types.iter() {
-        if ty.name.as_deref() == Some(name) {
-            if let naga::TypeInner::Struct { members, span } = &ty.inner {
-                let fields = members
-                    .iter()
-                    .map(|f| (f.name.clone().unwrap_or_default(), f.offset))
-                    .collect();
-                return (fields, *span);
-            }
+        if ty.name.as_deref() == Some(name)
+            && let naga::TypeInner::Struct { members, span } = &ty.inner
+        {
+            let fields = members
+                .iter()
+                .map(|f| (f.name.clone().unwrap_or_default(), f.offset))
+                .collect();
+            return (fields, *span);
         }
     }
     panic!("no struct {name}");

@@ -18,6 +18,9 @@ fn refs(mag: f64) -> RefCatalog {
     .unwrap()
 }
 
+/// Held by the tests that set GPUSTAR_CACHE_DIR.
+static ENV: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Rows with lo ≤ key ≤ hi by brute force.
 fn brute(t: &PairTable, lo: u32, hi: u32) -> std::ops::Range<usize> {
     let start = t.keys.iter().position(|&k| k >= lo).unwrap_or(t.len());
@@ -85,8 +88,9 @@ fn table_sizes_agree_with_seed_000_table_3() {
 
 #[test]
 fn cached_table_is_read_back_identically() {
+    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    // SAFETY: the only test in this binary that touches the environment.
+    // SAFETY: tests that touch the environment hold ENV.
     unsafe { std::env::set_var("GPUSTAR_CACHE_DIR", dir.path()) };
     let cat = refs(4.5);
     let (built, o1) = gpustar::table::load_or_build(&cat, 42, 0.2, true);
@@ -109,4 +113,66 @@ fn cached_table_is_read_back_identically() {
         o4.cache_note
     );
     assert_eq!(again, built);
+}
+
+/// Issue 22, item 2: a cache file scribbled on (pair ids, the k-vector, the row count; with
+/// its checksum recomputed too, so that the bounds checks alone must find it) is never used:
+/// it is rebuilt, and the table is the one built from the catalog.
+#[test]
+fn damaged_cache_files_are_rebuilt() {
+    let _env = ENV.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let cat = refs(4.5);
+    let table_at = |dir: &std::path::Path| {
+        // SAFETY: tests that touch the environment hold ENV.
+        unsafe { std::env::set_var("GPUSTAR_CACHE_DIR", dir) };
+        gpustar::table::load_or_build(&cat, 7, 0.2, true)
+    };
+    let (built, o) = table_at(dir.path());
+    let file = o.cache_file.unwrap();
+    let good = std::fs::read(&file).unwrap();
+    let rows = built.len();
+    let (keys, pairs, kvector) = (48, 48 + 4 * rows, 48 + 8 * rows);
+    let put = |b: &mut Vec<u8>, at: usize, v: u32| b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    type Scribble = Box<dyn Fn(&mut Vec<u8>)>;
+    let cases: Vec<(&str, Scribble)> = vec![
+        (
+            "pair id",
+            Box::new(move |b| put(b, pairs + 40, 0xFFFF_FFFF)),
+        ),
+        (
+            "pair id in range",
+            Box::new(move |b| put(b, pairs + 40, 2 | 1 << 16)),
+        ),
+        ("k-vector", Box::new(move |b| put(b, kvector + 8, u32::MAX))),
+        (
+            "k-vector order",
+            Box::new(move |b| b.swap(kvector + 4, kvector + 12)),
+        ),
+        (
+            "key",
+            Box::new(move |b| put(b, keys + 4 * (rows - 1), u32::MAX)),
+        ),
+        ("row count", Box::new(|b| b[16] ^= 1)),
+    ];
+    for (what, scribble) in cases {
+        for recompute_crc in [false, true] {
+            let mut bad = good.clone();
+            scribble(&mut bad);
+            if recompute_crc {
+                let n = bad.len() - 4;
+                let crc = crc32fast::hash(&bad[..n]);
+                bad[n..].copy_from_slice(&crc.to_le_bytes());
+            }
+            std::fs::write(&file, &bad).unwrap();
+            let (table, origin) = table_at(dir.path());
+            assert!(
+                origin.built,
+                "{what} (crc recomputed: {recompute_crc}): cache used"
+            );
+            assert!(origin.cache_note.is_some(), "{what}: no note");
+            assert_eq!(table, built, "{what}: the table differs");
+            assert_eq!(std::fs::read(&file).unwrap(), good, "{what}: not rewritten");
+        }
+    }
 }

@@ -297,10 +297,11 @@ impl Gpu {
     fn reused(&self, label: &'static str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
         let size = size.max(4).next_multiple_of(4);
         let mut cache = self.cache.borrow_mut();
-        if let Some(b) = cache.get(label) {
-            if b.size() >= size && b.usage() == usage {
-                return b.clone();
-            }
+        if let Some(b) = cache.get(label)
+            && b.size() >= size
+            && b.usage() == usage
+        {
+            return b.clone();
         }
         let b = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),

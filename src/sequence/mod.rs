@@ -416,14 +416,14 @@ fn predict(
     let px_cone = CHAIN_CONE_PX * camera.ifov_rad();
     // The camera as the last solution fitted it (scale, distortion): the same camera.
     let camera = last.camera.clone();
-    if let (Some((id, c)), Some((last_id, last_c))) = (chain, last.chain) {
-        if id == last_id {
-            return Some(Prediction {
-                r: c * last_c.transpose() * last.r,
-                camera,
-                cone_rad: px_cone,
-            });
-        }
+    if let (Some((id, c)), Some((last_id, last_c))) = (chain, last.chain)
+        && id == last_id
+    {
+        return Some(Prediction {
+            r: c * last_c.transpose() * last.r,
+            camera,
+            cone_rad: px_cone,
+        });
     }
     let max_cone = MAX_CONE_DEG.to_radians();
     if let [before, last] = solved {

@@ -67,12 +67,11 @@ pub fn estimate(
     let grid = Grid::new(b.px, camera, s.gate_px);
     // A prediction that holds is taken as it is found: it carries as many as a search would.
     let enough = s.min_inliers.max(a.px.len().min(b.px.len()) / 5);
-    if let Some(d) = predicted {
-        if let Some(m) = polish(camera, a, b, &grid, d, s) {
-            if m.inliers.len() >= enough {
-                return Some(m);
-            }
-        }
+    if let Some(d) = predicted
+        && let Some(m) = polish(camera, a, b, &grid, d, s)
+        && m.inliers.len() >= enough
+    {
+        return Some(m);
     }
     let (na, nb) = (
         a.px.len().min(s.hypothesis_stars),

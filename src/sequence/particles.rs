@@ -228,16 +228,16 @@ impl Tracker {
             let Some(k) = *k else { continue };
             let w = c.transpose() * dirs[j];
             let tr = &mut self.tracks[k];
-            if tr.decision == Decision::Undecided {
-                if let Some(p) = still[k] {
-                    let dt = (t - tr.last.1).abs();
-                    let nu = s.min_speed_rad_s / ifov * dt;
-                    tr.llr += step_llr(dist(p, px[j]), nu, sigma);
-                    if tr.llr >= ln_a {
-                        tr.decision = Decision::Particle;
-                    } else if tr.llr <= ln_b {
-                        tr.decision = Decision::Star;
-                    }
+            if tr.decision == Decision::Undecided
+                && let Some(p) = still[k]
+            {
+                let dt = (t - tr.last.1).abs();
+                let nu = s.min_speed_rad_s / ifov * dt;
+                tr.llr += step_llr(dist(p, px[j]), nu, sigma);
+                if tr.llr >= ln_a {
+                    tr.decision = Decision::Particle;
+                } else if tr.llr <= ln_b {
+                    tr.decision = Decision::Star;
                 }
             }
             tr.prev = Some(tr.last);

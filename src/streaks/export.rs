@@ -65,11 +65,22 @@ impl Exports {
                 az_deg: m.az_deg,
                 el_deg: m.el_deg,
             };
-            self.tracks.push(Track {
+            let track = Track {
                 object: format!("{}#{}", r.file, k + 1),
                 station: self.station_name.clone(),
                 observations: vec![obs],
-            });
+            };
+            // A streak the TDM cannot hold is left out on its own, never the whole file.
+            if let Err(e) = formats::tdm_text(
+                "2000-01-01T00:00:00",
+                "GPUSTAR",
+                std::slice::from_ref(&track),
+            ) {
+                tracing::warn!("{}: streak {} left out of the exports: {e}", r.file, k + 1);
+                self.left_out += 1;
+                continue;
+            }
+            self.tracks.push(track);
             let iod = IodObs {
                 norad: 99_999,
                 intl_des: String::new(),
@@ -89,14 +100,31 @@ impl Exports {
         }
     }
 
-    /// Write the files asked for; returns what was written, for the run's summary.
+    /// Refuse, before a run, export paths that could not be written at its end: a directory
+    /// that does not exist, or a file there that gpustar did not write (it is never replaced).
+    pub fn check_paths(&self) -> Result<()> {
+        if let Some(p) = &self.tdm {
+            crate::output::check_replaceable(
+                p,
+                |text| text.starts_with("CCSDS_TDM_VERS"),
+                "a TDM",
+            )?;
+        }
+        if let Some(p) = &self.iod {
+            crate::output::check_replaceable(p, formats::iod_like, "IOD lines")?;
+        }
+        Ok(())
+    }
+
+    /// Write the files asked for, each whole or not at all (through a new file renamed over
+    /// the old); returns what was written, for the run's summary.
     pub fn finish(&self, created_utc: &str) -> Result<String> {
         let mut said = Vec::new();
         if let Some(p) = &self.tdm {
-            let mut f = std::fs::File::create(p)
-                .with_context(|| format!("cannot create {}", p.display()))?;
-            formats::write_tdm(&mut f, created_utc, "GPUSTAR", &self.tracks)
+            let text = formats::tdm_text(created_utc, "GPUSTAR", &self.tracks)
+                .map_err(anyhow::Error::msg)
                 .with_context(|| format!("cannot write {}", p.display()))?;
+            crate::output::write_atomically(p, text.as_bytes())?;
             said.push(format!(
                 "{} (TDM, {} streaks)",
                 p.display(),
@@ -108,7 +136,7 @@ impl Exports {
             if !text.is_empty() {
                 text.push('\n');
             }
-            std::fs::write(p, text).with_context(|| format!("cannot write {}", p.display()))?;
+            crate::output::write_atomically(p, text.as_bytes())?;
             said.push(format!(
                 "{} (IOD, {} lines)",
                 p.display(),

@@ -317,7 +317,11 @@ fn push_segment(lines: &mut Vec<String>, seg: &SegmentOut) {
 }
 
 /// The whole TDM as text, or why the input cannot be written.
-fn tdm_text(creation_date_utc: &str, originator: &str, tracks: &[Track]) -> Result<String, String> {
+pub(crate) fn tdm_text(
+    creation_date_utc: &str,
+    originator: &str,
+    tracks: &[Track],
+) -> Result<String, String> {
     let created = parse_utc(creation_date_utc).map_err(|e| format!("CREATION_DATE: {e}"))?;
     let originator = kvn_value(originator, "ORIGINATOR")?;
     let mut lines = vec!["CCSDS_TDM_VERS = 2.0".to_string()];
@@ -934,6 +938,15 @@ fn check_code(c: char, what: &str) -> Result<char, String> {
             "{what} {c:?} is not a printable ASCII character or a blank"
         ))
     }
+}
+
+/// Does this text look like IOD lines (each starts with a 5-digit object number and a blank,
+/// at most 80 columns)? Used before replacing a file: only one gpustar could have written.
+pub fn iod_like(text: &str) -> bool {
+    text.lines().filter(|l| !l.is_empty()).all(|l| {
+        let b = l.as_bytes();
+        b.len() <= 80 && b.len() > 6 && b[..5].iter().all(u8::is_ascii_digit) && b[5] == b' '
+    })
 }
 
 /// The IOD line of `o`: angle format 2, epoch code 5 (J2000), magnitude and flash

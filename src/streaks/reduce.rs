@@ -141,10 +141,10 @@ fn plate<'a>(
     mode: Astrometry,
     warnings: &mut Vec<String>,
 ) -> Option<Plate<'a>> {
-    if mode != Astrometry::Header {
-        if let Outcome::Solved(r, _) = &sol.outcome {
-            return Some(Plate::Solved(r));
-        }
+    if mode != Astrometry::Header
+        && let Outcome::Solved(r, _) = &sol.outcome
+    {
+        return Some(Plate::Solved(r));
     }
     if mode == Astrometry::Solve {
         warnings.push("the frame is not solved: streak ends have no RA/Dec, Az or El".into());

@@ -422,6 +422,16 @@ const TIME_KEYS: [&str; 4] = ["TIME-OBS", "UTSTART", "UT", "UTC"];
 /// Keywords for the exposure length, seconds, in order of preference.
 const LENGTH_KEYS: [&str; 3] = ["EXPTIME", "XPOSURE", "TELAPSE"];
 
+/// The one plausibility rule for a time read from a file, whatever it is used for (exposure
+/// times, the epoch of proper motion): within 1960..2100, which a JD written into an MJD
+/// keyword, a year 9999 placeholder or a wrong century are not.
+pub fn plausible_mjd(mjd: f64) -> bool {
+    (MJD_PLAUSIBLE.0..MJD_PLAUSIBLE.1).contains(&mjd)
+}
+
+/// The longest exposure taken as such (EXPTIME and the like): a day.
+const MAX_EXPOSURE_S: f64 = 86_400.0;
+
 /// Reads one instant from the header; warnings go to `warn`.
 struct Reader<'a> {
     get: &'a dyn Fn(&str) -> Option<String>,
@@ -518,9 +528,10 @@ impl Reader<'_> {
                 continue;
             };
             match parse_number(&v) {
-                Some(s) if s > 0.0 => return Some(s),
+                Some(s) if s > 0.0 && s <= MAX_EXPOSURE_S => return Some(s),
                 Some(_) => self.warn.push(format!(
-                    "{key} = '{v}' is not a positive length (s); not used"
+                    "{key} = '{v}' is not a plausible exposure length (more than 0 s, at most \
+                     {MAX_EXPOSURE_S} s); not used"
                 )),
                 None => self
                     .warn
@@ -533,7 +544,7 @@ impl Reader<'_> {
     /// `t` unless it lies outside 1960..2100 (a JD in an MJD keyword, a wrong century).
     fn plausible(&mut self, key: &str, v: &str, t: Utc) -> Option<Utc> {
         let mjd = t.mjd();
-        if (MJD_PLAUSIBLE.0..MJD_PLAUSIBLE.1).contains(&mjd) {
+        if plausible_mjd(mjd) {
             Some(t)
         } else {
             self.warn.push(format!(
@@ -1140,8 +1151,16 @@ mod tests {
     fn bad_lengths() {
         assert_warned(
             &[("DATE-OBS", "2015-09-24T12:05:47"), ("EXPTIME", "-3")],
-            &["EXPTIME = '-3'", "positive"],
+            &["EXPTIME = '-3'", "plausible exposure length"],
         );
+        // Issue 22, item 5: lengths that would put the end beyond any calendar SOFA handles
+        // (a panic inside sofars, a 300-digit time) are refused like any implausible time.
+        for huge in ["1E10", "1E300", "86401"] {
+            assert_warned(
+                &[("DATE-OBS", "2015-09-24T12:05:47"), ("EXPTIME", huge)],
+                &[&format!("EXPTIME = '{huge}'"), "plausible exposure length"],
+            );
+        }
         assert_warned(
             &[("DATE-OBS", "2015-09-24T12:05:47"), ("EXPTIME", "0")],
             &["EXPTIME = '0'"],
