@@ -32,10 +32,13 @@ Examples:
   gpustar solve frame.png --fov-deg 11.4 --epoch 2019.58
   gpustar batch tracking/ --camera cam.toml --streaks --station 35.7,51.4,1200 --tdm obs.tdm
 
-Exit status: 0 when every input got a record and none is an error record; 1 when some input
-got an error record; 2 when the run could not start (bad options, unreadable camera or catalog,
-GPU asked for but absent) or merge found inputs missing or repeated; 130 when interrupted
-(Ctrl-C: the records written so far are complete; --resume continues).";
+Exit status: 0 when every input got a record and none is an error record (with --resume: none
+in the whole file); 1 when some input has an error record; 2 when the run could not start (bad
+options, unreadable camera or catalog, GPU asked for but absent, an --output that is not
+gpustar's or that another gpustar is writing) or merge found inputs missing, repeated or torn;
+3 when the records could not be written (a full disk: those written are whole; --resume
+continues); 130 when interrupted (Ctrl-C, SIGTERM: the records written so far are complete;
+--resume continues).";
 
 /// Identify the stars in sky images and find the camera's attitude (lost in space).
 #[derive(Parser, Debug)]
@@ -173,7 +176,7 @@ pub struct BatchOpts {
     #[arg(long, value_name = "K/N")]
     pub shard: Option<Shard>,
     /// Worker threads for decoding (and solving on the CPU) [default: all cores].
-    #[arg(short = 'j', long)]
+    #[arg(short = 'j', long, value_parser = count_within(1, 4096))]
     pub threads: Option<usize>,
     /// Each directory's frames (with -r, each subdirectory's) are one sequence of a camera
     /// head, in name order: detections moving against the stars are judged particles (they
@@ -189,6 +192,33 @@ pub struct BatchOpts {
 }
 
 /// A number greater than zero.
+/// A value parser for a number within `lo..=hi` (NaN and infinities refused): absurd values
+/// are told at once (exit 2), not found out by a run that takes hours.
+fn within(lo: f64, hi: f64) -> impl Fn(&str) -> std::result::Result<f64, String> + Clone {
+    move |s: &str| match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (lo..=hi).contains(&v) => Ok(v),
+        Ok(_) => Err(format!("{s} is outside {lo} to {hi}")),
+        Err(_) => Err(format!("{s:?} is not a number")),
+    }
+}
+
+/// [`within`] for single-precision options.
+fn within_f32(lo: f64, hi: f64) -> impl Fn(&str) -> std::result::Result<f32, String> + Clone {
+    move |s: &str| within(lo, hi)(s).map(|v| v as f32)
+}
+
+/// [`within`] for counts.
+fn count_within(
+    lo: usize,
+    hi: usize,
+) -> impl Fn(&str) -> std::result::Result<usize, String> + Clone {
+    move |s: &str| match s.trim().parse::<usize>() {
+        Ok(v) if (lo..=hi).contains(&v) => Ok(v),
+        Ok(_) => Err(format!("{s} is outside {lo} to {hi}")),
+        Err(_) => Err(format!("{s:?} is not a whole number")),
+    }
+}
+
 fn parse_positive(s: &str) -> std::result::Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
@@ -277,19 +307,19 @@ pub struct CatalogOpts {
     #[arg(long)]
     pub catalog: Option<PathBuf>,
     /// Observation epoch (decimal year) for proper motion.
-    #[arg(long, default_value_t = 2000.0)]
+    #[arg(long, default_value_t = 2000.0, value_parser = within(1000.0, 3000.0))]
     pub epoch: f64,
     /// Faintest catalog magnitude used [default: the camera file's mag_limit, else chosen from
     /// the field of view so that about 40 catalog stars are in view; in a scale search, each
     /// band's middle field's for the vote, the fitted field's for the final refinement].
-    #[arg(long)]
+    #[arg(long, value_parser = within(-2.0, 20.0), allow_negative_numbers = true)]
     pub mag_limit: Option<f64>,
     /// Stars the camera cannot separate: merge them into one at their photocentre, drop
     /// them, or keep them.
     #[arg(long, value_enum, default_value_t = DoubleStars::Merge)]
     pub double_stars: DoubleStars,
     /// Stars closer than this many pixels count as one.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, value_parser = within(0.0, 100.0))]
     pub double_star_px: f64,
     /// Do not read or write the distance-table cache.
     #[arg(long)]
@@ -315,10 +345,10 @@ pub struct SolveOpts {
     #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
     pub backend: BackendChoice,
     /// Frames per GPU batch (one submission for detection and one for voting per batch).
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = 32, value_parser = count_within(1, 4096))]
     pub batch_size: usize,
     /// Detection threshold above the local background, in noise sigmas.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_parser = within_f32(0.5, 100.0))]
     pub sigma: f32,
     /// Detection's matched filter: `binomial` thresholds each pixel's 3x3 binomial smoothing
     /// (about a star's PSF) at --sigma sigmas of the smoothed noise, and the pixel at 0.375 of
@@ -336,10 +366,10 @@ pub struct SolveOpts {
     #[arg(long, value_enum, default_value_t = crate::radial::Method::Vote)]
     pub method: crate::radial::Method,
     /// Brightest detected stars that take part in the vote.
-    #[arg(long, default_value_t = 40)]
+    #[arg(long, default_value_t = 40, value_parser = count_within(4, 200))]
     pub vote_stars: usize,
     /// Pair distance tolerance from centroid errors, pixels.
-    #[arg(long, default_value_t = 0.4)]
+    #[arg(long, default_value_t = 0.4, value_parser = within(0.01, 5.0))]
     pub pair_tol_px: f64,
     /// Do not retry frames that fail: first with up to 60 voting stars, then with the voters
     /// spread over a grid of 16 cells (both when there are more stars than --vote-stars), then
@@ -347,13 +377,13 @@ pub struct SolveOpts {
     #[arg(long)]
     pub no_retry: bool,
     /// Pair distance tolerance from focal-length and distortion errors, relative.
-    #[arg(long, default_value_t = 0.0002)]
+    #[arg(long, default_value_t = 0.0002, value_parser = within(0.0, 0.05))]
     pub scale_tol: f64,
     /// A detection matches a catalog star within this many pixels in refinement.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, value_parser = within(0.1, 20.0))]
     pub match_radius_px: f64,
     /// Report `solved` only when the probability of a chance match is below this.
-    #[arg(long, default_value_t = 1e-6)]
+    #[arg(long, default_value_t = 1e-6, value_parser = within(1e-300, 0.5))]
     pub max_false_prob: f64,
     /// Subtract this dark frame (same size, any readable format) from every frame before
     /// detection: removes hot pixels and fixed-pattern noise.
@@ -404,11 +434,13 @@ pub struct StreakOpts {
         value_name = "SECONDS",
         allow_negative_numbers = true,
         requires = "streaks",
-        help_heading = "Streaks"
+        help_heading = "Streaks",
+        value_parser = within(-1.0, 1.0)
     )]
     pub dut1: Option<f64>,
     /// Streak mask threshold, noise sigmas of the smoothed frame.
-    #[arg(long, default_value_t = 3.5, help_heading = "Streaks")]
+    #[arg(long, default_value_t = 3.5, help_heading = "Streaks",
+          value_parser = within_f32(0.5, 100.0))]
     pub streak_sigma: f32,
     /// Write the streaks' midpoints at mid-exposure as a CCSDS TDM (KVN): RADEC, and AZEL
     /// when the station is known.
@@ -595,7 +627,15 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
                 sequence: false,
                 frame_interval: None,
             };
-            run_solve(vec![Input { path: image, name }], &opts, &run)
+            run_solve(
+                vec![Input {
+                    path: image,
+                    name,
+                    replay: false,
+                }],
+                &opts,
+                &run,
+            )
         }
         Command::Merge {
             parts,
@@ -803,6 +843,12 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         Some(p) => {
             let opened = output::open_output(p, o.format, b.resume, b.retry_errors)?;
             let prev = opened.previous;
+            let before = inputs.len();
+            let already = inputs
+                .iter()
+                .filter(|i| prev.done.contains(&i.name))
+                .count();
+            inputs = resumed_inputs(inputs, &prev.done, b.sequence);
             if b.resume && !o.quiet {
                 if prev.truncated > 0 {
                     eprintln!(
@@ -811,12 +857,9 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
                         p.display()
                     );
                 }
-                let before = inputs.len();
-                inputs.retain(|i| !prev.done.contains(&i.name));
+                let replayed = inputs.iter().filter(|i| i.replay).count();
                 eprintln!(
-                    "gpustar: resuming: {} of {} inputs already have a record{}{}",
-                    before - inputs.len(),
-                    before,
+                    "gpustar: resuming: {already} of {before} inputs already have a record{}{}{}",
                     match prev.errors {
                         0 => String::new(),
                         n => format!(" ({n} of them errors; --retry-errors tries them again)"),
@@ -824,10 +867,22 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
                     match prev.retried {
                         0 => String::new(),
                         n => format!("; {n} error records taken out to be tried again"),
+                    },
+                    match replayed {
+                        0 => String::new(),
+                        n => format!(
+                            "; {n} of those are tracked again, unwritten, so that unfinished \
+                             sequences go on as an uninterrupted run does"
+                        ),
                     }
                 );
-            } else {
-                inputs.retain(|i| !prev.done.contains(&i.name));
+            }
+            // The exports are written whole at the end: they take the streaks of the records
+            // already in the file too, or a resumed run's TDM would hold only its own part.
+            if b.resume && exports.wanted() {
+                for r in output::previous_records(p, o.format)? {
+                    exports.add(&r);
+                }
             }
             errors_before = prev.errors;
             header = !prev.has_header;
@@ -862,7 +917,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     });
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
-    let to_do = inputs.len();
+    let to_do = inputs.iter().filter(|i| !i.replay).count();
     let bar = progress_bar(to_do as u64, o.quiet);
     let threads = b
         .threads
@@ -894,7 +949,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
         },
     )?;
     bar.finish_and_clear();
-    if exports.wanted() {
+    if exports.wanted() && summary.write_error.is_none() {
         let said = exports.finish(&crate::streaks::sky::now_utc_iso())?;
         if !o.quiet {
             eprintln!("gpustar: wrote {said}");
@@ -911,20 +966,52 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
             summary.seconds,
             c.total() as f64 / summary.seconds.max(1e-9),
             backend.name(),
-            match (summary.interrupted, c.total() < to_do) {
-                (true, true) => "; interrupted: rerun with --resume to finish",
-                (true, false) => "; interrupted after the last input: every input has a record",
-                (false, _) => "",
+            match (&summary.write_error, summary.interrupted, c.total() < to_do) {
+                (Some(e), ..) => format!(
+                    "; stopped: {e}; records before it are whole: make room and rerun with \
+                     --resume"
+                ),
+                (None, true, true) => "; interrupted: rerun with --resume to finish".into(),
+                (None, true, false) => {
+                    "; interrupted after the last input: every input has a record".into()
+                }
+                (None, false, _) => String::new(),
             }
         );
     }
-    Ok(if summary.interrupted {
+    Ok(if summary.write_error.is_some() {
+        ExitCode::from(3)
+    } else if summary.interrupted {
         ExitCode::from(130)
     } else if c.errors + errors_before > 0 {
         ExitCode::from(1)
     } else {
         ExitCode::SUCCESS
     })
+}
+
+/// The inputs still to do after an earlier run recorded `done`. Sequences are tracked frame
+/// to frame, so an unfinished sequence is taken from its first frame, the recorded ones marked
+/// `replay` (tracked, not written): the records that follow are those of an uninterrupted run.
+fn resumed_inputs(
+    inputs: Vec<Input>,
+    done: &std::collections::HashSet<String>,
+    sequence: bool,
+) -> Vec<Input> {
+    use crate::sequence::sequence_of;
+    let unfinished: std::collections::HashSet<&str> = inputs
+        .iter()
+        .filter(|i| sequence && !done.contains(&i.name))
+        .map(|i| sequence_of(&i.name))
+        .collect();
+    inputs
+        .iter()
+        .filter(|i| !done.contains(&i.name) || unfinished.contains(sequence_of(&i.name)))
+        .map(|i| Input {
+            replay: done.contains(&i.name),
+            ..i.clone()
+        })
+        .collect()
 }
 
 /// How long frames in flight may take to finish after a stop request before the process ends
@@ -1015,12 +1102,33 @@ fn init_logging(verbose: u8) {
         2 => tracing::Level::DEBUG,
         _ => tracing::Level::TRACE,
     };
+    use std::io::IsTerminal;
+    let terminal = std::io::stderr().is_terminal();
     let _ = tracing_subscriber::fmt()
         .with_max_level(level)
         .with_writer(std::io::stderr)
+        .with_ansi(terminal)
         .with_target(false)
         .without_time()
         .try_init();
+    // A panic on one frame becomes that frame's error record; into a log file (stderr not a
+    // terminal) it is said in one line, without the backtrace RUST_BACKTRACE would add
+    // (-vv keeps Rust's own report).
+    if !terminal && verbose < 2 {
+        std::panic::set_hook(Box::new(|info| {
+            let at = info
+                .location()
+                .map(|l| format!(" at {}:{}", l.file(), l.line()))
+                .unwrap_or_default();
+            let what = info
+                .payload()
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| info.payload().downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            eprintln!("gpustar: internal error{at}: {what} (-vv for Rust's report)");
+        }));
+    }
 }
 
 fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<ExitCode> {

@@ -201,6 +201,17 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
     })
 }
 
+/// A float keyword's value as text that reads back to the same number: plain digits, or an
+/// exponent where plain digits would be long (1E300 would otherwise be 301 characters in
+/// every warning that quotes it).
+fn number_text(v: f64) -> String {
+    if v != 0.0 && (v.abs() >= 1e16 || v.abs() < 1e-6) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}
+
 /// The keywords of the headers used, later headers over earlier ones.
 fn keywords(headers: &[Header<Image>]) -> BTreeMap<String, String> {
     let mut out = BTreeMap::new();
@@ -208,7 +219,7 @@ fn keywords(headers: &[Header<Image>]) -> BTreeMap<String, String> {
         for key in h.keywords() {
             let text = match h.get(key) {
                 Some(Value::Integer { value, .. }) => value.to_string(),
-                Some(Value::Float { value, .. }) => value.to_string(),
+                Some(Value::Float { value, .. }) => number_text(*value),
                 Some(Value::Logical { value, .. }) => if *value { "T" } else { "F" }.to_string(),
                 Some(Value::String { value, .. }) => value.trim_end().to_string(),
                 Some(Value::Invalid(_) | Value::Undefined) | None => continue,
@@ -552,7 +563,7 @@ fn epoch<'a>(
                     julian_year(value).map(|y| (y, value.clone()))
                 }
                 (Some(Value::Float { value, .. }), true) => {
-                    Some((2000.0 + (value - J2000_MJD) / 365.25, value.to_string()))
+                    Some((2000.0 + (value - J2000_MJD) / 365.25, number_text(*value)))
                 }
                 (Some(Value::Integer { value, .. }), true) => Some((
                     2000.0 + (*value as f64 - J2000_MJD) / 365.25,

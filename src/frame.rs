@@ -40,7 +40,7 @@ pub fn is_image_path(path: &Path) -> bool {
 
 /// Largest frame accepted, in pixels per side, and its decoder memory budget: a header that
 /// claims more is refused before anything is allocated.
-const MAX_SIDE: u32 = 32768;
+pub(crate) const MAX_SIDE: u32 = 32768;
 const MAX_ALLOC: u64 = 2 << 30;
 
 impl Frame {
@@ -84,11 +84,20 @@ impl Frame {
         if is_fits(path)? {
             return read_fits(path, &shown, meta.len());
         }
+        let fits_name = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| ["fits", "fit", "fts"].contains(&e.to_ascii_lowercase().as_str()));
         // The format from the extension, unless the first bytes say otherwise.
         let reader = ImageReader::open(path)
             .with_context(|| format!("cannot open {shown}"))?
             .with_guessed_format()
             .with_context(|| format!("cannot read {shown}"))?;
+        // Named FITS, and not another format by its content either: say what is wrong with it
+        // rather than that the extension is unknown to the image decoders.
+        if fits_name && reader.format().is_none() {
+            bail!("cannot decode {shown}: not a FITS file (it does not start with SIMPLE  =)");
+        }
         if reader.format() == Some(ImageFormat::Png)
             && let Some(frame) = read_grey_png(path, &shown, meta.len())?
         {

@@ -10,6 +10,9 @@ use std::path::{Path, PathBuf};
 pub struct Input {
     pub path: PathBuf,
     pub name: String,
+    /// Already recorded by an earlier run (`--resume`), taken again only for the state of its
+    /// sequence: processed, its record not written.
+    pub replay: bool,
 }
 
 /// The name of a path relative to the directory: components joined by '/'. A component that
@@ -24,12 +27,12 @@ fn relative_name(rel: &Path) -> String {
 }
 
 #[cfg(not(unix))]
-fn escape_component(c: &std::ffi::OsStr) -> String {
+pub(crate) fn escape_component(c: &std::ffi::OsStr) -> String {
     c.to_string_lossy().into_owned()
 }
 
 #[cfg(unix)]
-fn escape_component(c: &std::ffi::OsStr) -> String {
+pub(crate) fn escape_component(c: &std::ffi::OsStr) -> String {
     if let Some(s) = c.to_str() {
         return s.to_string();
     }
@@ -83,6 +86,7 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
             out.push(Input {
                 path: entry.path().to_path_buf(),
                 name: relative_name(rel),
+                replay: false,
             });
         }
     }

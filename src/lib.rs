@@ -38,3 +38,6 @@ pub mod streaks;
 pub mod table;
 pub mod triangle;
 pub mod wcs;
+
+#[cfg(test)]
+mod fuzz;

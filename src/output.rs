@@ -78,7 +78,7 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-fn csv_row(r: &Record) -> String {
+pub(crate) fn csv_row(r: &Record) -> String {
     let num = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_default();
     let int = |v: Option<usize>| v.map(|x| x.to_string()).unwrap_or_default();
     let q = r.quaternion.map(|q| q.map(Some)).unwrap_or([None; 4]);
@@ -131,7 +131,7 @@ fn csv_row(r: &Record) -> String {
 
 /// The fields of one CSV record (quotes removed, `""` unescaped), or None when a quote is
 /// left open or stray text follows a closing quote.
-fn csv_fields(record: &str) -> Option<Vec<String>> {
+pub(crate) fn csv_fields(record: &str) -> Option<Vec<String>> {
     let mut fields = vec![String::new()];
     let mut chars = record.chars().peekable();
     let mut quoted = false;
@@ -349,6 +349,32 @@ pub fn open_output(
     Ok(Output { file, previous })
 }
 
+/// The records an output file of `format` holds (its complete lines), for the exports of a
+/// resumed run to cover the whole file. CSV rows give the file and its streaks only (the
+/// columns the exports read).
+pub fn previous_records(path: &Path, format: Format) -> Result<Vec<Record>> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (lines, _) = parse_lines(&bytes, format, path)?;
+    let column = CSV_HEADER.split(',').position(|c| c == "streaks");
+    let mut out = Vec::new();
+    for l in lines.iter().filter(|l| l.file.is_some()) {
+        let text = String::from_utf8_lossy(&bytes[l.range.start..l.range.end - 1]);
+        match format {
+            Format::Jsonl => out.push(serde_json::from_str(&text)?),
+            Format::Csv => {
+                let fields = csv_fields(&text).unwrap_or_default();
+                let mut r = Record::empty(&fields[0], "");
+                r.streaks = column
+                    .and_then(|c| fields.get(c))
+                    .filter(|s| !s.is_empty())
+                    .and_then(|s| serde_json::from_str(s).ok());
+                out.push(r);
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// Hold `file`'s exclusive lock (advisory, released when the file is closed), or say who
 /// has it.
 fn lock(file: &std::fs::File, path: &Path) -> Result<()> {
@@ -437,12 +463,15 @@ pub fn check_replaceable(path: &Path, ours: impl Fn(&str) -> bool, what: &str) -
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    tempfile::NamedTempFile::new_in(dir).with_context(|| {
-        format!(
+    if !dir.is_dir() {
+        bail!("cannot write {shown}: {} is not a directory", dir.display());
+    }
+    if tempfile::NamedTempFile::new_in(dir).is_err() {
+        bail!(
             "cannot write {shown}: cannot create a file in {}",
             dir.display()
-        )
-    })?;
+        );
+    }
     match std::fs::read(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(e).with_context(|| format!("cannot read {shown}")),

@@ -34,12 +34,15 @@ pub struct RunOptions {
 pub const FLUSH_RECORDS: usize = 64;
 
 /// What happened in a run.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct RunSummary {
     pub counts: Counts,
     pub seconds: f64,
     /// Stopped early by an interrupt (Ctrl-C): inputs after the last record have none.
     pub interrupted: bool,
+    /// Stopped early because the records could not be written (a full disk): why. The file
+    /// holds whole lines up to the failure (`--resume` cuts a torn one).
+    pub write_error: Option<String>,
 }
 
 /// Process `inputs` and write one record per input, in order, until done or `stop` is set.
@@ -63,6 +66,12 @@ pub fn run(
     for _ in 0..window {
         ticket_tx.send(()).expect("room for every ticket");
     }
+    let replay: std::collections::HashSet<usize> = inputs
+        .iter()
+        .enumerate()
+        .filter(|(_, i)| i.replay)
+        .map(|(k, _)| k)
+        .collect();
     let mut summary = RunSummary::default();
     std::thread::scope(|scope| -> Result<()> {
         // The feeder: one input per ticket, until the inputs end or a stop is asked.
@@ -142,6 +151,7 @@ pub fn run(
             writer,
             opts.flush_every,
             stop,
+            &replay,
             &mut on_record,
         )?;
         Ok(())
@@ -250,6 +260,7 @@ fn gpu_detect_loop(
             .map(|d| Input {
                 path: d.path.clone(),
                 name: d.name.clone(),
+                replay: false,
             })
             .collect();
         let found = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -344,6 +355,7 @@ fn write_in_order(
     writer: &mut RecordWriter,
     flush_every: Duration,
     stop: &AtomicBool,
+    replay: &std::collections::HashSet<usize>,
     on_record: &mut impl FnMut(&Record, &Counts),
 ) -> Result<RunSummary> {
     let mut summary = RunSummary::default();
@@ -360,11 +372,14 @@ fn write_in_order(
             Err(crossbeam_channel::RecvTimeoutError::Disconnected) => break,
         }
         while let Some(r) = waiting.remove(&next) {
-            summary.counts.add(&r);
-            writer.write(&r);
-            on_record(&r, &summary.counts);
+            // A replayed input's record is already in the file.
+            if !replay.contains(&next) {
+                summary.counts.add(&r);
+                writer.write(&r);
+                on_record(&r, &summary.counts);
+                unflushed += 1;
+            }
             next += 1;
-            unflushed += 1;
             // The feeder may hand out one more input.
             let _ = tickets.try_send(());
         }
@@ -372,11 +387,17 @@ fn write_in_order(
         if unflushed > 0
             && (stopping || unflushed >= FLUSH_RECORDS || last_flush.elapsed() >= flush_every)
         {
-            writer.flush()?;
+            if let Err(e) = writer.flush() {
+                // Returning drops the channels: the workers and the feeder end.
+                summary.write_error = Some(format!("{e:#}"));
+                return Ok(summary);
+            }
             last_flush = Instant::now();
             unflushed = 0;
         }
     }
-    writer.flush()?;
+    if let Err(e) = writer.flush() {
+        summary.write_error = Some(format!("{e:#}"));
+    }
     Ok(summary)
 }

@@ -539,3 +539,274 @@ fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
         }
     }
 }
+
+/// Item 10: a `--sequence` run resumed in the middle of a sequence gives the records of an
+/// uninterrupted run (tracking once started cold at the first frame without a record).
+#[test]
+fn a_resumed_sequence_gives_the_uninterrupted_run_s_records() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sim");
+    let o = gpustar()
+        .args(["simulate", "--sequence", "--sequences", "2", "-n", "12"])
+        .args(["--seed", "5", "--out", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let camera = dir.join("camera.toml");
+    let seq = |out: &Path, more: &[&str]| {
+        let mut c = gpustar();
+        c.args([
+            "batch",
+            dir.to_str().unwrap(),
+            "-r",
+            "--sequence",
+            "--backend",
+            "cpu",
+        ])
+        .args([
+            "--camera",
+            camera.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ])
+        .args(more);
+        run(c, 120)
+    };
+    let clean = tmp.path().join("clean.jsonl");
+    assert!(seq(&clean, &[]).status.success());
+    let whole = std::fs::read_to_string(&clean).unwrap();
+    let lines: Vec<&str> = whole.lines().collect();
+    assert_eq!(lines.len(), 24);
+    // Stopped inside each sequence in turn (after 11 frames: tracking by then).
+    for kept in [11, 17] {
+        let out = tmp.path().join(format!("resumed-{kept}.jsonl"));
+        std::fs::write(&out, lines[..kept].join("\n") + "\n").unwrap();
+        let o = seq(&out, &["--resume"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert_eq!(
+            without_timing(records(&out)),
+            without_timing(records(&clean)),
+            "resumed after {kept} records"
+        );
+    }
+}
+
+/// Absurd numbers on the command line are refused at once (exit 2), not found out by a run
+/// (`--pair-tol-px 1e9` once took 20 s a frame).
+#[test]
+fn absurd_numeric_options_are_refused_at_once() {
+    let s = set(1);
+    let out = s.root.join("r.jsonl");
+    for (flag, value) in [
+        ("--pair-tol-px", "1e9"),
+        ("--pair-tol-px", "NaN"),
+        ("--sigma", "nan"),
+        ("--match-radius-px", "-1"),
+        ("--scale-tol", "inf"),
+        ("--max-false-prob", "2"),
+        ("--vote-stars", "0"),
+        ("--batch-size", "0"),
+        ("--epoch", "1e300"),
+        ("--mag-limit", "NaN"),
+        ("--double-star-px", "-3"),
+        ("--threads", "0"),
+    ] {
+        let o = run(batch(&s.dir, &out, &[&format!("{flag}={value}")]), 10);
+        assert_eq!(o.status.code(), Some(2), "{flag} {value}: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains(flag.trim_start_matches('-')),
+            "{}",
+            stderr(&o)
+        );
+        assert!(!out.exists(), "{flag} {value}: an output was made");
+    }
+}
+
+/// A full disk: the run stops with its summary and exit 3 (not 2, "could not start"), the
+/// records written are whole, and --resume after room is made gives an uninterrupted run's
+/// records. The disk is a 24 KiB tmpfs where this machine lets the test mount one, and
+/// /dev/full (every write fails) in any case.
+#[test]
+fn a_full_disk_stops_with_a_summary_and_resume_completes() {
+    let s = set(30);
+    let o = run(batch(&s.dir, Path::new("/dev/full"), &[]), 60);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    assert!(stderr(&o).contains("stopped"), "{}", stderr(&o));
+
+    let clean = s.root.join("clean.jsonl");
+    assert!(run(batch(&s.dir, &clean, &[]), 60).status.success());
+    let disk = s.root.join("disk");
+    std::fs::create_dir(&disk).unwrap();
+    let mount = |opts: &str| {
+        Command::new("mount")
+            .args(["-t", "tmpfs", "-o", opts, "tmpfs", disk.to_str().unwrap()])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if !mount("size=24k") {
+        eprintln!(
+            "SKIPPED a_full_disk (tmpfs part): this machine does not let the test mount a \
+             tmpfs (needs root); the /dev/full part ran"
+        );
+        return;
+    }
+    struct Unmount(PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(&self.0).status();
+        }
+    }
+    let _unmount = Unmount(disk.clone());
+    let out = disk.join("r.jsonl");
+    let o = run(batch(&s.dir, &out, &[]), 60);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    let text = std::fs::read(&out).unwrap();
+    let whole = text.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+    println!(
+        "full tmpfs: {} whole records, {} bytes of a torn one",
+        text[..whole].iter().filter(|&&b| b == b'\n').count(),
+        text.len() - whole
+    );
+    assert!(whole < std::fs::metadata(&clean).unwrap().len() as usize);
+    // Room made: the same mount, larger.
+    assert!(mount("remount,size=4m"), "cannot grow the tmpfs");
+    let o = run(batch(&s.dir, &out, &["--resume"]), 60);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        without_timing(records(&out)),
+        without_timing(records(&clean))
+    );
+}
+
+/// A frame of another size than the camera file's is refused from its header: a 20000² PNG
+/// (a few hundred KB of zeros) once took 1.2 GB to decode before the size was compared.
+#[test]
+fn frames_of_another_size_are_refused_before_decoding() {
+    let s = set(1);
+    let big = s.root.join("big");
+    std::fs::create_dir(&big).unwrap();
+    let side = 20_000u32;
+    {
+        let file = std::io::BufWriter::new(std::fs::File::create(big.join("huge.png")).unwrap());
+        let mut enc = png::Encoder::new(file, side, side);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::Fast);
+        let mut w = enc.write_header().unwrap().into_stream_writer().unwrap();
+        let row = vec![0u8; side as usize];
+        for _ in 0..side {
+            std::io::Write::write_all(&mut w, &row).unwrap();
+        }
+        w.finish().unwrap();
+    }
+    let out = s.root.join("r.jsonl");
+    let camera = s.dir.join("camera.toml");
+    let mut c = gpustar();
+    c.args([
+        "batch",
+        big.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "-o",
+        out.to_str().unwrap(),
+    ])
+    .args(["--camera", camera.to_str().unwrap()]);
+    let o = run(c, 60);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let r = records(&out);
+    assert!(
+        r[0]["error"].as_str().unwrap().contains("20000x20000"),
+        "{}",
+        r[0]
+    );
+    // The largest child this test process has waited for (all of them small but gpustar's
+    // run here, which decoding would have taken past 1 GB).
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes into the struct it is given.
+    assert_eq!(
+        unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut usage) },
+        0
+    );
+    let peak_mb = usage.ru_maxrss as f64 / 1024.0;
+    println!("largest child's peak memory: {peak_mb:.0} MB");
+    assert!(peak_mb < 600.0, "{peak_mb:.0} MB");
+}
+
+/// `--tdm` and `--iod` after `--resume` hold the streaks of the whole file, not only of the
+/// inputs this run did (they are written whole at the end), in both formats.
+#[test]
+fn a_resumed_run_exports_the_whole_file_s_streaks() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sim");
+    let o = gpustar()
+        .args([
+            "simulate",
+            "--streaks",
+            "--out",
+            dir.to_str().unwrap(),
+            "-n",
+            "4",
+        ])
+        .args(["--size", "512x512", "--fov-deg", "12", "--mag-limit", "7.5"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let camera = dir.join("camera.toml");
+    let files = |tag: &str| {
+        let p = |ext: &str| tmp.path().join(format!("{tag}.{ext}"));
+        (p("out"), p("tdm"), p("iod"))
+    };
+    let streaks = |out: &Path, tdm: &Path, iod: &Path, more: &[&str]| {
+        let mut c = gpustar();
+        c.args([
+            "batch",
+            dir.to_str().unwrap(),
+            "--backend",
+            "cpu",
+            "--streaks",
+        ])
+        .args([
+            "--camera",
+            camera.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ])
+        .args([
+            "--tdm",
+            tdm.to_str().unwrap(),
+            "--iod",
+            iod.to_str().unwrap(),
+        ])
+        .args(more);
+        let o = run(c, 120);
+        assert!(o.status.success(), "{}", stderr(&o));
+    };
+    // The TDM without its creation time.
+    let tdm_body = |p: &Path| -> Vec<String> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with("CREATION_DATE"))
+            .map(String::from)
+            .collect()
+    };
+    let (clean, clean_tdm, clean_iod) = files("clean");
+    streaks(&clean, &clean_tdm, &clean_iod, &[]);
+    assert!(std::fs::read_to_string(&clean_iod).unwrap().lines().count() >= 3);
+    for format in ["jsonl", "csv"] {
+        let (out, tdm, iod) = files(format);
+        streaks(&out, &tdm, &iod, &["--format", format]);
+        // Keep the header (CSV) and the first record only.
+        let text = std::fs::read_to_string(&out).unwrap();
+        let keep = if format == "csv" { 2 } else { 1 };
+        let kept: Vec<&str> = text.lines().take(keep).collect();
+        std::fs::write(&out, kept.join("\n") + "\n").unwrap();
+        streaks(&out, &tdm, &iod, &["--format", format, "--resume"]);
+        assert_eq!(tdm_body(&tdm), tdm_body(&clean_tdm), "{format}: TDM");
+        assert_eq!(
+            std::fs::read_to_string(&iod).unwrap(),
+            std::fs::read_to_string(&clean_iod).unwrap(),
+            "{format}: IOD"
+        );
+    }
+}

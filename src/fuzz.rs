@@ -1,0 +1,398 @@
+//! The fuzz suite (issue 22): property tests over what a hostile archive controls — FITS
+//! headers, PNG and TIFF headers, header keywords (WCS, times, station) — and over what an
+//! earlier run left in an output file (`--resume`). Each property runs a bounded number of
+//! cases, each case within a time limit, so that `cargo test` runs the suite in seconds; a
+//! failure prints the smallest input proptest found.
+//!
+//! Properties: decoding never panics and never stalls; an output file is either refused
+//! untouched or only its torn last line is cut; CSV rows give back their file name whatever it
+//! holds; record names escape reversibly. `GPUSTAR_FUZZ_SCALE=N cargo test --lib fuzz --
+//! --nocapture` searches N times longer and prints what each property tried.
+
+use crate::output::{Format, csv_fields, csv_row, open_output};
+use crate::record::Record;
+use proptest::prelude::*;
+use std::time::{Duration, Instant};
+
+/// No single case may take longer than this (a header-driven loop once took hours).
+const CASE_LIMIT: Duration = Duration::from_secs(2);
+
+/// Run `body` on `cases` inputs from `strategy` (proptest shrinks a failure to the smallest
+/// input), counting the outcomes it names; prints them, so that a run shows what it tried.
+fn fuzz<S: Strategy>(
+    name: &str,
+    cases: u32,
+    strategy: S,
+    body: impl Fn(S::Value) -> Result<&'static str, TestCaseError>,
+) {
+    // GPUSTAR_FUZZ_SCALE=N runs N times the cases (a longer search than CI's).
+    let scale: u32 = std::env::var("GPUSTAR_FUZZ_SCALE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    let cases = cases * scale.max(1);
+    let counts = std::sync::Mutex::new(std::collections::BTreeMap::<&str, u32>::new());
+    let mut runner = proptest::test_runner::TestRunner::new(ProptestConfig {
+        cases,
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    });
+    let result = runner.run(&strategy, |v| {
+        let outcome = body(v)?;
+        *counts.lock().unwrap().entry(outcome).or_default() += 1;
+        Ok(())
+    });
+    println!("fuzz {name}: {cases} cases: {:?}", counts.lock().unwrap());
+    if let Err(e) = result {
+        panic!("fuzz {name}: {e}");
+    }
+}
+
+fn within_limit<T>(what: &str, f: impl FnOnce() -> T) -> T {
+    let t0 = Instant::now();
+    let out = f();
+    assert!(t0.elapsed() < CASE_LIMIT, "{what} took {:?}", t0.elapsed());
+    out
+}
+
+/// Keys a FITS header may hold that steer how the data are read.
+const FITS_KEYS: &[&str] = &[
+    "BITPIX", "NAXIS", "NAXIS1", "NAXIS2", "NAXIS3", "BZERO", "BSCALE", "BLANK", "EXTEND",
+    "XTENSION", "PCOUNT", "GCOUNT", "DATE-OBS", "DATE-BEG", "MJD-OBS", "MJD-BEG", "EXPTIME",
+    "SIMPLE", "END", "CONTINUE", "COMMENT",
+];
+
+/// Values that broke, or could break, a reader.
+const NASTY: &[&str] = &[
+    "0",
+    "1",
+    "-1",
+    "2",
+    "8",
+    "16",
+    "-32",
+    "-64",
+    "64",
+    "2147483647",
+    "-2147483648",
+    "9223372036854775807",
+    "1E300",
+    "-1E300",
+    "1E10",
+    "NaN",
+    "inf",
+    "T",
+    "F",
+    "''",
+    "'",
+    "'9999-12-31'",
+    "'2019-07-29T20:47:26.5'",
+    "'2024-02-30'",
+    "2460000.5",
+    "51544.5",
+    "'IMAGE   '",
+    "'BINTABLE'",
+    "1.5",
+    "   ",
+    "'unterminated",
+];
+
+fn card(key: &str, value: &str) -> String {
+    format!("{:<80.80}", format!("{key:<8}= {value:>20}"))
+}
+
+/// A FITS file: a valid 8×8 16-bit image's structural cards, then `extra` cards, END, and
+/// `data_bytes` of data.
+fn fits_file(extra: &[(usize, usize)], data_bytes: usize) -> Vec<u8> {
+    let mut cards = vec![
+        card("SIMPLE", "T"),
+        card("BITPIX", "16"),
+        card("NAXIS", "2"),
+        card("NAXIS1", "8"),
+        card("NAXIS2", "8"),
+    ];
+    for &(k, v) in extra {
+        cards.push(card(FITS_KEYS[k % FITS_KEYS.len()], NASTY[v % NASTY.len()]));
+    }
+    cards.push(format!("{:<80}", "END"));
+    let mut b = cards.concat().into_bytes();
+    b.resize(b.len().div_ceil(2880) * 2880, b' ');
+    b.extend((0..data_bytes).map(|i| (i * 37 % 251) as u8));
+    b
+}
+
+/// FITS headers with any of the keys that steer reading, set to nasty values (and a few
+/// bytes scribbled anywhere): an error or a frame, never a panic or a stall.
+#[test]
+fn fits_headers() {
+    let strategy = (
+        proptest::collection::vec((0usize..64, 0usize..64), 0..8),
+        0usize..3000,
+        proptest::collection::vec((any::<usize>(), any::<u8>()), 0..4),
+    );
+    fuzz(
+        "fits_headers",
+        3000,
+        strategy,
+        |(extra, data, scribbles)| {
+            let mut b = fits_file(&extra, data);
+            for (at, byte) in scribbles {
+                let n = b.len();
+                b[at % n] = byte;
+            }
+            Ok(within_limit(
+                "decode_fits",
+                || match crate::fits::decode_fits(&b, 1 << 22) {
+                    Ok(_) => "decoded",
+                    Err(_) => "refused",
+                },
+            ))
+        },
+    );
+}
+
+/// Header keywords as the streak and sequence code read them (times, station, WCS with SIP
+/// orders), any value: no panic, no stall.
+#[test]
+fn header_keywords() {
+    const KEYS: &[&str] = &[
+        "DATE-OBS", "DATE-BEG", "DATE-END", "MJD-OBS", "MJD-BEG", "MJD-END", "EXPTIME", "XPOSURE",
+        "TELAPSE", "TIMESYS", "TIME-OBS", "UT", "OBSGEO-B", "OBSGEO-L", "OBSGEO-H", "OBSGEO-X",
+        "OBSGEO-Y", "OBSGEO-Z", "SITELAT", "SITELONG", "SITEELEV", "A_ORDER", "B_ORDER", "A_2_0",
+        "B_0_2", "A_1_1", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "CD1_1", "CD1_2", "CD2_1",
+        "CD2_2", "CDELT1", "CDELT2", "CROTA2", "PC1_1", "CTYPE1", "CTYPE2",
+    ];
+    let strategy = proptest::collection::vec((0..KEYS.len(), 0usize..64), 0..12);
+    fuzz("header_keywords", 3000, strategy, |pairs| {
+        let mut k: std::collections::BTreeMap<String, String> = [
+            ("CTYPE1", "RA---TAN-SIP"),
+            ("CTYPE2", "DEC--TAN-SIP"),
+            ("CRPIX1", "256"),
+            ("CRPIX2", "256"),
+            ("CRVAL1", "10"),
+            ("CRVAL2", "20"),
+            ("CD1_1", "0.001"),
+            ("CD2_2", "0.001"),
+        ]
+        .into_iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+        for (key, value) in pairs {
+            let v = NASTY[value % NASTY.len()].trim_matches('\'');
+            k.insert(KEYS[key].to_string(), v.to_string());
+        }
+        let get = |key: &str| k.get(key).cloned();
+        Ok(within_limit("header keywords", || {
+            let wcs = crate::wcs::HeaderWcs::from_keywords(&k);
+            let (exposure, _) = crate::streaks::sky::exposure_from_header(&get);
+            let _ = crate::streaks::sky::station_from_header(&get);
+            match (wcs, exposure) {
+                (Ok(Some(_)), Some(_)) => "wcs and exposure",
+                (Ok(Some(_)), None) => "wcs only",
+                (_, Some(_)) => "exposure only",
+                _ => "neither",
+            }
+        }))
+    });
+}
+
+/// A small grey image encoded as PNG or TIFF.
+fn encoded(format: image::ImageFormat, sixteen: bool) -> Vec<u8> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    let img = if sixteen {
+        image::DynamicImage::ImageLuma16(image::ImageBuffer::from_fn(24, 16, |x, y| {
+            image::Luma([(x * 1000 + y * 7) as u16])
+        }))
+    } else {
+        image::DynamicImage::ImageLuma8(image::ImageBuffer::from_fn(24, 16, |x, y| {
+            image::Luma([(x * 10 + y) as u8])
+        }))
+    };
+    img.write_to(&mut out, format).expect("encodes");
+    out.into_inner()
+}
+
+/// Set a PNG's IHDR width and height and give the chunk its right CRC, so that the decoder
+/// believes them.
+fn png_claiming(mut b: Vec<u8>, w: u32, h: u32) -> Vec<u8> {
+    // Signature (8), length (4), "IHDR" (4), then width and height.
+    b[16..20].copy_from_slice(&w.to_be_bytes());
+    b[20..24].copy_from_slice(&h.to_be_bytes());
+    let crc = crc32fast::hash(&b[12..29]);
+    b[29..33].copy_from_slice(&crc.to_be_bytes());
+    b
+}
+
+/// PNG and TIFF files with their headers' sizes set to anything (CRC fixed, so the decoder
+/// believes them) and bytes scribbled anywhere: an error or a frame, never a panic, never a
+/// stall (sizes beyond the limits are refused before decoding).
+#[test]
+fn png_and_tiff_headers() {
+    let strategy = (
+        0usize..4,
+        (any::<u32>(), any::<u32>()),
+        any::<bool>(),
+        proptest::collection::vec((any::<usize>(), any::<u8>()), 0..6),
+    );
+    let dir = tempfile::tempdir().unwrap();
+    fuzz(
+        "png_and_tiff_headers",
+        600,
+        strategy,
+        |(kind, size, claim, scribbles)| {
+            let (format, sixteen) = [
+                (image::ImageFormat::Png, false),
+                (image::ImageFormat::Png, true),
+                (image::ImageFormat::Tiff, false),
+                (image::ImageFormat::Tiff, true),
+            ][kind];
+            let mut b = encoded(format, sixteen);
+            if claim && format == image::ImageFormat::Png {
+                b = png_claiming(b, size.0, size.1);
+            }
+            for (at, byte) in scribbles {
+                let n = b.len();
+                b[at % n] = byte;
+            }
+            let name = if format == image::ImageFormat::Png {
+                "f.png"
+            } else {
+                "f.tif"
+            };
+            let path = dir.path().join(name);
+            std::fs::write(&path, &b).unwrap();
+            Ok(within_limit(
+                "Frame::read",
+                || match crate::frame::Frame::read(&path) {
+                    Ok(f) => {
+                        assert_eq!(f.pixels.len(), f.width as usize * f.height as usize);
+                        "decoded"
+                    }
+                    Err(_) => "refused",
+                },
+            ))
+        },
+    );
+}
+
+/// Undo `inputs::escape_component` (the test's own reading of its documentation).
+fn unescape(s: &str) -> Vec<u8> {
+    let b = s.as_bytes();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'\\' && b.get(i + 1) == Some(&b'\\') {
+            out.push(b'\\');
+            i += 2;
+        } else if b[i] == b'\\' && b.get(i + 1) == Some(&b'x') {
+            let hex = std::str::from_utf8(&b[i + 2..i + 4]).unwrap();
+            out.push(u8::from_str_radix(hex, 16).unwrap());
+            i += 4;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    out
+}
+
+/// A line an earlier run could have left, or garbage.
+fn line() -> impl Strategy<Value = Vec<u8>> {
+    prop_oneof![
+        4 => ".{0,12}".prop_map(|name| {
+            let mut l = Record::error(&name, "x".into(), "cpu").to_json_line().into_bytes();
+            l.push(b'\n');
+            l
+        }),
+        2 => ".{0,12}".prop_map(|name| {
+            let mut l = csv_row(&Record::error(&name, "x".into(), "cpu")).into_bytes();
+            l.push(b'\n');
+            l
+        }),
+        1 => Just(format!("{}\n", crate::output::CSV_HEADER).into_bytes()),
+        1 => proptest::collection::vec(any::<u8>(), 0..40),
+    ]
+}
+
+/// A CSV row gives back its file name, whatever characters the name holds (commas, quotes,
+/// newlines), and has every column.
+#[test]
+fn csv_rows_give_back_their_names() {
+    fuzz("csv_rows", 2000, "\\PC{0,16}|[,\"\n\r a]{0,8}", |name| {
+        let row = csv_row(&Record::error(&name, "e,\"\n".into(), "cpu"));
+        let fields = csv_fields(&row).expect("a row parses");
+        prop_assert_eq!(&fields[0], &name);
+        prop_assert_eq!(fields.len(), crate::output::CSV_HEADER.split(',').count());
+        Ok(if name.contains(['"', ',', '\n']) {
+            "quoted"
+        } else {
+            "plain"
+        })
+    });
+}
+
+/// Record names: a UTF-8 name is kept as it is; any other is escaped so that it reads back to
+/// its bytes (names that differ stay different).
+#[test]
+fn names_escape_reversibly() {
+    let byte = any::<u8>().prop_filter("no / or NUL", |b| *b != b'/' && *b != 0);
+    fuzz(
+        "names",
+        3000,
+        proptest::collection::vec(byte, 1..24),
+        |bytes| {
+            use std::os::unix::ffi::OsStrExt;
+            let name = crate::inputs::escape_component(std::ffi::OsStr::from_bytes(&bytes));
+            Ok(match std::str::from_utf8(&bytes) {
+                Ok(s) => {
+                    prop_assert_eq!(name, s);
+                    "utf-8"
+                }
+                Err(_) => {
+                    prop_assert_eq!(unescape(&name), bytes);
+                    "escaped"
+                }
+            })
+        },
+    );
+}
+
+/// `--resume` over whatever an output file holds: refused with the file untouched, or
+/// accepted with only an unterminated last line cut; never a panic.
+#[test]
+fn resume_refuses_or_cuts_only_a_torn_line() {
+    let strategy = (
+        proptest::collection::vec(line(), 0..6),
+        any::<usize>(),
+        any::<bool>(),
+    );
+    let dir = tempfile::tempdir().unwrap();
+    fuzz("resume", 1500, strategy, |(lines, cut, csv)| {
+        let mut old: Vec<u8> = lines.concat();
+        if !old.is_empty() {
+            old.truncate(old.len() - cut % old.len().min(30));
+        }
+        let path = dir.path().join("out");
+        std::fs::write(&path, &old).unwrap();
+        let format = if csv { Format::Csv } else { Format::Jsonl };
+        let opened = within_limit("open_output", || open_output(&path, format, true, false));
+        let new = std::fs::read(&path).unwrap();
+        Ok(match opened {
+            Err(_) => {
+                prop_assert_eq!(new, old);
+                "refused untouched"
+            }
+            Ok(o) => {
+                prop_assert_eq!(new.len() as u64 + o.previous.truncated, old.len() as u64);
+                prop_assert_eq!(&new[..], &old[..new.len()]);
+                prop_assert!(new.is_empty() || new.ends_with(b"\n"));
+                prop_assert!(!old[new.len()..].contains(&b'\n') || csv);
+                if o.previous.truncated > 0 {
+                    "torn line cut"
+                } else {
+                    "taken whole"
+                }
+            }
+        })
+    });
+}
