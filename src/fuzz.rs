@@ -333,6 +333,7 @@ fn csv_rows_give_back_their_names() {
 
 /// Record names: a UTF-8 name is kept as it is; any other is escaped so that it reads back to
 /// its bytes (names that differ stay different).
+#[cfg(unix)]
 #[test]
 fn names_escape_reversibly() {
     let byte = any::<u8>().prop_filter("no / or NUL", |b| *b != b'/' && *b != 0);

@@ -810,3 +810,75 @@ fn a_resumed_run_exports_the_whole_file_s_streaks() {
         );
     }
 }
+
+/// kill -9 at pseudo-random moments of a `--sequence` run, each time resumed: the file ends
+/// with every input once and the records of an uninterrupted run (tracking state included).
+#[test]
+fn sigkill_during_sequences_then_resume_gives_the_uninterrupted_records() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sim");
+    let o = gpustar()
+        .args(["simulate", "--sequence", "--sequences", "3", "-n", "20"])
+        .args(["--seed", "11", "--out", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let camera = dir.join("camera.toml");
+    let seq = |out: &Path| {
+        let mut c = gpustar();
+        c.args([
+            "batch",
+            dir.to_str().unwrap(),
+            "-r",
+            "--sequence",
+            "--backend",
+            "cpu",
+            "-q",
+        ])
+        .args([
+            "--camera",
+            camera.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ])
+        .args(["--resume", "-j", "1"]);
+        c
+    };
+    let clean = tmp.path().join("clean.jsonl");
+    let t0 = Instant::now();
+    assert!(run(seq(&clean), 120).status.success());
+    let full = t0.elapsed().as_secs_f64();
+    let out = tmp.path().join("killed.jsonl");
+    let mut seed = 0x9E3779B9u32;
+    let (mut kills, mut finished) = (0, false);
+    while !finished {
+        assert!(kills < 60, "the run never finished");
+        let mut child = seq(&out).spawn().unwrap();
+        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+        let wait = full * (0.1 + 0.5 * f64::from(seed >> 8) / f64::from(1u32 << 24));
+        let start = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                assert!(status.success(), "a resumed run failed: {status}");
+                finished = true;
+                break;
+            }
+            if start.elapsed().as_secs_f64() >= wait {
+                child.kill().unwrap(); // SIGKILL
+                child.wait().unwrap();
+                kills += 1;
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+    println!("sequences: {kills} kills before the run finished");
+    assert!(
+        kills >= 3,
+        "the test must really interrupt the run ({kills} kills)"
+    );
+    assert_eq!(
+        without_timing(records(&out)),
+        without_timing(records(&clean))
+    );
+}
