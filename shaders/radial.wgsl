@@ -14,7 +14,7 @@ struct RadialUniform {
     words: u32,
 }
 
-// Keep in sync with src/radial.rs (BITS).
+// Keep in sync with src/cpu/radial.rs (BITS).
 const BITS: u32 = 4096u;
 
 @group(0) @binding(0) var<uniform> u: RadialUniform;

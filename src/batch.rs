@@ -14,7 +14,6 @@ use crate::gpu::vote::{GpuTable, VoteJob};
 use crate::products::Products;
 use crate::radial;
 use crate::record::{Record, Timing};
-use crate::sequence::Detected;
 use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use anyhow::Result;
@@ -78,6 +77,16 @@ pub struct Solvers {
     map: Mutex<HashMap<(u32, u32), SharedSolver>>,
 }
 
+/// A frame after its pixel stages (the sequence stage's input): its detections, or the
+/// message of its error record.
+pub struct Detected {
+    pub decoded: Decoded,
+    pub detections: std::result::Result<Vec<crate::detect::Detection>, String>,
+    pub detect_ms: f64,
+    /// The `backend` field of its record.
+    pub backend: String,
+}
+
 /// The error of a frame whose size is not the camera file's.
 fn wrong_size(width: u32, height: u32, c: &Camera) -> String {
     format!(
@@ -116,7 +125,7 @@ impl Solvers {
 
     /// Read and decode one file, and remove its fixed pattern when asked.
     pub fn decode(&self, path: &Path, name: &str) -> Decoded {
-        // Fault injection (tests/faults.rs): the input of this name never finishes, as a
+        // Fault injection (tests/it/faults.rs): the input of this name never finishes, as a
         // frame stuck in a bug would; the stop request must end the run all the same.
         if std::env::var_os("GPUSTAR_FAULT_STALL").is_some_and(|v| v == name) {
             loop {
@@ -768,7 +777,8 @@ impl Backend {
 }
 
 /// A single-threaded pipeline: decode the files in turn, then solve them as one batch. `run`
-/// streams large runs over threads; this serves `solve`, tests and library users.
+/// streams large runs over threads (`batch` and `solve` go through it); this serves
+/// `calibrate`, tests and library users.
 pub struct Pipeline {
     pub solvers: Solvers,
     pub backend: Backend,

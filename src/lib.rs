@@ -2,12 +2,16 @@
 //! frames.
 //!
 //! The pipeline, one module per stage:
-//! [`frame`] (decode) → [`detect`] (`cpu::threshold` → `cpu::components` → `cpu::centroid`) →
-//! [`identify`] (pair ranges → `cpu::vote` → `cpu::select` → verification) → [`attitude`]
+//! [`frame`] (decode) → [`detect`] (`cpu::threshold` → `cpu::components` → `cpu::centroid` →
+//! `cpu::psf_fit`) → [`identify`] (pair ranges → `cpu::vote` → `cpu::select` → verification;
+//! or [`radial`]: `cpu::radial` → `cpu::select` → triangles, [`triangle`]) → [`attitude`]
 //! (Wahba by SVD) → [`refine`] (match, refit, false-match probability) → [`record`].
 //! [`catalog`] and [`table`] prepare the reference stars and the sorted distance table;
-//! [`solve`] ties a camera to them; [`batch`] runs many files; [`simulate`] and [`evaluate`]
-//! make and score synthetic sets.
+//! [`solve`] ties a camera to them; [`batch`] and [`run`] run many files ([`output`] writes
+//! and resumes the records); [`streaks`] finds and reduces satellite streaks (times, Az/El,
+//! TDM and IOD); [`sequence`] tracks sequences of frames and rejects moving particles;
+//! [`calibrate`] fits the camera; [`simulate`] and [`evaluate`] make and score synthetic
+//! sets.
 
 pub mod annotate;
 pub mod attitude;

@@ -20,11 +20,7 @@ use crate::table::{PairTable, angle_of_chord, chord_key};
 use crate::triangle::{Triangle, triangle_order};
 use nalgebra::Vector3;
 
-/// Rings per feature: chance sets few of them in common (a feature of 16 neighbours against a
-/// catalog star's 30 shares 0.5 rings by chance).
-pub const BITS: usize = 4096;
-/// u32 words per feature.
-pub const WORDS: usize = BITS / 32;
+pub use crate::cpu::radial::{BITS, WORDS};
 /// Candidates kept per image star.
 pub const CANDIDATES: usize = 32;
 /// The brightest image stars whose candidates form triangles (560 triangles for 16): only

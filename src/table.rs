@@ -201,18 +201,27 @@ pub struct TableOrigin {
     pub cache_note: Option<String>,
 }
 
-/// Load the table from the cache, or build it (and try to store it).
+/// Load the table from the cache ([`cache_dir`]), or build it (and try to store it).
 pub fn load_or_build(
     cat: &RefCatalog,
     catalog_hash: u64,
     max_sep_rad: f64,
     use_cache: bool,
 ) -> (PairTable, TableOrigin) {
+    let dir = cache_dir().filter(|_| use_cache);
+    load_or_build_in(dir.as_deref(), cat, catalog_hash, max_sep_rad)
+}
+
+/// [`load_or_build`] with the cache in `dir` (None: no cache).
+pub fn load_or_build_in(
+    dir: Option<&Path>,
+    cat: &RefCatalog,
+    catalog_hash: u64,
+    max_sep_rad: f64,
+) -> (PairTable, TableOrigin) {
     let t0 = Instant::now();
     let key = cache_key(cat, catalog_hash, max_sep_rad);
-    let file = cache_dir()
-        .filter(|_| use_cache)
-        .map(|d| d.join(format!("table-{key:016x}.bin")));
+    let file = dir.map(|d| d.join(format!("table-{key:016x}.bin")));
     let mut note = None;
     if let Some(f) = &file
         && f.exists()

@@ -23,7 +23,8 @@ pub const ITERATIONS: usize = 6;
 /// undersampled spot (σ 0.3 px puts 86 % of a centred star's light in one pixel) fits widths
 /// scattered below its own, and its position is still the best there is.
 pub const MIN_WIDTH: f64 = 0.15;
-const WIDTH_CLAMP: f64 = 0.1;
+/// The least width a Fisher step may leave.
+pub const WIDTH_CLAMP: f64 = 0.1;
 
 /// A star's window: what the kernel reads per star.
 #[derive(Clone, Copy, Debug, PartialEq)]

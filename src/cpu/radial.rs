@@ -7,7 +7,11 @@
 //! are read, each over all catalog stars in order (the catalog is word-major). Integer
 //! arithmetic only: GPU = CPU bit for bit; `select` then keeps the best.
 
-use crate::radial::{BITS, WORDS};
+/// Rings per feature: chance sets few of them in common (a feature of 16 neighbours against a
+/// catalog star's 30 shares 0.5 rings by chance). Keep in sync with `shaders/radial.wgsl`.
+pub const BITS: usize = 4096;
+/// u32 words per feature.
+pub const WORDS: usize = BITS / 32;
 
 /// Scores of `image`'s features (`WORDS` words each) against the catalog's (word-major,
 /// `catalog[w · n_ref + id]`), whose bit counts are `counts` (one per catalog star).

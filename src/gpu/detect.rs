@@ -83,7 +83,8 @@ pub struct DetectInspect {
     pub labels: Vec<Vec<u32>>,
 }
 
-const BLOCK: u32 = 256;
+/// Pixels per block of the centroid compaction (`BLOCK` in `shaders/shared/detect.wgsl`).
+pub const BLOCK: u32 = 256;
 
 /// Workgroups per frame of the kernels that walk the set list.
 const LIST_GROUPS: u32 = 64;

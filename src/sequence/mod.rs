@@ -15,6 +15,7 @@ pub mod simulate;
 pub mod track;
 
 use crate::attitude::attitude_error;
+pub use crate::batch::Detected;
 use crate::batch::{Decoded, Solvers};
 use crate::camera::Camera;
 use crate::detect::Detection;
@@ -76,15 +77,6 @@ pub const MAX_CONE_DEG: f64 = 10.0;
 /// The sequence a record name belongs to: its directory ("" for the top level).
 pub fn sequence_of(name: &str) -> &str {
     name.rsplit_once('/').map_or("", |(dir, _)| dir)
-}
-
-/// A frame after its pixel stages: its detections, or the message of its error record.
-pub struct Detected {
-    pub decoded: Decoded,
-    pub detections: std::result::Result<Vec<Detection>, String>,
-    pub detect_ms: f64,
-    /// The `backend` field of its record.
-    pub backend: String,
 }
 
 /// A solution kept for predicting the next frames.

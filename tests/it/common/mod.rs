@@ -1,0 +1,326 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+/// `../shared` beside the project (real frames, Hipparcos-2), if present. A user's clone has
+/// none: the caller's test is then skipped with a printed reason. In CI (`CI=true`) a missing
+/// `../shared` fails the test instead, so CI never skips these checks silently.
+pub fn shared_dir(test: &str) -> Option<PathBuf> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared");
+    if dir.join("data/real").is_dir() {
+        return Some(dir);
+    }
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        panic!("{test}: ../shared is missing, and CI must run this test");
+    }
+    eprintln!("SKIPPED {test}: ../shared (real frames and hip2.dat) is not beside the project");
+    None
+}
+
+/// The gpustar binary under test.
+pub fn gpustar() -> std::process::Command {
+    let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_gpustar"));
+    // Keep table caches out of the user's home.
+    c.env(
+        "GPUSTAR_CACHE_DIR",
+        std::env::temp_dir().join("gpustar-test-cache"),
+    );
+    c
+}
+
+/// Run a gpustar command that must succeed; its records (JSON Lines on stdout).
+pub fn run_records(cmd: &mut std::process::Command) -> Vec<serde_json::Value> {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+/// The GPU (lavapipe in CI), or None with a printed reason. In CI (`CI=true`) a missing
+/// adapter fails the test instead: GPU = CPU must be checked there.
+pub fn gpu(test: &str) -> Option<gpustar::gpu::Gpu> {
+    match gpustar::gpu::Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref()) {
+        Ok(g) => Some(g),
+        Err(e) => {
+            if std::env::var("CI").is_ok_and(|v| v == "true") {
+                panic!("{test}: no GPU adapter in CI: {e:#}");
+            }
+            eprintln!("SKIPPED {test}: {e:#}");
+            None
+        }
+    }
+}
+
+/// Frames from the simulator (in memory), 8- or 16-bit.
+pub fn sim_frames(
+    n: usize,
+    size: (u32, u32),
+    fov: f64,
+    bits: u8,
+    seed: u64,
+) -> Vec<gpustar::frame::Frame> {
+    let s = gpustar::simulate::SimSettings {
+        width: size.0,
+        height: size.1,
+        fov_x_deg: fov,
+        bits,
+        seed,
+        ..Default::default()
+    };
+    rendered(&s, n).into_iter().map(|(f, _)| f).collect()
+}
+
+/// The CPU twins' outputs of every detection stage, dense as the GPU writes them.
+pub struct CpuDetect {
+    pub tiles: Vec<gpustar::cpu::threshold::TileStats>,
+    pub mask: Vec<u32>,
+    pub labels: Vec<u32>,
+    pub blobs: Vec<gpustar::cpu::centroid::Blob>,
+}
+
+pub fn cpu_detect(
+    f: &gpustar::frame::Frame,
+    p: &gpustar::cpu::threshold::DetectParams,
+) -> CpuDetect {
+    use gpustar::cpu::*;
+    let tiles = threshold::tile_stats(&f.pixels, p);
+    let runs = threshold::threshold(&f.pixels, &tiles, p);
+    let labels = components::components(&runs, p.width);
+    CpuDetect {
+        blobs: centroid::centroid(&f.pixels, &runs, &labels, &tiles, p),
+        mask: threshold::dense_mask(&runs, p.width, p.height),
+        labels: components::dense_labels(&runs, &labels, p.width, p.height),
+        tiles,
+    }
+}
+
+/// Run the detection kernels on the GPU and check every stage against its CPU twin: tile
+/// statistics, mask, labels and blobs must be equal exactly. Returns the blobs compared.
+pub fn assert_detect_stages_equal(
+    g: &gpustar::gpu::Gpu,
+    frames: &[gpustar::frame::Frame],
+    tile: u32,
+) -> usize {
+    assert_detect_stages_equal_with(g, frames, tile, false)
+}
+
+/// As [`assert_detect_stages_equal`], with the matched filter on or off.
+pub fn assert_detect_stages_equal_with(
+    g: &gpustar::gpu::Gpu,
+    frames: &[gpustar::frame::Frame],
+    tile: u32,
+    matched_filter: bool,
+) -> usize {
+    let f0 = &frames[0];
+    let p = gpustar::cpu::threshold::DetectParams::new(
+        f0.width,
+        f0.height,
+        tile,
+        5.0,
+        f0.saturation as u32,
+    )
+    .with_filter(matched_filter);
+    let refs: Vec<&gpustar::frame::Frame> = frames.iter().collect();
+    let (blobs, ins) = g.detect_inspect(&refs, &p).unwrap();
+    let mut n = 0;
+    for (k, f) in frames.iter().enumerate() {
+        let c = cpu_detect(f, &p);
+        assert!(c.tiles == ins.tiles[k], "frame {k}: tile_stats differ");
+        assert!(c.mask == ins.mask[k], "frame {k}: threshold masks differ");
+        assert!(
+            c.labels == ins.labels[k],
+            "frame {k}: component labels differ"
+        );
+        assert!(c.blobs == blobs[k], "frame {k}: centroid moments differ");
+        n += c.blobs.len();
+    }
+    n
+}
+
+/// A 64×48 frame with '#' drawn as bright pixels (200) on a dark sky (10) from the top left.
+pub fn drawn(rows: &[&str]) -> gpustar::frame::Frame {
+    let (w, h) = (64u32, 48u32);
+    let mut pixels = vec![10u16; (w * h) as usize];
+    for (y, r) in rows.iter().enumerate() {
+        for (x, c) in r.bytes().enumerate() {
+            if c == b'#' {
+                pixels[y * w as usize + x] = 200;
+            }
+        }
+    }
+    gpustar::frame::Frame {
+        width: w,
+        height: h,
+        pixels,
+        saturation: 255,
+    }
+}
+
+/// Frames 0..n of a simulation, decoded as batch would see them, with their truth.
+pub fn rendered(
+    s: &gpustar::simulate::SimSettings,
+    n: usize,
+) -> Vec<(gpustar::frame::Frame, gpustar::simulate::Truth)> {
+    let cat = gpustar::catalog::Catalog::builtin();
+    let camera = s.camera().unwrap();
+    (0..n)
+        .map(|k| {
+            let (pixels, truth) = gpustar::simulate::render(&cat, s, k).unwrap();
+            let frame = gpustar::frame::Frame {
+                width: camera.width,
+                height: camera.height,
+                pixels,
+                saturation: if s.bits == 8 { 255 } else { 65535 },
+            };
+            (frame, truth)
+        })
+        .collect()
+}
+
+/// A solver for a pinhole camera with catalog stars to magnitude 6 (no table cache).
+pub fn solver(fov: f64, size: (u32, u32)) -> gpustar::solve::Solver {
+    let s = gpustar::solve::Settings {
+        mag_limit: Some(6.0),
+        table_cache: false,
+        ..gpustar::solve::Settings::default()
+    };
+    let camera = gpustar::camera::Camera::from_fov(size.0, size.1, fov).unwrap();
+    gpustar::solve::Solver::new(&gpustar::catalog::Catalog::builtin(), camera, s).unwrap()
+}
+
+/// Vote and select on the GPU and check the counters and candidate lists against the CPU.
+pub fn assert_votes_equal(
+    g: &gpustar::gpu::Gpu,
+    solver: &gpustar::solve::Solver,
+    jobs: &[gpustar::gpu::vote::VoteJob],
+) {
+    let band = &solver.bands[0];
+    let n_ref = band.refs.len();
+    let table = g.upload_table(&band.table, n_ref).unwrap();
+    let (results, votes) = g.vote_inspect(&table, jobs).unwrap();
+    for (f, job) in jobs.iter().enumerate() {
+        let (cpu_votes, hyp) = gpustar::cpu::vote::vote(&band.table, &job.ranges, job.stars, n_ref);
+        assert!(cpu_votes == votes[f], "job {f}: vote counters differ");
+        let cpu = gpustar::identify::vote_cpu(&band.table, &job.ranges, job.stars, n_ref, job.k);
+        assert_eq!(results[f].hypotheses, hyp, "job {f}: hypotheses");
+        assert_eq!(results[f].k, cpu.k);
+        assert!(
+            results[f].candidates == cpu.candidates,
+            "job {f}: candidates differ"
+        );
+    }
+}
+
+/// Paint `n` bright round spots (σ 1.2 px) into the top-right quarter of an 8-bit frame: a
+/// cluster brighter than most stars.
+pub fn crowd_corner(frame: &mut gpustar::frame::Frame, n: usize, seed: u64) {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (w, h) = (frame.width as f64, frame.height as f64);
+    for _ in 0..n {
+        let cx = w / 2.0 + rng.random::<f64>() * w / 2.0;
+        let cy = rng.random::<f64>() * h / 2.0;
+        let peak = 120.0 + 120.0 * rng.random::<f64>();
+        for y in (cy as i64 - 5).max(0)..(cy as i64 + 6).min(h as i64) {
+            for x in (cx as i64 - 5).max(0)..(cx as i64 + 6).min(w as i64) {
+                let r2 = (x as f64 - cx).powi(2) + (y as f64 - cy).powi(2);
+                let p = &mut frame.pixels[(y * w as i64 + x) as usize];
+                *p = (*p as f64 + peak * (-r2 / (2.0 * 1.44)).exp()).min(255.0) as u16;
+            }
+        }
+    }
+}
+
+/// (solved, wrong) over simulated frames: wrong = solved with an attitude more than
+/// `wrong_deg` from the truth.
+pub fn solved_and_wrong(
+    solver: &gpustar::solve::Solver,
+    set: &[(gpustar::frame::Frame, gpustar::simulate::Truth)],
+    wrong_deg: f64,
+) -> (usize, usize) {
+    let (mut solved, mut wrong) = (0, 0);
+    for (f, t) in set {
+        if let gpustar::solve::Outcome::Solved(r, _) = solver.solve_frame(f).0.outcome {
+            solved += 1;
+            let truth = nalgebra::Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
+            if gpustar::attitude::attitude_error(&r.r, &truth).to_degrees() > wrong_deg {
+                wrong += 1;
+            }
+        }
+    }
+    (solved, wrong)
+}
+
+/// What a retry adds on a set of `n` frames, given (solved, wrong) with it and without it:
+/// no wrong answer either way, at least `min_with` solved with it, at least 3 more than without.
+pub fn assert_retry_adds(
+    case: &str,
+    retry: &str,
+    n: usize,
+    min_with: usize,
+    (with, wrong_with): (usize, usize),
+    (without, wrong_without): (usize, usize),
+) {
+    println!("{case}, {n} frames: {with} solved with {retry}, {without} without");
+    assert_eq!((wrong_with, wrong_without), (0, 0));
+    assert!(with >= min_with, "{with}/{n} solved with {retry}");
+    assert!(
+        with >= without + 3,
+        "{without}/{n} solved without it: {retry} adds little"
+    );
+}
+
+/// GPU = CPU for records: everything equal but the floats that carry the PSF fit's f32
+/// (`--centroid ml`, the default): centroids within 1e-5 px (tests/it/psf_fit.rs measures 4.5e-7),
+/// RA/Dec/roll within 1e-6° (0.004″), rotation matrix and quaternion elements within 1e-8
+/// (0.002″), other floats within 1e-4 relative, plus 1e-5 px or 1e-4″ for pixel and arcsec
+/// values (residuals, rms, 1σ, the floor move with the centroids: a 0.02″ residual by 2e-6″).
+/// Integers, strings and the shapes of lists exactly.
+pub fn assert_records_match(a: &serde_json::Value, b: &serde_json::Value) {
+    fn walk(path: &str, key: &str, a: &serde_json::Value, b: &serde_json::Value) {
+        use serde_json::Value;
+        match (a, b) {
+            (Value::Object(x), Value::Object(y)) => {
+                let keys = |m: &serde_json::Map<String, Value>| -> Vec<String> {
+                    m.keys().cloned().collect()
+                };
+                assert_eq!(keys(x), keys(y), "{path}: fields");
+                for (k, v) in x {
+                    walk(&format!("{path}.{k}"), k, v, &y[k]);
+                }
+            }
+            (Value::Array(x), Value::Array(y)) => {
+                assert_eq!(x.len(), y.len(), "{path}: length");
+                for (i, (u, v)) in x.iter().zip(y).enumerate() {
+                    walk(&format!("{path}[{i}]"), key, u, v);
+                }
+            }
+            (Value::Number(x), Value::Number(y)) if x.is_f64() || y.is_f64() => {
+                let (u, v) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+                let rel = 1e-4 * u.abs().max(v.abs());
+                let tol = match key {
+                    "x" | "y" => 1e-5,
+                    "ra_deg" | "dec_deg" | "roll_deg" => 1e-6,
+                    "rotation_matrix" | "quaternion" => 1e-8,
+                    k if k.ends_with("_px") => rel + 1e-5,
+                    k if k.ends_with("_arcsec") || k == "boresight" || k == "roll" => rel + 1e-4,
+                    _ => rel + 1e-12,
+                };
+                assert!(
+                    (u - v).abs() <= tol,
+                    "{path}: {u} vs {v} (tolerance {tol:e})"
+                );
+            }
+            _ => assert_eq!(a, b, "{path}"),
+        }
+    }
+    walk("record", "", a, b);
+}

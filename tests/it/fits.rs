@@ -1,0 +1,113 @@
+//! FITS input end to end: simulated frames written as FITS (unsigned 16-bit, and 32-bit float
+//! with NaN blanks) with a DATE-OBS solve like their PNGs, and the catalog positions of a
+//! dated frame are those at its own epoch, not the run's.
+
+use crate::common;
+
+use gpustar::catalog::{Catalog, vector_to_radec};
+use gpustar::simulate::{SimSettings, render};
+use std::path::Path;
+
+/// A FITS card: keyword, value text.
+fn card(key: &str, value: &str) -> String {
+    format!("{key:<8}= {value:>20}")
+        .chars()
+        .chain(std::iter::repeat(' '))
+        .take(80)
+        .collect()
+}
+
+fn pad(mut bytes: Vec<u8>, fill: u8) -> Vec<u8> {
+    while !bytes.len().is_multiple_of(2880) {
+        bytes.push(fill);
+    }
+    bytes
+}
+
+/// Write pixels as a FITS primary image: BITPIX 16 with BZERO 32768 (unsigned), or −32 with
+/// every 97th pixel blank (NaN).
+fn write_fits(path: &Path, w: u32, h: u32, pixels: &[u16], float: bool, date_obs: &str) {
+    let mut cards = vec![
+        card("SIMPLE", "T"),
+        card("BITPIX", if float { "-32" } else { "16" }),
+        card("NAXIS", "2"),
+        card("NAXIS1", &w.to_string()),
+        card("NAXIS2", &h.to_string()),
+    ];
+    if !float {
+        cards.push(card("BZERO", "32768"));
+        cards.push(card("BSCALE", "1"));
+    }
+    cards.push(card("DATE-OBS", &format!("'{date_obs}'")));
+    cards.push(format!("{:<80}", "END"));
+    let mut bytes = pad(cards.concat().into_bytes(), b' ');
+    let mut data = Vec::new();
+    for (i, &p) in pixels.iter().enumerate() {
+        if float {
+            let v = if i % 97 == 0 {
+                f32::NAN
+            } else {
+                p as f32 * 0.25 + 10.0
+            };
+            data.extend_from_slice(&v.to_be_bytes());
+        } else {
+            data.extend_from_slice(&((p as i32 - 32768) as i16).to_be_bytes());
+        }
+    }
+    bytes.extend(pad(data, 0));
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn fits_frames_solve_at_their_own_epoch() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("fits");
+    std::fs::create_dir(&dir).unwrap();
+    let cat = Catalog::builtin();
+    // The sky of 2030; the run's epoch stays at its default, 2000.
+    let s = SimSettings {
+        width: 640,
+        height: 480,
+        fov_x_deg: 15.0,
+        bits: 16,
+        seed: 5,
+        epoch: 2030.0,
+        ..SimSettings::default()
+    };
+    for k in 0..4 {
+        let (pixels, _) = render(&cat, &s, k).unwrap();
+        let path = dir.join(format!("f{k}.fits"));
+        write_fits(&path, 640, 480, &pixels, k % 2 == 1, "2030-01-01T12:00:00");
+    }
+    let records = common::run_records(common::gpustar().arg("batch").arg(&dir).args([
+        "--fov-deg",
+        "15",
+        "--mag-limit",
+        "6",
+        "--backend",
+        "cpu",
+        "-q",
+    ]));
+    assert_eq!(records.len(), 4);
+    // 2030-01-01T12:00 UT is JD 2462503.0: 2000 + 10957.5 / 365.25 = 2029.9999316.
+    let epoch = 2000.0 + (2_462_503.0 - 2_451_545.0) / 365.25;
+    let (mut at_epoch, mut total) = (0, 0);
+    for r in &records {
+        assert_eq!(r["status"], "solved", "{r}");
+        assert!((r["epoch"].as_f64().unwrap() - epoch).abs() < 1e-9, "{r}");
+        for m in r["matches"].as_array().unwrap() {
+            let hip = m["hip"].as_u64().unwrap() as u32;
+            let star = cat.stars.iter().find(|s| s.hip == hip).unwrap();
+            let (ra, dec) = vector_to_radec(&star.vector_at(epoch));
+            let d_ra = (m["ra_deg"].as_f64().unwrap() - ra) * dec.to_radians().cos();
+            let d_dec = m["dec_deg"].as_f64().unwrap() - dec;
+            total += 1;
+            // At the 2030 place to 1 mas; at the 2000 place a typical star is ~0.5″ away.
+            at_epoch += (d_ra.hypot(d_dec) * 3.6e6 < 1.0) as usize;
+        }
+    }
+    eprintln!("{at_epoch} of {total} identified stars at their 2030 positions (to 1 mas)");
+    assert!(total >= 40, "only {total} stars identified");
+    // Merged doubles sit at their photocentre, so not quite every star.
+    assert!(at_epoch * 10 >= total * 9, "{at_epoch} of {total}");
+}

@@ -1,0 +1,40 @@
+//! gpustar's integration tests as one binary: one module per stage (the same name as its
+//! kernel in `shaders/`, its CPU twin in `src/cpu/` and its GPU host code in `src/gpu/`), plus
+//! end-to-end runs of the binary, real frames, faults and the WGSL layouts. One binary links
+//! wgpu once, where one per file linked it 30 times.
+//!
+//! Tests that need a GPU adapter or `../shared` print `SKIPPED <test>: <why>` when these are
+//! absent; with `CI=true` they fail instead (see `common`).
+
+mod common;
+
+mod attitude;
+mod backend;
+mod bad_input;
+mod catalog;
+mod centroid;
+mod components;
+mod confidence;
+mod dark;
+mod end_to_end;
+mod faults;
+mod fits;
+mod gpu_pipeline;
+mod layout;
+mod noise;
+mod psf_fit;
+mod radial;
+mod real;
+mod refine;
+mod resume;
+mod select;
+mod sequence;
+mod spread;
+mod streaks;
+mod streaks_cli;
+mod table;
+mod threshold;
+mod triangle;
+mod unseen;
+mod vote;
+mod wcs;

@@ -1,0 +1,321 @@
+//! `batch --streaks` through the real binary: frames of `simulate --streaks`, the records'
+//! ends, times and Az/El, the TDM and IOD files read back by their parsers, header astrometry,
+//! and frames whose headers lack or garble the time or the station.
+
+use crate::common;
+
+use common::{gpustar, run_records};
+use gpustar::camera::Camera;
+use gpustar::frame::Frame;
+use gpustar::streaks::formats::{parse_iod_line, parse_tdm};
+use nalgebra::Matrix3;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+fn run_ok(args: &[&str]) {
+    let out = gpustar().args(args).output().unwrap();
+    assert!(
+        out.status.success(),
+        "gpustar {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Eight 512² frames of 12° with streaks, in `tmp/sim`.
+fn simulated(tmp: &Path) -> PathBuf {
+    let dir = tmp.join("sim");
+    let d = dir.to_str().unwrap();
+    run_ok(&[
+        "simulate",
+        "--streaks",
+        "--out",
+        d,
+        "-n",
+        "8",
+        "--size",
+        "512x512",
+        "--fov-deg",
+        "12",
+        "--mag-limit",
+        "7.5",
+    ]);
+    dir
+}
+
+fn truths(dir: &Path) -> Vec<Value> {
+    std::fs::read_to_string(dir.join("truth.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+fn batch(dir: &Path, extra: &[&str]) -> Vec<Value> {
+    let camera = dir.join("camera.toml");
+    let mut cmd = gpustar();
+    cmd.args([
+        "batch",
+        dir.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--streaks",
+    ])
+    .args(["--camera", camera.to_str().unwrap()])
+    .args(extra);
+    run_records(&mut cmd)
+}
+
+fn xy(v: &Value) -> (f64, f64) {
+    (v["x"].as_f64().unwrap(), v["y"].as_f64().unwrap())
+}
+
+fn dist(a: (f64, f64), b: [f64; 2]) -> f64 {
+    ((a.0 - b[0]).powi(2) + (a.1 - b[1]).powi(2)).sqrt()
+}
+
+#[test]
+fn streak_ends_times_azel_and_the_tdm_and_iod_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = simulated(tmp.path());
+    let (tdm, iod) = (tmp.path().join("out.tdm"), tmp.path().join("out.iod"));
+    let records = batch(
+        &dir,
+        &[
+            "--tdm",
+            tdm.to_str().unwrap(),
+            "--iod",
+            iod.to_str().unwrap(),
+        ],
+    );
+    let truth = truths(&dir);
+    assert_eq!(records.len(), 8);
+    let mut mids = Vec::new();
+    for (r, t) in records.iter().zip(&truth) {
+        assert_eq!(r["status"], "solved", "{r}");
+        let found = r["streaks"].as_array().unwrap();
+        let want = t["streaks"].as_array().unwrap();
+        assert_eq!(
+            found.len(),
+            want.len(),
+            "{}: {found:?} vs {want:?}",
+            r["file"]
+        );
+        for w in want {
+            let p = |k: &str| -> [f64; 2] {
+                let a = w[k].as_array().unwrap();
+                [a[0].as_f64().unwrap(), a[1].as_f64().unwrap()]
+            };
+            let (p0, p1) = (p("p0"), p("p1"));
+            // The record streak on this line, ends in either order.
+            let s = found
+                .iter()
+                .find(|s| {
+                    let (a, b) = (xy(&s["ends"][0]), xy(&s["ends"][1]));
+                    let on = |q: (f64, f64)| {
+                        let (dx, dy) = (p1[0] - p0[0], p1[1] - p0[1]);
+                        ((q.0 - p0[0]) * dy - (q.1 - p0[1]) * dx).abs() / dx.hypot(dy) < 1.0
+                    };
+                    on(a) && on(b)
+                })
+                .unwrap_or_else(|| panic!("{}: no streak along {w}", r["file"]));
+            let edges = [w["edge0"].as_bool().unwrap(), w["edge1"].as_bool().unwrap()];
+            let (e0, e1) = (&s["ends"][0], &s["ends"][1]);
+            let swap = dist(xy(e0), p0) + dist(xy(e1), p1) > dist(xy(e0), p1) + dist(xy(e1), p0);
+            let (near0, near1) = if swap { (e1, e0) } else { (e0, e1) };
+            for (end, truth_p, edge) in [(near0, p0, edges[0]), (near1, p1, edges[1])] {
+                assert_eq!(end["edge"].as_bool(), Some(edge), "{}: {s}", r["file"]);
+                if edge {
+                    assert!(end["time_utc"].is_null() && end["az_deg"].is_null());
+                } else {
+                    assert!(
+                        dist(xy(end), truth_p) < 1.0,
+                        "{}: {end} vs {truth_p:?}",
+                        r["file"]
+                    );
+                    assert!(
+                        end["ra_deg"].is_f64() && end["az_deg"].is_f64() && end["el_deg"].is_f64()
+                    );
+                    let time = end["time_utc"].as_str().unwrap();
+                    assert!(
+                        time == t["date_beg_utc"] || time == t["date_end_utc"],
+                        "{time}"
+                    );
+                }
+            }
+            if !edges[0] && !edges[1] {
+                mids.push(s["mid"].clone());
+            }
+        }
+    }
+    assert!(!mids.is_empty(), "the set has streaks inside the frame");
+    // TDM: a RADEC and an AZEL segment per timed midpoint, the record's values.
+    let tdm = parse_tdm(&std::fs::read_to_string(&tdm).unwrap()).unwrap();
+    let radec: Vec<_> = tdm
+        .segments
+        .iter()
+        .filter(|s| s.meta_value("ANGLE_TYPE") == Some("RADEC"))
+        .collect();
+    assert_eq!(radec.len(), mids.len());
+    assert_eq!(tdm.segments.len(), 2 * mids.len());
+    for (seg, m) in radec.iter().zip(&mids) {
+        let ra = seg.values("ANGLE_1")[0];
+        assert_eq!(ra.0, m["time_utc"].as_str().unwrap());
+        assert!((ra.1 - m["ra_deg"].as_f64().unwrap()).abs() < 1e-8);
+        assert!((seg.values("ANGLE_2")[0].1 - m["dec_deg"].as_f64().unwrap()).abs() < 1e-8);
+    }
+    // IOD: one line per midpoint, to the format's resolution (0.001 min of RA, 0.01′ of Dec).
+    let lines: Vec<String> = std::fs::read_to_string(&iod)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect();
+    assert_eq!(lines.len(), mids.len());
+    for (line, m) in lines.iter().zip(&mids) {
+        let o = parse_iod_line(line).unwrap();
+        let dra = (o.ra_deg - m["ra_deg"].as_f64().unwrap()).abs();
+        assert!(dra.min(360.0 - dra) < 0.001 / 60.0 * 15.0, "{line}: {m}");
+        assert!((o.dec_deg - m["dec_deg"].as_f64().unwrap()).abs() < 0.01 / 60.0);
+        assert_eq!(o.time_utc, m["time_utc"].as_str().unwrap());
+    }
+}
+
+/// Rewrite a FITS frame with other header cards (the pixels kept).
+fn rewrite(src: &Path, dst: &Path, cards: &[String]) {
+    let f = Frame::read(src).unwrap();
+    std::fs::write(
+        dst,
+        gpustar::fits::encode_u16(f.width, f.height, &f.pixels, cards),
+    )
+    .unwrap();
+}
+
+#[test]
+fn frames_without_time_or_station_keep_their_ends_and_say_why() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = simulated(tmp.path());
+    let bad = tmp.path().join("bad");
+    std::fs::create_dir(&bad).unwrap();
+    std::fs::copy(dir.join("camera.toml"), bad.join("camera.toml")).unwrap();
+    let q = |v: &str| format!("'{v}'");
+    let src = dir.join("sim_00000.fits");
+    let cases: [(&str, Vec<String>); 4] = [
+        ("a_none.fits", vec![]),
+        (
+            "b_y2k.fits",
+            vec![
+                gpustar::fits::card("DATE-OBS", &q("15/03/24")),
+                gpustar::fits::card("EXPTIME", "5"),
+            ],
+        ),
+        (
+            "c_time_only.fits",
+            vec![
+                gpustar::fits::card("TIME-OBS", &q("20:00:00")),
+                gpustar::fits::card("EXPTIME", "5"),
+            ],
+        ),
+        (
+            "d_no_station.fits",
+            vec![
+                gpustar::fits::card("DATE-OBS", &q("2024-03-15T20:00:00")),
+                gpustar::fits::card("EXPTIME", "5"),
+            ],
+        ),
+    ];
+    for (name, cards) in &cases {
+        rewrite(&src, &bad.join(name), cards);
+    }
+    let records = batch(&bad, &[]);
+    assert_eq!(records.len(), 4);
+    for r in &records {
+        let streaks = r["streaks"].as_array().unwrap();
+        assert!(!streaks.is_empty(), "{r}");
+        let warnings = r["warnings"].to_string();
+        for s in streaks {
+            for e in s["ends"].as_array().unwrap() {
+                assert!(e["x"].is_f64() && e["ra_deg"].is_f64(), "{e}");
+                assert!(e["az_deg"].is_null() && e["el_deg"].is_null(), "{e}");
+            }
+        }
+        let file = r["file"].as_str().unwrap();
+        match file {
+            "d_no_station.fits" => {
+                // A time, but no station: times, no Az/El.
+                assert!(warnings.contains("--station"), "{warnings}");
+                let inside = streaks
+                    .iter()
+                    .flat_map(|s| s["ends"].as_array().unwrap())
+                    .find(|e| e["edge"] == false);
+                if let Some(e) = inside {
+                    assert!(e["time_utc"].is_string());
+                }
+            }
+            _ => {
+                assert!(warnings.contains("no exposure time"), "{file}: {warnings}");
+                if file == "b_y2k.fits" {
+                    assert!(warnings.contains("15/03/24"), "{warnings}");
+                }
+                if file == "c_time_only.fits" {
+                    assert!(warnings.contains("TIME-OBS"), "{warnings}");
+                }
+                for s in streaks {
+                    for e in s["ends"].as_array().unwrap() {
+                        assert!(e["time_utc"].is_null());
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn header_astrometry_gives_the_solution_s_ra_dec() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = simulated(tmp.path());
+    let solved = batch(&dir, &["--astrometry", "solve"]);
+    // The first frame with a streak, with a TAN WCS of its true attitude in the header.
+    let truth = truths(&dir);
+    let k = truth
+        .iter()
+        .position(|t| !t["streaks"].as_array().unwrap().is_empty())
+        .unwrap();
+    let t = &truth[k];
+    let r: Vec<Vec<f64>> = serde_json::from_value(t["rotation_matrix"].clone()).unwrap();
+    let r = Matrix3::from_fn(|i, j| r[i][j]);
+    let camera = Camera::from_fov(512, 512, 12.0).unwrap();
+    let one = tmp.path().join("one");
+    std::fs::create_dir(&one).unwrap();
+    std::fs::copy(dir.join("camera.toml"), one.join("camera.toml")).unwrap();
+    let name = t["file"].as_str().unwrap();
+    rewrite(
+        &dir.join(name),
+        &one.join(name),
+        &gpustar::wcs::wcs_header(&camera, &r),
+    );
+    let header = batch(&one, &["--astrometry", "header"]);
+    // Without a camera at all: the stars are not identified, the streaks the same.
+    let mut cmd = gpustar();
+    cmd.args([
+        "batch",
+        one.to_str().unwrap(),
+        "--streaks",
+        "--astrometry",
+        "header",
+    ]);
+    let alone = run_records(&mut cmd);
+    assert_eq!(alone[0]["status"], "unsolved");
+    assert_eq!(alone[0]["reason"], "no_camera");
+    assert_eq!(alone[0]["streaks"], header[0]["streaks"]);
+    let (a, b) = (&solved[k]["streaks"], &header[0]["streaks"]);
+    assert_eq!(a.as_array().unwrap().len(), b.as_array().unwrap().len());
+    for (sa, sb) in a.as_array().unwrap().iter().zip(b.as_array().unwrap()) {
+        for e in 0..2 {
+            let (ea, eb) = (&sa["ends"][e], &sb["ends"][e]);
+            let dra = (ea["ra_deg"].as_f64().unwrap() - eb["ra_deg"].as_f64().unwrap()).abs()
+                * eb["dec_deg"].as_f64().unwrap().to_radians().cos();
+            let ddec = (ea["dec_deg"].as_f64().unwrap() - eb["dec_deg"].as_f64().unwrap()).abs();
+            // The solution's attitude is within a few arcseconds of the truth.
+            assert!(dra.hypot(ddec) * 3600.0 < 10.0, "{ea} vs {eb}");
+        }
+    }
+}

@@ -1,0 +1,255 @@
+//! Stage `threshold` (CPU twin) on hand-made inputs.
+
+use crate::common;
+
+use gpustar::cpu::threshold::*;
+
+#[test]
+fn flat_tiles_interpolate_exactly() {
+    let p = DetectParams::new(100, 70, 16, 5.0, 255);
+    let tiles = vec![
+        TileStats {
+            background: 10,
+            offset: 3
+        };
+        (p.tiles_x * p.tiles_y) as usize
+    ];
+    for (x, y) in [(0, 0), (99, 69), (50, 33), (7, 8)] {
+        assert_eq!(background_at(&tiles, &p, x, y), 10);
+        assert_eq!(level_scaled(&tiles, &p, x, y), 13 * 4 * 16 * 16);
+    }
+}
+
+#[test]
+fn gradient_is_followed_between_tile_centres() {
+    // Two tiles side by side with backgrounds 0 and 64: halfway between their centres
+    // (x = 7.5 + 8 = 15.5) the background is 32.
+    let p = DetectParams::new(32, 16, 16, 5.0, 255);
+    let tiles = [
+        TileStats {
+            background: 0,
+            offset: 0,
+        },
+        TileStats {
+            background: 64,
+            offset: 0,
+        },
+    ];
+    assert_eq!(background_at(&tiles, &p, 7, 0), 0);
+    assert_eq!(background_at(&tiles, &p, 24, 0), 64);
+    let mid = (interpolate(&tiles, &p, 15, 0, |t| t.background)
+        + interpolate(&tiles, &p, 16, 0, |t| t.background)) as f64
+        / 2.0
+        / (4.0 * 16.0 * 16.0);
+    assert!((mid - 32.0).abs() < 1e-9);
+}
+
+#[test]
+fn median_and_mad_ignore_a_bright_star() {
+    let p = DetectParams::new(8, 8, 8, 5.0, 255);
+    let mut px: Vec<u16> = (0..64).map(|i| 100 + (i % 5) as u16).collect();
+    // A star on row 2, one of the rows the statistics sample.
+    px[19] = 250;
+    px[20] = 240;
+    let t = tile_stats(&px, &p);
+    assert_eq!(t[0].background, 102);
+    // |v − 102| over 0..4 cycles: MAD 1 → offset ceil(5 · 1.4826) = 8.
+    assert_eq!(t[0].offset, 8);
+    let runs = threshold(&px, &t, &p);
+    assert_eq!(runs, vec![Run { y: 2, x0: 3, x1: 5 }]);
+    assert_eq!(dense_mask(&runs, 8, 8).iter().sum::<u32>(), 2);
+}
+
+/// Pseudo-random 8-bit pixels and tile statistics for the frame of `p`.
+fn random_pixels_and_tiles(p: &DetectParams, seed: u32) -> (Vec<u16>, Vec<TileStats>) {
+    let mut seed = seed;
+    let mut next = || {
+        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+        seed >> 16
+    };
+    let px: Vec<u16> = (0..p.width * p.height)
+        .map(|_| (next() % 256) as u16)
+        .collect();
+    let tiles: Vec<TileStats> = (0..p.tiles_x * p.tiles_y)
+        .map(|_| TileStats {
+            background: next() % 200,
+            offset: next() % 40,
+        })
+        .collect();
+    (px, tiles)
+}
+
+#[test]
+fn row_wise_runs_equal_the_per_pixel_definition() {
+    // Pseudo-random pixels and tile statistics: the runs must mark exactly the pixels with
+    // pixel · (2·tile)² > level_scaled(x, y), the definition the GPU kernel evaluates.
+    let (w, h) = (77u32, 51u32);
+    let p = DetectParams::new(w, h, 8, 3.0, 255);
+    let (px, tiles) = random_pixels_and_tiles(&p, 12345);
+    let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
+    let s2 = 4 * p.tile * p.tile;
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let want = (px[i] as u32 * s2 > level_scaled(&tiles, &p, x, y)) as u32;
+            assert_eq!(mask[i], want, "pixel ({x}, {y})");
+        }
+    }
+}
+
+#[test]
+fn eight_bit_histogram_stats_equal_selection_stats() {
+    // The same pixels read as an 8-bit frame (histogram path) and as a 16-bit one (selection
+    // path) give the same medians and MADs.
+    let (w, h) = (96u32, 64u32);
+    let mut seed = 99u32;
+    let px: Vec<u16> = (0..w * h)
+        .map(|i| {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            let star = if i % 97 == 0 { 200 } else { 0 };
+            ((seed >> 24) as u16 % 23 + (i % w) as u16 / 3 + star).min(255)
+        })
+        .collect();
+    let a = tile_stats(&px, &DetectParams::new(w, h, 16, 5.0, 255));
+    let b = tile_stats(&px, &DetectParams::new(w, h, 16, 5.0, 65535));
+    assert_eq!(a, b);
+    assert!(a.iter().any(|t| t.offset > 8), "varied tiles");
+}
+
+#[test]
+fn gpu_equals_cpu_on_simulated_8_and_16_bit_frames() {
+    let Some(g) = common::gpu("gpu_equals_cpu_on_simulated_8_and_16_bit_frames") else {
+        return;
+    };
+    let n8 =
+        common::assert_detect_stages_equal(&g, &common::sim_frames(4, (640, 480), 18.0, 8, 11), 32);
+    let n16 = common::assert_detect_stages_equal(
+        &g,
+        &common::sim_frames(3, (500, 333), 10.0, 16, 12),
+        32,
+    );
+    assert!(n8 > 50 && n16 > 20, "{n8} and {n16} blobs compared");
+}
+
+#[test]
+fn gpu_equals_cpu_on_odd_sizes_and_one_pixel_frames() {
+    let Some(g) = common::gpu("gpu_equals_cpu_on_odd_sizes_and_one_pixel_frames") else {
+        return;
+    };
+    // Sizes not multiples of the tile, of 32 (mask words) or of 2 (packed pixels).
+    common::assert_detect_stages_equal(&g, &common::sim_frames(2, (333, 77), 12.0, 8, 5), 16);
+    common::assert_detect_stages_equal(&g, &common::sim_frames(1, (97, 131), 12.0, 16, 6), 64);
+    for (w, h, v) in [(1, 1, 7u16), (1, 5, 0), (3, 1, 65535)] {
+        let f = gpustar::frame::Frame {
+            width: w,
+            height: h,
+            pixels: vec![v; (w * h) as usize],
+            saturation: 65535,
+        };
+        common::assert_detect_stages_equal(&g, &[f], 4);
+    }
+}
+
+#[test]
+fn filtered_runs_equal_the_per_pixel_definition() {
+    // The matched filter's mask marks exactly the pixels with 16·pixel > level and
+    // binomial3 > level (level = filtered_level_at), the definition the GPU kernel evaluates,
+    // edges included.
+    let (w, h) = (77u32, 51u32);
+    let p = DetectParams::new(w, h, 8, 3.0, 255).with_filter(true);
+    let (px, tiles) = random_pixels_and_tiles(&p, 4321);
+    let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
+    let mut set = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let level = filtered_level_at(&tiles, &p, x, y);
+            let want = (16 * px[i] as u32 > level && binomial3(&px, w, h, x, y) > level) as u32;
+            assert_eq!(mask[i], want, "pixel ({x}, {y})");
+            set += want;
+        }
+    }
+    assert!(
+        set > 100 && set < w * h - 100,
+        "{set} set: both outcomes tested"
+    );
+}
+
+#[test]
+fn matched_filter_finds_a_faint_star_and_drops_a_hot_pixel() {
+    // Flat sky 100 ± 4 (noise from a fixed pattern), a Gaussian star (σ 1.2 px) of peak 3.5σ
+    // above it, and a hot pixel of 30σ: without the filter the star is missed; with it the star
+    // is one blob of several pixels and the hot pixel a single pixel (dropped by min_area).
+    let (w, h) = (64u32, 64u32);
+    let mut seed = 7u32;
+    let mut px: Vec<f64> = (0..w * h)
+        .map(|_| {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            // Sum of 4 uniforms: roughly Gaussian, σ = 4.
+            let u: f64 = (0..4)
+                .map(|k| ((seed.rotate_left(8 * k) >> 16) as f64 / 65536.0) - 0.5)
+                .sum();
+            100.0 + u * 4.0 * (12.0f64 / 4.0).sqrt()
+        })
+        .collect();
+    let (sx, sy, sigma) = (20.3, 30.6, 1.2);
+    for y in 0..h {
+        for x in 0..w {
+            let r2 = (x as f64 - sx).powi(2) + (y as f64 - sy).powi(2);
+            px[(y * w + x) as usize] += 3.5 * 4.0 * (-r2 / (2.0 * sigma * sigma)).exp();
+        }
+    }
+    px[(40 * w + 45) as usize] += 120.0;
+    let px: Vec<u16> = px.iter().map(|v| v.round() as u16).collect();
+    let frame = gpustar::frame::Frame {
+        width: w,
+        height: h,
+        pixels: px,
+        saturation: 255,
+    };
+    let detect = |filter: bool| {
+        let s = gpustar::detect::DetectSettings {
+            tile: 16,
+            matched_filter: filter,
+            ..Default::default()
+        };
+        gpustar::detect::detect(&frame, &s)
+    };
+    let near = |d: &[gpustar::detect::Detection], x: f64, y: f64| {
+        d.iter().any(|d| (d.x - x).hypot(d.y - y) < 1.5)
+    };
+    let raw = detect(false);
+    let filtered = detect(true);
+    assert!(!near(&raw, sx, sy), "{raw:?}");
+    assert!(near(&filtered, sx, sy), "{filtered:?}");
+    assert!(!near(&filtered, 45.0, 40.0), "the hot pixel: {filtered:?}");
+}
+
+#[test]
+fn gpu_equals_cpu_with_the_matched_filter() {
+    let Some(g) = common::gpu("gpu_equals_cpu_with_the_matched_filter") else {
+        return;
+    };
+    let n8 = common::assert_detect_stages_equal_with(
+        &g,
+        &common::sim_frames(3, (640, 480), 18.0, 8, 21),
+        32,
+        true,
+    );
+    let n16 = common::assert_detect_stages_equal_with(
+        &g,
+        &common::sim_frames(2, (333, 77), 10.0, 16, 22),
+        16,
+        true,
+    );
+    for (w, h, v) in [(1, 1, 7u16), (2, 5, 0), (3, 1, 65535)] {
+        let f = gpustar::frame::Frame {
+            width: w,
+            height: h,
+            pixels: vec![v; (w * h) as usize],
+            saturation: 65535,
+        };
+        common::assert_detect_stages_equal_with(&g, &[f], 4, true);
+    }
+    assert!(n8 > 50 && n16 > 5, "{n8} and {n16} blobs compared");
+}
