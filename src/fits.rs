@@ -546,9 +546,19 @@ fn number(header: &Header<Image>, key: &str) -> Result<Option<f64>> {
     Ok(Some(v))
 }
 
+/// Plausible observation dates, MJD: 1960-01-01 (UTC begins) to 2100-01-01.
+const MJD_PLAUSIBLE: (f64, f64) = (36_934.0, 88_069.0);
+
+/// The one plausibility rule for a time read from a file, whatever it is used for (the epoch
+/// of proper motion here, exposure times in `streaks::sky`): within 1960..2100, which a JD
+/// written into an MJD keyword, a year 9999 placeholder or a wrong century are not.
+pub fn plausible_mjd(mjd: f64) -> bool {
+    (MJD_PLAUSIBLE.0..MJD_PLAUSIBLE.1).contains(&mjd)
+}
+
 /// The epoch of proper motion (Julian year) from the first of DATE-BEG, DATE-OBS, MJD-BEG and
 /// MJD-OBS (the order the exposure times are read in) that a header holds in a form read and
-/// within the years any time is taken from (`sky::plausible_mjd`); a value outside them (a
+/// within the years any time is taken from ([`plausible_mjd`]); a value outside them (a
 /// 9999-12-31 placeholder, a JD in MJD-OBS) is passed over with a warning.
 fn epoch<'a>(
     headers: impl Iterator<Item = &'a Header<Image>> + Clone,
@@ -576,7 +586,7 @@ fn epoch<'a>(
             continue;
         };
         let mjd = J2000_MJD + (year - 2000.0) * 365.25;
-        if year.is_finite() && crate::streaks::sky::plausible_mjd(mjd) {
+        if year.is_finite() && plausible_mjd(mjd) {
             return (Some(year), warnings);
         }
         warnings.push(format!(

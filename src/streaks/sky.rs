@@ -20,8 +20,6 @@ const DJM0: f64 = 2_400_000.5;
 const DAYSEC: f64 = 86_400.0;
 /// TAI - GPS time, seconds (fixed since 1980).
 const TAI_MINUS_GPS_S: f64 = 19.0;
-/// Plausible observation dates, MJD: 1960-01-01 (UTC begins) to 2100-01-01.
-const MJD_PLAUSIBLE: (f64, f64) = (36_934.0, 88_069.0);
 /// Station heights accepted, metres: below the Dead Sea shore to airborne.
 const HEIGHT_RANGE_M: (f64, f64) = (-1_000.0, 20_000.0);
 /// Earth rotation, arcsec of hour angle per second of UT1.
@@ -422,12 +420,7 @@ const TIME_KEYS: [&str; 4] = ["TIME-OBS", "UTSTART", "UT", "UTC"];
 /// Keywords for the exposure length, seconds, in order of preference.
 const LENGTH_KEYS: [&str; 3] = ["EXPTIME", "XPOSURE", "TELAPSE"];
 
-/// The one plausibility rule for a time read from a file, whatever it is used for (exposure
-/// times, the epoch of proper motion): within 1960..2100, which a JD written into an MJD
-/// keyword, a year 9999 placeholder or a wrong century are not.
-pub fn plausible_mjd(mjd: f64) -> bool {
-    (MJD_PLAUSIBLE.0..MJD_PLAUSIBLE.1).contains(&mjd)
-}
+pub use crate::fits::plausible_mjd;
 
 /// The longest exposure taken as such (EXPTIME and the like): a day.
 const MAX_EXPOSURE_S: f64 = 86_400.0;
