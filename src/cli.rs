@@ -721,7 +721,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
             per_frame,
         } => {
             let truth = simulate::read_truth(&truth)?;
-            let records = evaluate::read_records(&results)?;
+            let records = output::read_records(&results)?;
             let (s, frames) = evaluate::evaluate(&truth, &records, tolerance_deg, id_tolerance_px);
             let mut text = String::new();
             if per_frame {

@@ -6,11 +6,9 @@ use crate::camera::Camera;
 use crate::catalog::radec_to_vector;
 use crate::record::{MatchRecord, Record, Status};
 use crate::simulate::Truth;
-use anyhow::{Context, Result};
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 use std::collections::HashMap;
-use std::path::Path;
 
 /// Per-frame verdict.
 #[derive(Clone, Debug, Serialize)]
@@ -234,20 +232,6 @@ pub fn evaluate(
     s.p90_error_arcsec = q(0.9);
     s.max_error_arcsec = errors.last().copied();
     (s, verdicts)
-}
-
-/// Read result records (JSON Lines).
-pub fn read_records(path: &Path) -> Result<Vec<Record>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read results {}", path.display()))?;
-    text.lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(n, l)| {
-            serde_json::from_str(l)
-                .with_context(|| format!("{}: line {}: not a result record", path.display(), n + 1))
-        })
-        .collect()
 }
 
 #[cfg(test)]

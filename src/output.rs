@@ -500,26 +500,10 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
-/// Read the records of a JSON Lines file. A last line without its newline is a shard that
-/// did not finish (a crash mid-write): an error, not a record quietly dropped.
+/// Read the records of a JSON Lines file (a torn last line is an error: see
+/// [`crate::record::read_jsonl`]).
 pub fn read_records(path: &Path) -> Result<Vec<Record>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read results {}", path.display()))?;
-    if !text.is_empty() && !text.ends_with('\n') {
-        bail!(
-            "{} ends with an incomplete record: that run did not finish; run it again with \
-             --resume",
-            path.display()
-        );
-    }
-    text.lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(n, l)| {
-            serde_json::from_str(l)
-                .with_context(|| format!("{}: line {}: not a result record", path.display(), n + 1))
-        })
-        .collect()
+    crate::record::read_jsonl(path, "record")
 }
 
 /// Combine shard outputs: every expected input exactly once, in input order. Returns the

@@ -1,7 +1,9 @@
 //! The result record: one JSON object per input file (spec/INTERFACE.md). Scripts parse these;
 //! fields are only ever added.
 
+use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
+use std::path::Path;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -215,4 +217,27 @@ impl Record {
     pub fn to_json_line(&self) -> String {
         serde_json::to_string(self).expect("records serialise")
     }
+}
+
+/// gpustar's one JSON Lines reader (result records, truth files): every line one `T`, blank
+/// lines skipped. A last line without its newline is a run that did not finish (a crash
+/// mid-write): an error, not a record quietly dropped. `what` names the records in messages.
+pub fn read_jsonl<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<Vec<T>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read {what}s {}", path.display()))?;
+    if !text.is_empty() && !text.ends_with('\n') {
+        bail!(
+            "{} ends with an incomplete {what}: that run did not finish; run it again with \
+             --resume",
+            path.display()
+        );
+    }
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(n, l)| {
+            serde_json::from_str(l)
+                .with_context(|| format!("{}: line {}: not a {what}", path.display(), n + 1))
+        })
+        .collect()
 }

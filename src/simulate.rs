@@ -394,14 +394,5 @@ fn write_png(path: &Path, width: u32, height: u32, pixels: &[u16], bits: u8) -> 
 
 /// Read a truth file (JSON Lines).
 pub fn read_truth(path: &Path) -> Result<Vec<Truth>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read truth file {}", path.display()))?;
-    text.lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(n, l)| {
-            serde_json::from_str(l)
-                .with_context(|| format!("{}: line {}: not a truth record", path.display(), n + 1))
-        })
-        .collect()
+    crate::record::read_jsonl(path, "truth record")
 }
