@@ -9,8 +9,8 @@ import sys
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src")
 LAYERS = [
-    ["record", "camera", "catalog", "table", "wcs"],
-    ["cpu", "fits", "frame", "dark", "inputs"],
+    ["record", "camera", "catalog", "table"],
+    ["cpu", "fits", "wcs", "frame", "dark", "inputs"],
     ["detect", "identify", "triangle", "radial", "attitude", "refine"],
     ["gpu"],
     ["solve"],

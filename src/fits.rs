@@ -52,10 +52,59 @@ pub struct FitsFrame {
     pub keywords: BTreeMap<String, String>,
 }
 
+// gpustar's one writer of FITS header cards (frames, WCS headers, simulated sets): 80 columns,
+// values in fixed format (FITS 4.0, 4.2), keyword names at most 8 characters.
+
 /// A FITS header card `KEYWORD = value` (value as FITS text: a string quoted, e.g.
 /// `'2024-03-15T20:00:00.000'`, or a number), 80 columns.
 pub fn card(key: &str, value: &str) -> String {
-    format!("{:<80.80}", format!("{key:<8}= {value:>20}"))
+    card_raw(key, value, "")
+}
+
+/// A card with a value already formatted (logical, integer): right-justified to column 30.
+pub fn card_raw(key: &str, value: &str, comment: &str) -> String {
+    finish_card(format!("{key:<8}= {value:>20}"), comment)
+}
+
+/// A string card: quoted from column 11, padded to at least 8 characters (fixed format).
+pub fn card_str(key: &str, value: &str, comment: &str) -> String {
+    let quoted = format!("'{:<8}'", value.replace('\'', "''"));
+    finish_card(format!("{key:<8}= {quoted:<20}"), comment)
+}
+
+/// A real card, right-justified to column 30, with enough digits to round-trip to ~1e-13.
+pub fn card_real(key: &str, value: f64, comment: &str) -> String {
+    let text = if value.fract() == 0.0 && value.abs() < 1e9 {
+        format!("{value:.1}")
+    } else {
+        // 14 significant digits fit in 20 columns for exponents of up to two digits.
+        (8..=13)
+            .rev()
+            .map(|digits| format!("{value:.digits$E}"))
+            .find(|s| s.len() <= 20)
+            .unwrap_or_else(|| format!("{value:.6E}"))
+    };
+    card_raw(key, &text, comment)
+}
+
+/// A COMMENT card (text past column 80 cut).
+pub fn card_comment(text: &str) -> String {
+    finish_card(format!("COMMENT {text}"), "")
+}
+
+/// The END card.
+pub fn card_end() -> String {
+    format!("{:<80}", "END")
+}
+
+/// A card with its comment, cut or padded to 80 columns (by characters: a non-ASCII comment
+/// cannot split a character).
+fn finish_card(mut card: String, comment: &str) -> String {
+    if !comment.is_empty() {
+        card.push_str(" / ");
+        card.push_str(comment);
+    }
+    format!("{card:<80.80}")
 }
 
 /// A FITS file of one 16-bit image (BITPIX 16 with BZERO 32768, so the values are u16) with
@@ -84,7 +133,7 @@ pub fn encode_u16(width: u32, height: u32, pixels: &[u16], cards: &[String]) -> 
             .filter(|c| !structural(c))
             .map(|c| format!("{c:<80.80}")),
     );
-    head.push(format!("{:<80}", "END"));
+    head.push(card_end());
     let mut out: Vec<u8> = head.iter().flat_map(|c| c.bytes()).collect();
     out.resize(out.len().div_ceil(BLOCK) * BLOCK, b' ');
     for &v in pixels {

@@ -33,6 +33,7 @@
 //! camera may want to cache headers' SIP part if that ever matters.
 
 use crate::camera::Camera;
+use crate::fits::{card_comment, card_raw, card_real, card_str};
 use anyhow::{Context, Result, ensure};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use std::path::Path;
@@ -117,7 +118,7 @@ pub fn wcs_header(camera: &Camera, r: &Matrix3<f64>) -> Vec<String> {
     cards.push(card_comment(
         "WCS by gpustar. Pixel (1,1) = centre of the top-left pixel of the file.",
     ));
-    cards.push(format!("{:<80}", "END"));
+    cards.push(crate::fits::card_end());
     cards
 }
 
@@ -418,47 +419,6 @@ fn powers(x: f64, order: usize) -> Vec<f64> {
     std::iter::successors(Some(1.0), |p| Some(p * x))
         .take(order + 1)
         .collect()
-}
-
-/// A card with a value already formatted (logical, integer): right-justified to column 30.
-fn card_raw(key: &str, value: &str, comment: &str) -> String {
-    finish_card(format!("{key:<8}= {value:>20}"), comment)
-}
-
-/// A string card: quoted from column 11, padded to at least 8 characters (fixed format).
-fn card_str(key: &str, value: &str, comment: &str) -> String {
-    let quoted = format!("'{:<8}'", value.replace('\'', "''"));
-    finish_card(format!("{key:<8}= {quoted:<20}"), comment)
-}
-
-/// A real card, right-justified to column 30, with enough digits to round-trip to ~1e-13.
-fn card_real(key: &str, value: f64, comment: &str) -> String {
-    let text = if value.fract() == 0.0 && value.abs() < 1e9 {
-        format!("{value:.1}")
-    } else {
-        // 14 significant digits fit in 20 columns for exponents of up to two digits.
-        (8..=13)
-            .rev()
-            .map(|digits| format!("{value:.digits$E}"))
-            .find(|s| s.len() <= 20)
-            .unwrap_or_else(|| format!("{value:.6E}"))
-    };
-    card_raw(key, &text, comment)
-}
-
-fn finish_card(mut card: String, comment: &str) -> String {
-    if !comment.is_empty() {
-        card.push_str(" / ");
-        card.push_str(comment);
-    }
-    card.truncate(80);
-    format!("{card:<80}")
-}
-
-fn card_comment(text: &str) -> String {
-    let mut card = format!("COMMENT {text}");
-    card.truncate(80);
-    format!("{card:<80}")
 }
 
 #[cfg(test)]
