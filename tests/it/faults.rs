@@ -5,31 +5,11 @@
 
 use crate::common;
 
-use common::gpustar;
+use common::{gpustar, kill_until_done, simulate};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-/// `n` simulated 256² frames of 18° (fast to solve) in `dir`.
-fn simulate(dir: &Path, n: usize) {
-    let out = gpustar()
-        .args([
-            "simulate",
-            "--out",
-            dir.to_str().unwrap(),
-            "-n",
-            &n.to_string(),
-        ])
-        .args(["--fov-deg", "18", "--size", "256x256", "--seed", "9"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 fn batch(dir: &Path, out: &Path, more: &[&str]) -> Command {
     let mut c = gpustar();
@@ -104,7 +84,7 @@ fn set(n: usize) -> Set {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path().to_path_buf();
     let dir = root.join("frames");
-    simulate(&dir, n);
+    common::simulate_small(&dir, n);
     Set {
         _tmp: tmp,
         root,
@@ -215,7 +195,7 @@ fn a_second_writer_on_the_same_output_is_refused() {
     drop(held);
     // Two real processes at once: one refuses or finds nothing left; no record twice.
     let frames = s.root.join("more");
-    simulate(&frames, 150);
+    common::simulate_small(&frames, 150);
     let out2 = s.root.join("r2.jsonl");
     let spawn = || {
         batch(&frames, &out2, &["--resume", "-j", "1"])
@@ -359,6 +339,35 @@ fn a_stop_request_ends_the_run_in_seconds_whatever_a_frame_is_doing() {
     );
 }
 
+/// `batch DIR -r --sequence` on the CPU with DIR's camera file, into `out`.
+fn sequence_batch(dir: &Path, out: &Path, more: &[&str]) -> Command {
+    let camera = dir.join("camera.toml");
+    let mut c = gpustar();
+    c.args([
+        "batch",
+        dir.to_str().unwrap(),
+        "-r",
+        "--sequence",
+        "--backend",
+        "cpu",
+    ])
+    .args([
+        "--camera",
+        camera.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ])
+    .args(more);
+    c
+}
+
+/// `n` simulated 512² streak frames of 12° (FITS with times and a station) in `dir`.
+fn streak_set(dir: &Path, n: usize) {
+    let n = n.to_string();
+    let size = ["--size", "512x512", "--fov-deg", "12", "--mag-limit", "7.5"];
+    simulate(dir, &[&["--streaks", "-n", &n][..], &size].concat());
+}
+
 /// A FITS file of one BITPIX −32 image with these cards.
 fn fits_f32(w: u32, h: u32, pixels: &[f32], cards: &[String]) -> Vec<u8> {
     let card = gpustar::fits::card;
@@ -432,19 +441,7 @@ fn implausible_epochs_and_float_sentinels_do_not_cost_the_solution() {
 fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sim");
-    let o = gpustar()
-        .args([
-            "simulate",
-            "--streaks",
-            "--out",
-            dir.to_str().unwrap(),
-            "-n",
-            "3",
-        ])
-        .args(["--size", "512x512", "--fov-deg", "12", "--mag-limit", "7.5"])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    streak_set(&dir, 3);
     let card = gpustar::fits::card;
     let q = |v: &str| format!("'{v}'");
     let station = [
@@ -546,32 +543,11 @@ fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
 fn a_resumed_sequence_gives_the_uninterrupted_run_s_records() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sim");
-    let o = gpustar()
-        .args(["simulate", "--sequence", "--sequences", "2", "-n", "12"])
-        .args(["--seed", "5", "--out", dir.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let camera = dir.join("camera.toml");
-    let seq = |out: &Path, more: &[&str]| {
-        let mut c = gpustar();
-        c.args([
-            "batch",
-            dir.to_str().unwrap(),
-            "-r",
-            "--sequence",
-            "--backend",
-            "cpu",
-        ])
-        .args([
-            "--camera",
-            camera.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ])
-        .args(more);
-        run(c, 120)
-    };
+    simulate(
+        &dir,
+        &["--sequence", "--sequences", "2", "-n", "12", "--seed", "5"],
+    );
+    let seq = |out: &Path, more: &[&str]| run(sequence_batch(&dir, out, more), 120);
     let clean = tmp.path().join("clean.jsonl");
     assert!(seq(&clean, &[]).status.success());
     let whole = std::fs::read_to_string(&clean).unwrap();
@@ -738,19 +714,7 @@ fn frames_of_another_size_are_refused_before_decoding() {
 fn a_resumed_run_exports_the_whole_file_s_streaks() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sim");
-    let o = gpustar()
-        .args([
-            "simulate",
-            "--streaks",
-            "--out",
-            dir.to_str().unwrap(),
-            "-n",
-            "4",
-        ])
-        .args(["--size", "512x512", "--fov-deg", "12", "--mag-limit", "7.5"])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    streak_set(&dir, 4);
     let camera = dir.join("camera.toml");
     let files = |tag: &str| {
         let p = |ext: &str| tmp.path().join(format!("{tag}.{ext}"));
@@ -817,61 +781,17 @@ fn a_resumed_run_exports_the_whole_file_s_streaks() {
 fn sigkill_during_sequences_then_resume_gives_the_uninterrupted_records() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sim");
-    let o = gpustar()
-        .args(["simulate", "--sequence", "--sequences", "3", "-n", "20"])
-        .args(["--seed", "11", "--out", dir.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let camera = dir.join("camera.toml");
-    let seq = |out: &Path| {
-        let mut c = gpustar();
-        c.args([
-            "batch",
-            dir.to_str().unwrap(),
-            "-r",
-            "--sequence",
-            "--backend",
-            "cpu",
-            "-q",
-        ])
-        .args([
-            "--camera",
-            camera.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ])
-        .args(["--resume", "-j", "1"]);
-        c
-    };
+    simulate(
+        &dir,
+        &["--sequence", "--sequences", "3", "-n", "20", "--seed", "11"],
+    );
+    let seq = |out: &Path| sequence_batch(&dir, out, &["-q", "--resume", "-j", "1"]);
     let clean = tmp.path().join("clean.jsonl");
     let t0 = Instant::now();
     assert!(run(seq(&clean), 120).status.success());
     let full = t0.elapsed().as_secs_f64();
     let out = tmp.path().join("killed.jsonl");
-    let mut seed = 0x9E3779B9u32;
-    let (mut kills, mut finished) = (0, false);
-    while !finished {
-        assert!(kills < 60, "the run never finished");
-        let mut child = seq(&out).spawn().unwrap();
-        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
-        let wait = full * (0.1 + 0.5 * f64::from(seed >> 8) / f64::from(1u32 << 24));
-        let start = Instant::now();
-        loop {
-            if let Some(status) = child.try_wait().unwrap() {
-                assert!(status.success(), "a resumed run failed: {status}");
-                finished = true;
-                break;
-            }
-            if start.elapsed().as_secs_f64() >= wait {
-                child.kill().unwrap(); // SIGKILL
-                child.wait().unwrap();
-                kills += 1;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-    }
+    let kills = kill_until_done(|| seq(&out).spawn().unwrap(), full, (0.1, 0.6), 0x9E3779B9);
     println!("sequences: {kills} kills before the run finished");
     assert!(
         kills >= 3,

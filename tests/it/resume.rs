@@ -4,29 +4,10 @@
 
 use crate::common;
 
-use common::gpustar;
+use common::{gpustar, kill_until_done};
 use serde_json::Value;
 use std::path::Path;
 use std::time::{Duration, Instant};
-
-fn simulate(dir: &Path, n: usize) {
-    let out = gpustar()
-        .args([
-            "simulate",
-            "--out",
-            dir.to_str().unwrap(),
-            "-n",
-            &n.to_string(),
-        ])
-        .args(["--fov-deg", "18", "--size", "256x256", "--seed", "9"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 fn batch_args(dir: &Path, out: &Path) -> Vec<String> {
     [
@@ -73,7 +54,7 @@ fn records(path: &Path) -> Vec<(String, String)> {
 fn sigkill_at_random_moments_then_resume_gives_every_record_exactly_once() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("frames");
-    simulate(&dir, 600);
+    common::simulate_small(&dir, 600);
     let clean = tmp.path().join("clean.jsonl");
     let t_clean = Instant::now();
     assert!(
@@ -87,36 +68,14 @@ fn sigkill_at_random_moments_then_resume_gives_every_record_exactly_once() {
     let out = tmp.path().join("killed.jsonl");
     let mut args = batch_args(&dir, &out);
     args.push("--resume".into());
-    // A fixed pseudo-random sequence of kill times between 5 % and 45 % of an uninterrupted
-    // run (records are flushed every 64 records or 250 ms).
-    let mut seed = 0x2545F491u32;
-    let (mut kills, mut finished) = (0, false);
-    let t0 = Instant::now();
-    while !finished {
-        assert!(
-            t0.elapsed() < Duration::from_secs(300),
-            "the run never finished"
-        );
-        let mut child = gpustar().args(&args).spawn().unwrap();
-        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
-        let wait =
-            Duration::from_secs_f64(full * (0.05 + 0.4 * (seed >> 8) as f64 / (1u32 << 24) as f64));
-        let start = Instant::now();
-        loop {
-            if let Some(status) = child.try_wait().unwrap() {
-                assert!(status.success(), "a resumed run failed: {status}");
-                finished = true;
-                break;
-            }
-            if start.elapsed() >= wait {
-                child.kill().unwrap(); // SIGKILL
-                child.wait().unwrap();
-                kills += 1;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-    }
+    // Kill times between 5 % and 45 % of an uninterrupted run (records are flushed every 64
+    // records or 250 ms).
+    let kills = kill_until_done(
+        || gpustar().args(&args).spawn().unwrap(),
+        full,
+        (0.05, 0.45),
+        0x2545F491,
+    );
     println!("{kills} kills before the run finished");
     assert!(
         kills >= 3,
@@ -131,7 +90,7 @@ fn sigkill_at_random_moments_then_resume_gives_every_record_exactly_once() {
 fn resume_cuts_a_torn_last_line_and_skips_recorded_inputs() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("frames");
-    simulate(&dir, 6);
+    common::simulate_small(&dir, 6);
     let out = tmp.path().join("out.jsonl");
     assert!(
         gpustar()
@@ -168,7 +127,7 @@ fn resume_cuts_a_torn_last_line_and_skips_recorded_inputs() {
 fn shards_merge_to_every_input_exactly_once() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("frames");
-    simulate(&dir, 24);
+    common::simulate_small(&dir, 24);
     let mut parts = Vec::new();
     for k in 0..3 {
         let part = tmp.path().join(format!("part-{k}.jsonl"));
@@ -244,7 +203,7 @@ fn shards_merge_to_every_input_exactly_once() {
 fn ctrl_c_stops_cleanly_with_complete_records_and_exit_130() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("frames");
-    simulate(&dir, 400);
+    common::simulate_small(&dir, 400);
     let out = tmp.path().join("out.jsonl");
     let mut child = gpustar().args(batch_args(&dir, &out)).spawn().unwrap();
     // Wait until some records are out, then interrupt as Ctrl-C does.

@@ -324,3 +324,72 @@ pub fn assert_records_match(a: &serde_json::Value, b: &serde_json::Value) {
     }
     walk("record", "", a, b);
 }
+
+/// `gpustar simulate --out DIR ARGS…`, which must succeed.
+pub fn simulate(dir: &std::path::Path, args: &[&str]) {
+    let out = gpustar()
+        .args(["simulate", "--out", dir.to_str().unwrap()])
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "simulate {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// `n` simulated 256² frames of 18° (fast to solve) in `dir`.
+pub fn simulate_small(dir: &std::path::Path, n: usize) {
+    let n = n.to_string();
+    simulate(
+        dir,
+        &[
+            "-n",
+            &n,
+            "--fov-deg",
+            "18",
+            "--size",
+            "256x256",
+            "--seed",
+            "9",
+        ],
+    );
+}
+
+/// Start runs with `spawn` and SIGKILL each at a pseudo-random moment between `from` and `to`
+/// of `full_s` (an uninterrupted run's seconds), until one finishes by itself (it must
+/// succeed); returns how many were killed. `seed` fixes the moments.
+pub fn kill_until_done(
+    mut spawn: impl FnMut() -> std::process::Child,
+    full_s: f64,
+    (from, to): (f64, f64),
+    mut seed: u32,
+) -> usize {
+    use std::time::{Duration, Instant};
+    let t0 = Instant::now();
+    let mut kills = 0;
+    loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(300) && kills < 100,
+            "the run never finished ({kills} kills)"
+        );
+        let mut child = spawn();
+        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+        let wait = full_s * (from + (to - from) * f64::from(seed >> 8) / f64::from(1u32 << 24));
+        let start = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                assert!(status.success(), "a resumed run failed: {status}");
+                return kills;
+            }
+            if start.elapsed().as_secs_f64() >= wait {
+                child.kill().unwrap(); // SIGKILL
+                child.wait().unwrap();
+                kills += 1;
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+}
