@@ -38,14 +38,16 @@ pub const FLUSH_RECORDS: usize = 64;
 pub struct RunSummary {
     pub counts: Counts,
     pub seconds: f64,
-    /// Stopped early by an interrupt (Ctrl-C): inputs after the last record have none.
+    /// Stopped early by an interrupt (Ctrl-C, SIGTERM): inputs after the last record have none.
     pub interrupted: bool,
     /// Stopped early because the records could not be written (a full disk): why. The file
     /// holds whole lines up to the failure (`--resume` cuts a torn one).
     pub write_error: Option<String>,
 }
 
-/// Process `inputs` and write one record per input, in order, until done or `stop` is set.
+/// Process `inputs` and write one record per input, in order, until done or `stop` is set
+/// (then no input is started; those in flight are written when they finish). Inputs marked
+/// `replay` are processed for their sequence's state, their records not written.
 /// `on_record` sees every record as it is written (progress).
 pub fn run(
     inputs: Vec<Input>,
