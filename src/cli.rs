@@ -165,7 +165,8 @@ pub struct BatchOpts {
     /// Skip inputs that already have a complete record in --output and append the rest (an
     /// incomplete last line, left by a crash, is cut off first). A file that is not gpustar
     /// output of this --format is refused untouched. Error records already there count in the
-    /// exit status.
+    /// exit status. An unfinished --sequence is tracked again from its first frame (its records
+    /// not written twice), so the records that follow are an uninterrupted run's.
     #[arg(long, requires = "output")]
     pub resume: bool,
     /// With --resume: take the error records out of --output and try their inputs again.

@@ -775,7 +775,7 @@ fn a_resumed_run_exports_the_whole_file_s_streaks() {
     }
 }
 
-/// kill -9 at pseudo-random moments of a `--sequence` run, each time resumed: the file ends
+/// kill -9 at pseudo-random moments of a `--sequence` run (3 sequences of 50), each time resumed: the file ends
 /// with every input once and the records of an uninterrupted run (tracking state included).
 #[test]
 fn sigkill_during_sequences_then_resume_gives_the_uninterrupted_records() {
@@ -783,15 +783,20 @@ fn sigkill_during_sequences_then_resume_gives_the_uninterrupted_records() {
     let dir = tmp.path().join("sim");
     simulate(
         &dir,
-        &["--sequence", "--sequences", "3", "-n", "20", "--seed", "11"],
+        &["--sequence", "--sequences", "3", "-n", "50", "--seed", "11"],
     );
     let seq = |out: &Path| sequence_batch(&dir, out, &["-q", "--resume", "-j", "1"]);
     let clean = tmp.path().join("clean.jsonl");
-    let t0 = Instant::now();
     assert!(run(seq(&clean), 120).status.success());
-    let full = t0.elapsed().as_secs_f64();
     let out = tmp.path().join("killed.jsonl");
-    let kills = kill_until_done(|| seq(&out).spawn().unwrap(), full, (0.1, 0.6), 0x9E3779B9);
+    let full = std::fs::metadata(&clean).unwrap().len();
+    let kills = kill_until_done(
+        || seq(&out).spawn().unwrap(),
+        &out,
+        full,
+        (0.05, 0.3),
+        0x9E3779B9,
+    );
     println!("sequences: {kills} kills before the run finished");
     assert!(
         kills >= 3,

@@ -357,16 +357,21 @@ pub fn simulate_small(dir: &std::path::Path, n: usize) {
     );
 }
 
-/// Start runs with `spawn` and SIGKILL each at a pseudo-random moment between `from` and `to`
-/// of `full_s` (an uninterrupted run's seconds), until one finishes by itself (it must
-/// succeed); returns how many were killed. `seed` fixes the moments.
+/// Start runs with `spawn` and SIGKILL each at a pseudo-random moment, until one finishes by
+/// itself (it must succeed); returns how many were killed. A run is killed once its output
+/// `out` has grown by a share between `from` and `to` of what is left to write (`full_bytes`
+/// is an uninterrupted run's size), then 0–50 ms later, so that kills fall anywhere between
+/// flushes and every attempt makes progress whatever the machine's speed or load. `seed`
+/// fixes the shares and delays.
 pub fn kill_until_done(
     mut spawn: impl FnMut() -> std::process::Child,
-    full_s: f64,
+    out: &std::path::Path,
+    full_bytes: u64,
     (from, to): (f64, f64),
     mut seed: u32,
 ) -> usize {
     use std::time::{Duration, Instant};
+    let size = || std::fs::metadata(out).map_or(0, |m| m.len());
     let t0 = Instant::now();
     let mut kills = 0;
     loop {
@@ -374,16 +379,24 @@ pub fn kill_until_done(
             t0.elapsed() < Duration::from_secs(300) && kills < 100,
             "the run never finished ({kills} kills)"
         );
+        let mut next = || {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            f64::from(seed >> 8) / f64::from(1u32 << 24)
+        };
+        let (share, delay) = (from + (to - from) * next(), 0.05 * next());
+        let start_size = size();
+        let target = start_size + (share * full_bytes.saturating_sub(start_size) as f64) as u64;
         let mut child = spawn();
-        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
-        let wait = full_s * (from + (to - from) * f64::from(seed >> 8) / f64::from(1u32 << 24));
-        let start = Instant::now();
+        let mut reached: Option<Instant> = None;
         loop {
             if let Some(status) = child.try_wait().unwrap() {
                 assert!(status.success(), "a resumed run failed: {status}");
                 return kills;
             }
-            if start.elapsed().as_secs_f64() >= wait {
+            if reached.is_none() && size() > target.max(start_size) {
+                reached = Some(Instant::now());
+            }
+            if reached.is_some_and(|r| r.elapsed().as_secs_f64() >= delay) {
                 child.kill().unwrap(); // SIGKILL
                 child.wait().unwrap();
                 kills += 1;
