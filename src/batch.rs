@@ -1,6 +1,9 @@
 //! Solving many frames: the solvers per frame size (shared by worker threads), the CPU path
 //! (one frame at a time, on any thread) and the GPU path (batches of frames on the thread
 //! that owns the GPU context). `run` streams a directory through them.
+//!
+//! Size: about 830 lines: the CPU and GPU paths are kept side by side so that they build the
+//! same records; issue 23's layout step separates the GPU batch runner.
 
 use crate::camera::Camera;
 use crate::catalog::Catalog;
@@ -87,15 +90,6 @@ pub struct Detected {
     pub backend: String,
 }
 
-/// The error of a frame whose size is not the camera file's.
-fn wrong_size(width: u32, height: u32, c: &Camera) -> String {
-    format!(
-        "image is {width}x{height} but the camera file says {}x{}: pass the camera of this \
-         image (--camera FILE), or --fov-deg",
-        c.width, c.height
-    )
-}
-
 /// A frame read from its file (or why it could not be).
 pub struct Decoded {
     pub name: String,
@@ -133,26 +127,11 @@ impl Solvers {
             }
         }
         let t0 = Instant::now();
-        // A frame of another size than the camera file's is refused from its header, before
-        // its pixels take memory (a 30000² PNG is 0.9 MB on disk, 1.8 GB decoded).
-        if let CameraSource::Fixed(c) = &self.camera
-            && std::fs::metadata(path).is_ok_and(|m| m.is_file())
-            && let Ok((w, h)) = image::image_dimensions(path)
-            && (w, h) != (c.width, c.height)
-            // Beyond the decoder's limits its own refusal says more.
-            && w.max(h) <= crate::frame::MAX_SIDE
-        {
-            return Decoded {
-                name: name.to_string(),
-                path: path.to_path_buf(),
-                epoch: None,
-                keywords: Default::default(),
-                warnings: Vec::new(),
-                frame: Err(wrong_size(w, h, c)),
-                decode_ms: t0.elapsed().as_secs_f64() * 1e3,
-            };
-        }
-        let (frame, info) = match Frame::read_info(path) {
+        let expect = match &self.camera {
+            CameraSource::Fixed(c) => Some((c.width, c.height)),
+            _ => None,
+        };
+        let (frame, info) = match Frame::read_info_sized(path, expect) {
             Ok((f, info)) => (self.darks.apply(path, f), info),
             Err(e) => (Err(format!("{e:#}")), Default::default()),
         };
@@ -234,7 +213,7 @@ impl Solvers {
         let camera = match &self.camera {
             CameraSource::Fixed(c) => {
                 if (c.width, c.height) != (width, height) {
-                    return Err(wrong_size(width, height, c));
+                    return Err(crate::frame::wrong_size(width, height, (c.width, c.height)));
                 }
                 c.clone()
             }

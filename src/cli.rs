@@ -1,4 +1,8 @@
 //! The command line (clap derive). `main` calls [`run`].
+//!
+//! Size: about 1,500 lines because it holds every command (argument types, the solve driver,
+//! `info`, `merge`, the calibration loop). Issue 23's layout step splits it into `cli/`, one
+//! file per command; until then its sections follow the commands' order in [`Command`].
 
 use crate::batch::{Backend, BackendChoice, BackendNote, CameraSource, Pipeline, Solvers};
 use crate::camera::Camera;
@@ -881,8 +885,8 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
             // The exports are written whole at the end: they take the streaks of the records
             // already in the file too, or a resumed run's TDM would hold only its own part.
             if b.resume && exports.wanted() {
-                for r in output::previous_records(p, o.format)? {
-                    exports.add(&r);
+                for r in &prev.streaks {
+                    exports.add(r);
                 }
             }
             errors_before = prev.errors;

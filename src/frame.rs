@@ -40,7 +40,7 @@ pub fn is_image_path(path: &Path) -> bool {
 
 /// Largest frame accepted, in pixels per side, and its decoder memory budget: a header that
 /// claims more is refused before anything is allocated.
-pub(crate) const MAX_SIDE: u32 = 32768;
+const MAX_SIDE: u32 = 32768;
 const MAX_ALLOC: u64 = 2 << 30;
 
 impl Frame {
@@ -63,6 +63,13 @@ impl Frame {
 
     /// Decode an image file, with what its header says ([`FileInfo`]).
     pub fn read_info(path: &Path) -> Result<(Frame, FileInfo)> {
+        Frame::read_info_sized(path, None)
+    }
+
+    /// [`Frame::read_info`] for frames that must be `expect` (width, height) pixels, a camera
+    /// file's size: a PNG, JPEG or TIFF of another size is refused from its header, before its
+    /// pixels take memory (a 30000² PNG is 0.9 MB on disk, 1.8 GB decoded).
+    pub fn read_info_sized(path: &Path, expect: Option<(u32, u32)>) -> Result<(Frame, FileInfo)> {
         let shown = path.display().to_string();
         // Follows links: a dangling or looping one fails here, with where it leads.
         let meta = std::fs::metadata(path).map_err(|e| match std::fs::read_link(path) {
@@ -99,7 +106,7 @@ impl Frame {
             bail!("cannot decode {shown}: not a FITS file (it does not start with SIMPLE  =)");
         }
         if reader.format() == Some(ImageFormat::Png)
-            && let Some(frame) = read_grey_png(path, &shown, meta.len())?
+            && let Some(frame) = read_grey_png(path, &shown, meta.len(), expect)?
         {
             return Ok((frame, FileInfo::default()));
         }
@@ -115,9 +122,10 @@ impl Frame {
             decode(
                 ImageReader::with_format(Cursor::new(bytes), ImageFormat::Jpeg),
                 &shown,
+                expect,
             )?
         } else {
-            decode(reader, &shown)?
+            decode(reader, &shown, expect)?
         };
         Ok((Frame::from_image(img)?, FileInfo::default()))
     }
@@ -186,7 +194,12 @@ fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, FileInfo
 /// Grey PNGs (the usual star-tracker frame) straight through the png crate, a fifth faster
 /// than through `image`; None for other PNGs (colour, palette, low bit depths), which take the
 /// general path. The same size and memory limits apply.
-fn read_grey_png(path: &Path, shown: &str, file_len: u64) -> Result<Option<Frame>> {
+fn read_grey_png(
+    path: &Path,
+    shown: &str,
+    file_len: u64,
+    expect: Option<(u32, u32)>,
+) -> Result<Option<Frame>> {
     // Read whole (one system call; a fifth faster than through a BufReader) unless huge.
     if file_len > 256 << 20 {
         return Ok(None);
@@ -204,6 +217,7 @@ fn read_grey_png(path: &Path, shown: &str, file_len: u64) -> Result<Option<Frame
     };
     let info = reader.info();
     let (w, h) = (info.width, info.height);
+    check_size(w, h, expect)?;
     let grey = info.color_type == png::ColorType::Grayscale;
     let depth = info.bit_depth;
     if !grey
@@ -251,9 +265,31 @@ fn read_grey_png(path: &Path, shown: &str, file_len: u64) -> Result<Option<Frame
     }))
 }
 
+/// The error of a frame of `width`×`height` where the camera file says `expect`.
+pub fn wrong_size(width: u32, height: u32, expect: (u32, u32)) -> String {
+    format!(
+        "image is {width}x{height} but the camera file says {}x{}: pass the camera of this \
+         image (--camera FILE), or --fov-deg",
+        expect.0, expect.1
+    )
+}
+
+/// Refuse a header's size that is not `expect` (one beyond the decoders' limits is left to
+/// their own refusal, which says more).
+fn check_size(w: u32, h: u32, expect: Option<(u32, u32)>) -> Result<()> {
+    match expect {
+        Some(e) if (w, h) != e && w.max(h) <= MAX_SIDE => bail!("{}", wrong_size(w, h, e)),
+        _ => Ok(()),
+    }
+}
+
 /// Decode with limits: the header is read first, and an image larger than gpustar reads, or
 /// one whose pixels do not fit in memory, is refused before its buffer is allocated.
-fn decode<R: BufRead + Seek>(mut reader: ImageReader<R>, shown: &str) -> Result<DynamicImage> {
+fn decode<R: BufRead + Seek>(
+    mut reader: ImageReader<R>,
+    shown: &str,
+    expect: Option<(u32, u32)>,
+) -> Result<DynamicImage> {
     // No side limit here: the header is read, so the refusal below can give the size.
     let mut limits = Limits::default();
     limits.max_alloc = Some(MAX_ALLOC);
@@ -269,6 +305,7 @@ fn decode<R: BufRead + Seek>(mut reader: ImageReader<R>, shown: &str) -> Result<
             MAX_ALLOC >> 20
         );
     }
+    check_size(w, h, expect)?;
     // The decoder allocates its buffer with no way to fail but aborting the process: ask
     // first whether the memory is there, with room for the frame of u16 pixels, so that a
     // shortage is this file's error and the run goes on.

@@ -193,6 +193,9 @@ pub struct Previous {
     pub truncated: u64,
     /// The file already has a CSV header.
     pub has_header: bool,
+    /// The records kept in the file that have streaks, as their file and streaks only: a
+    /// resumed run's `--tdm`/`--iod` are written whole at its end and cover them too.
+    pub streaks: Vec<Record>,
 }
 
 /// One complete line (JSON Lines) or record (CSV) of an earlier output.
@@ -202,6 +205,8 @@ struct Line {
     /// The input it is the record of; None for the CSV header.
     file: Option<String>,
     error: bool,
+    /// Its streaks (`--streaks` runs), for the exports of a resumed run.
+    streaks: Option<Vec<crate::record::StreakRecord>>,
 }
 
 /// An output file opened for a run: locked against a second writer for as long as it is
@@ -289,7 +294,7 @@ pub fn open_output(
             previous: Previous::default(),
         });
     }
-    let (lines, complete) = parse_lines(&bytes, format, path)?;
+    let (mut lines, complete) = parse_lines(&bytes, format, path)?;
     let tail = &bytes[complete..];
     if !tail.is_empty() && lines.is_empty() && !looks_like_output(tail) {
         bail!(
@@ -302,12 +307,17 @@ pub fn open_output(
         has_header: lines.iter().any(|l| l.file.is_none()),
         ..Previous::default()
     };
-    for l in &lines {
+    for l in &mut lines {
         match &l.file {
             Some(_) if l.error && retry_errors => previous.retried += 1,
             Some(name) => {
                 previous.errors += usize::from(l.error);
                 previous.done.insert(name.clone());
+                if let Some(streaks) = l.streaks.take().filter(|s| !s.is_empty()) {
+                    let mut r = Record::empty(name, "");
+                    r.streaks = Some(streaks);
+                    previous.streaks.push(r);
+                }
             }
             None => {}
         }
@@ -347,32 +357,6 @@ pub fn open_output(
     }
     file.seek(std::io::SeekFrom::End(0))?;
     Ok(Output { file, previous })
-}
-
-/// The records an output file of `format` holds (its complete lines), for the exports of a
-/// resumed run to cover the whole file. CSV rows give the file and its streaks only (the
-/// columns the exports read).
-pub fn previous_records(path: &Path, format: Format) -> Result<Vec<Record>> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let (lines, _) = parse_lines(&bytes, format, path)?;
-    let column = CSV_HEADER.split(',').position(|c| c == "streaks");
-    let mut out = Vec::new();
-    for l in lines.iter().filter(|l| l.file.is_some()) {
-        let text = String::from_utf8_lossy(&bytes[l.range.start..l.range.end - 1]);
-        match format {
-            Format::Jsonl => out.push(serde_json::from_str(&text)?),
-            Format::Csv => {
-                let fields = csv_fields(&text).unwrap_or_default();
-                let mut r = Record::empty(&fields[0], "");
-                r.streaks = column
-                    .and_then(|c| fields.get(c))
-                    .filter(|s| !s.is_empty())
-                    .and_then(|s| serde_json::from_str(s).ok());
-                out.push(r);
-            }
-        }
-    }
-    Ok(out)
 }
 
 /// Hold `file`'s exclusive lock (advisory, released when the file is closed), or say who
@@ -417,22 +401,28 @@ fn parse_lines(bytes: &[u8], format: Format, path: &Path) -> Result<(Vec<Line>, 
     };
     let mut lines = Vec::with_capacity(ends.len());
     let mut start = 0;
-    let mut columns = 0;
+    // CSV: the header's column count, and where its streaks column is (if it has one).
+    let (mut columns, mut streaks_at) = (0, None);
     for (n, end) in ends.into_iter().enumerate() {
         let text = std::str::from_utf8(&bytes[start..end]).ok();
         let parsed = text.and_then(|text| match format {
             Format::Jsonl => serde_json::from_str::<Record>(text)
                 .ok()
-                .map(|r| (Some(r.file), r.status == Status::Error)),
+                .map(|r| (Some(r.file), r.status == Status::Error, r.streaks)),
             Format::Csv if n == 0 => {
                 columns = text.split(',').count();
-                is_csv_header(text).then_some((None, false))
+                streaks_at = text.split(',').position(|c| c == "streaks");
+                is_csv_header(text).then_some((None, false, None))
             }
-            Format::Csv => csv_fields(text)
-                .filter(|f| f.len() == columns)
-                .map(|f| (Some(f[0].clone()), f[1] == "error")),
+            Format::Csv => csv_fields(text).filter(|f| f.len() == columns).map(|f| {
+                let streaks = streaks_at
+                    .and_then(|c| f.get(c))
+                    .filter(|s| !s.is_empty())
+                    .and_then(|s| serde_json::from_str(s).ok());
+                (Some(f[0].clone()), f[1] == "error", streaks)
+            }),
         });
-        let Some((file, error)) = parsed else {
+        let Some((file, error, streaks)) = parsed else {
             let text = String::from_utf8_lossy(&bytes[start..end]);
             let what = if n == 0 && format == Format::Csv {
                 "the CSV header"
@@ -449,6 +439,7 @@ fn parse_lines(bytes: &[u8], format: Format, path: &Path) -> Result<(Vec<Line>, 
             range: start..end + 1,
             file,
             error,
+            streaks,
         });
         start = end + 1;
     }

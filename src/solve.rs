@@ -1,5 +1,9 @@
 //! The lost-in-space pipeline for one frame: detect → vote → select → verify → attitude →
 //! refine → accept, producing one result record.
+//!
+//! Size: about 1,050 lines: the solver's set-up (catalog selection, tables, scale bands) and
+//! the identification passes and retries that share its state; issue 23's layout step puts the
+//! passes in a `pipeline/` folder of their own.
 
 use crate::attitude::{pointing, wahba};
 use crate::camera::Camera;

@@ -1,5 +1,9 @@
 //! Streak astrometry in the two formats orbit-determination users read.
 //!
+//! Size: the writers are about 500 lines; the TDM and IOD parsers (about 600, used by the tests
+//! to read back what gpustar writes, as stvid and sattools read it) and this file's own UTC
+//! type move out with issue 23's single time type.
+//!
 //! * CCSDS Tracking Data Message (503.0-B-2), KVN: the agency and SST standard (ESA,
 //!   GSOC SMARTnet, APPARILLO). One RADEC segment per track, then an AZEL segment when
 //!   every observation of the track has a station azimuth/elevation.

@@ -1,6 +1,10 @@
 //! Streak-end astrometry: exposure times (UTC) and the observing station from FITS headers,
 //! Earth orientation from the bundled IERS table, and topocentric Az/El.
 //!
+//! Size: about 950 lines of code (time scales and header times, stations, Earth orientation,
+//! Az/El), all used by streaks and sequences; issue 23's layout step makes it `sky/`, a
+//! module per topic.
+//!
 //! Time scales, leap seconds and the ICRS -> observed chain come from `sofars`, a Rust port of
 //! the IAU SOFA library; results made with it should acknowledge "IAU SOFA". Az/El is what
 //! astropy's ICRS -> AltAz gives with pressure 0 (see the tests for the agreement).
