@@ -9,9 +9,9 @@
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::cpu::centroid::Blob;
-use gpustar::detect::{self, Centroid};
-use gpustar::frame::Frame;
 use gpustar::gpu::Gpu;
+use gpustar::io::frame::Frame;
+use gpustar::solve::detect::{self, Centroid};
 use gpustar::solve::{Outcome, Settings, Solver};
 use std::path::PathBuf;
 mod common;

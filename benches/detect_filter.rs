@@ -7,8 +7,8 @@
 //! stars and hot pixels); without it, 60 frames of `gpustar simulate` (10°, Hp ≤ 6) are made
 //! in a temporary directory, whose truth has no SNR (completeness is then by magnitude).
 
-use gpustar::detect::{self, DetectSettings, Detection};
-use gpustar::frame::Frame;
+use gpustar::io::frame::Frame;
+use gpustar::solve::detect::{self, DetectSettings, Detection};
 use serde_json::Value;
 use std::path::PathBuf;
 use std::time::Instant;

@@ -9,12 +9,12 @@
 
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
-use gpustar::detect::Detection;
-use gpustar::frame::Frame;
 use gpustar::gpu::Gpu;
 use gpustar::gpu::radial::RadialJob;
 use gpustar::gpu::vote::VoteJob;
-use gpustar::radial::{self, Method};
+use gpustar::io::frame::Frame;
+use gpustar::solve::detect::Detection;
+use gpustar::solve::radial::{self, Method};
 use gpustar::solve::{Outcome, Settings, Solver};
 use std::path::PathBuf;
 mod common;
@@ -76,7 +76,7 @@ fn main() {
             let solver = Solver::new(&catalog, camera.clone(), settings).unwrap();
             let dets: Vec<Vec<Detection>> = names
                 .iter()
-                .map(|p| gpustar::detect::detect(&Frame::read(p).unwrap(), &settings.detect))
+                .map(|p| gpustar::solve::detect::detect(&Frame::read(p).unwrap(), &settings.detect))
                 .collect();
             // One warm-up (the table's pages, the epoch's catalog), then each frame once.
             if let Some(d) = dets.first() {

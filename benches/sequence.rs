@@ -8,9 +8,9 @@
 //! keeps 250 detections instead of 100). Medians of 5 runs after a warm-up; milliseconds per
 //! frame and frames/s on one thread, and how many frames each way solves.
 
-use gpustar::batch::{CameraSource, Solvers};
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
+use gpustar::pipeline::{CameraSource, Solvers};
 use gpustar::record::Status;
 use gpustar::sequence::simulate::{SequenceSim, write_set};
 use gpustar::sequence::{DETECT_STARS, Detected, SequenceOptions, Sequencer};

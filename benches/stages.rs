@@ -11,12 +11,12 @@
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::cpu;
-use gpustar::detect::{self, DetectSettings};
-use gpustar::frame::Frame;
 use gpustar::gpu::Gpu;
 use gpustar::gpu::detect::DETECT_KERNELS;
 use gpustar::gpu::vote::VoteJob;
+use gpustar::io::frame::Frame;
 use gpustar::simulate::{SimSettings, render};
+use gpustar::solve::detect::{self, DetectSettings};
 use gpustar::solve::{Settings, Solver};
 mod common;
 

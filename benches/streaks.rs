@@ -15,12 +15,12 @@ use common::median_ms;
 use gpustar::catalog::Catalog;
 use gpustar::cpu::streak_filter::{mask_runs, streak_mask};
 use gpustar::cpu::threshold::tile_stats;
-use gpustar::detect::{self, DetectSettings};
-use gpustar::frame::Frame;
 use gpustar::gpu::Gpu;
+use gpustar::io::frame::Frame;
 use gpustar::simulate::SimSettings;
+use gpustar::sky::{Station, Utc};
+use gpustar::solve::detect::{self, DetectSettings};
 use gpustar::streaks::simulate::{StreakSim, render_streaks};
-use gpustar::streaks::sky::{Station, Utc};
 use gpustar::streaks::{self, StreakSettings, segments};
 
 fn main() {

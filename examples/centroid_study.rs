@@ -1,6 +1,6 @@
 //! Centroid study (issue 16, item 3): the position error of gpustar's two centroid estimators
 //! (`--centroid cog` and `--centroid ml`), measured through the whole detection pipeline
-//! (`gpustar::detect::detect`: threshold, components, centre of gravity, then the ML fit), against
+//! (`gpustar::solve::detect::detect`: threshold, components, centre of gravity, then the ML fit), against
 //! the Cramér–Rao bound, over PSF width, SNR and sub-pixel phase.
 //!
 //!     cargo run --release --example centroid_study -- OUT.csv
@@ -35,8 +35,8 @@
 //! Each point uses FRAMES frames (289 stars each) from its own seed, so the result does not
 //! depend on the number of threads.
 
-use gpustar::detect::{Centroid, DetectSettings, Detection, detect};
-use gpustar::frame::Frame;
+use gpustar::io::frame::Frame;
+use gpustar::solve::detect::{Centroid, DetectSettings, Detection, detect};
 use nalgebra::{SMatrix, SVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

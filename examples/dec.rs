@@ -13,7 +13,7 @@ fn main() {
     );
     let t = Instant::now();
     for _ in 0..n {
-        std::hint::black_box(gpustar::frame::Frame::read(std::path::Path::new(&path)).unwrap());
+        std::hint::black_box(gpustar::io::frame::Frame::read(std::path::Path::new(&path)).unwrap());
     }
     println!(
         "Frame::read {:.2} ms",

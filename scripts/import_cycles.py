@@ -9,14 +9,20 @@ import sys
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src")
 LAYERS = [
-    ["record", "camera", "catalog", "table"],
-    ["cpu", "fits", "wcs", "frame", "dark", "inputs"],
-    ["detect", "identify", "triangle", "radial", "attitude", "refine"],
-    ["gpu"],
+    ["error", "camera", "record"],
+    ["catalog"],
+    ["cpu"],
+    ["io"],
+    ["sky"],
     ["solve"],
-    ["simulate", "evaluate", "calibrate"],
-    ["batch", "output", "streaks", "sequence", "products", "annotate"],
-    ["run"],
+    ["gpu"],
+    ["simulate"],
+    ["streaks"],
+    ["products"],
+    ["pipeline"],
+    ["sequence"],
+    ["batch"],
+    ["calibrate"],
     ["cli"],
     ["lib", "main", "fuzz"],
 ]

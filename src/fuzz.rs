@@ -9,7 +9,7 @@
 //! holds; record names escape reversibly. `GPUSTAR_FUZZ_SCALE=N cargo test --lib fuzz --
 //! --nocapture` searches N times longer and prints what each property tried.
 
-use crate::output::{Format, csv_fields, csv_row, open_output};
+use crate::io::output::{Format, csv_fields, csv_row, open_output};
 use crate::record::Record;
 use proptest::prelude::*;
 use std::time::{Duration, Instant};
@@ -142,7 +142,7 @@ fn fits_headers() {
             }
             Ok(within_limit(
                 "decode_fits",
-                || match crate::fits::decode_fits(&b, 1 << 22) {
+                || match crate::io::fits::decode_fits(&b, 1 << 22) {
                     Ok(_) => "decoded",
                     Err(_) => "refused",
                 },
@@ -183,9 +183,9 @@ fn header_keywords() {
         }
         let get = |key: &str| k.get(key).cloned();
         Ok(within_limit("header keywords", || {
-            let wcs = crate::wcs::HeaderWcs::from_keywords(&k);
-            let (exposure, _) = crate::streaks::sky::exposure_from_header(&get);
-            let _ = crate::streaks::sky::station_from_header(&get);
+            let wcs = crate::io::wcs::HeaderWcs::from_keywords(&k);
+            let (exposure, _) = crate::sky::exposure_from_header(&get);
+            let _ = crate::sky::station_from_header(&get);
             match (wcs, exposure) {
                 (Ok(Some(_)), Some(_)) => "wcs and exposure",
                 (Ok(Some(_)), None) => "wcs only",
@@ -263,7 +263,7 @@ fn png_and_tiff_headers() {
             std::fs::write(&path, &b).unwrap();
             Ok(within_limit(
                 "Frame::read",
-                || match crate::frame::Frame::read(&path) {
+                || match crate::io::frame::Frame::read(&path) {
                     Ok(f) => {
                         assert_eq!(f.pixels.len(), f.width as usize * f.height as usize);
                         "decoded"
@@ -309,7 +309,7 @@ fn line() -> impl Strategy<Value = Vec<u8>> {
             l.push(b'\n');
             l
         }),
-        1 => Just(format!("{}\n", crate::output::CSV_HEADER).into_bytes()),
+        1 => Just(format!("{}\n", crate::io::output::CSV_HEADER).into_bytes()),
         1 => proptest::collection::vec(any::<u8>(), 0..40),
     ]
 }
@@ -322,7 +322,10 @@ fn csv_rows_give_back_their_names() {
         let row = csv_row(&Record::error(&name, "e,\"\n".into(), "cpu"));
         let fields = csv_fields(&row).expect("a row parses");
         prop_assert_eq!(&fields[0], &name);
-        prop_assert_eq!(fields.len(), crate::output::CSV_HEADER.split(',').count());
+        prop_assert_eq!(
+            fields.len(),
+            crate::io::output::CSV_HEADER.split(',').count()
+        );
         Ok(if name.contains(['"', ',', '\n']) {
             "quoted"
         } else {
@@ -343,7 +346,7 @@ fn names_escape_reversibly() {
         proptest::collection::vec(byte, 1..24),
         |bytes| {
             use std::os::unix::ffi::OsStrExt;
-            let name = crate::inputs::escape_component(std::ffi::OsStr::from_bytes(&bytes));
+            let name = crate::io::inputs::escape_component(std::ffi::OsStr::from_bytes(&bytes));
             Ok(match std::str::from_utf8(&bytes) {
                 Ok(s) => {
                     prop_assert_eq!(name, s);

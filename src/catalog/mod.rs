@@ -5,6 +5,7 @@
 //! [`import_hip2`]); it is compiled into the binary so `gpustar` works with no files beside it.
 
 mod import;
+pub mod table;
 
 pub use import::import_hip2;
 

@@ -2,7 +2,7 @@
 //! table row whose chord key lies in the pair's range: both catalog stars of the row get a vote
 //! from each of the two image stars.
 
-use crate::table::PairTable;
+use crate::catalog::table::PairTable;
 use bytemuck::{Pod, Zeroable};
 
 /// One image-star pair and its key range (inclusive), made on the CPU in f64.

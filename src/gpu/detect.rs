@@ -7,7 +7,7 @@ use crate::cpu::centroid::Blob;
 use crate::cpu::components::NO_LABEL;
 use crate::cpu::streak_filter::StreakParams;
 use crate::cpu::threshold::{DetectParams, TileStats};
-use crate::frame::Frame;
+use crate::io::frame::Frame;
 use anyhow::{Result, bail};
 use bytemuck::{Pod, Zeroable};
 
@@ -235,7 +235,7 @@ impl Gpu {
         let blob_bytes = std::mem::size_of::<Blob>() as u64 * max_blobs as u64 * n as u64;
         let blobs = self.storage("blobs", blob_bytes);
 
-        let pl = &self.pipelines;
+        let pl = &self.kernels;
         let bg_tiles = self.bind_group(&pl.threshold_tiles, &[&uniform, &pixels, &tiles]);
         let bg_threshold = self.bind_group(
             &pl.threshold,

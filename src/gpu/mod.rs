@@ -127,7 +127,7 @@ impl AdapterSummary {
 }
 
 /// The compute pipelines, one per kernel.
-struct Pipelines {
+struct Kernels {
     threshold_tiles: wgpu::ComputePipeline,
     threshold: wgpu::ComputePipeline,
     components_merge: wgpu::ComputePipeline,
@@ -147,7 +147,7 @@ struct Pipelines {
 pub struct Gpu {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    pipelines: Pipelines,
+    kernels: Kernels,
     /// The adapter in use, as the records' `backend` field names it.
     pub adapter: AdapterSummary,
     /// Limits granted: the defaults, with buffer sizes raised to the adapter's.
@@ -246,7 +246,7 @@ impl Gpu {
         // Errors outside an error scope are logged, not raised as panics.
         device.on_uncaptured_error(Arc::new(|e| eprintln!("gpustar: GPU error: {e}")));
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let pipelines = Pipelines {
+        let kernels = Kernels {
             threshold_tiles: pipeline(&device, "threshold_tiles"),
             threshold: pipeline(&device, "threshold"),
             components_merge: pipeline(&device, "components_merge"),
@@ -267,7 +267,7 @@ impl Gpu {
         Ok(Gpu {
             device,
             queue,
-            pipelines,
+            kernels,
             adapter: AdapterSummary::of(&info),
             limits,
             counters: Cell::new(Counters::default()),

@@ -59,13 +59,13 @@ impl Gpu {
         let out = self.storage("psf fits", out_bytes);
         let stage = self.staging("psf fits out", out_bytes);
         let bg = self.bind_group(
-            &self.pipelines.psf_fit,
+            &self.kernels.psf_fit,
             &[&uniform, &pixel_buf, &start_buf, &out],
         );
         let mut enc = self.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.pipelines.psf_fit);
+            pass.set_pipeline(&self.kernels.psf_fit);
             pass.set_bind_group(0, &bg, &[]);
             pass.dispatch_workgroups((n as u32).div_ceil(64).min(MAX_GROUPS), 1, 1);
         }

@@ -3,8 +3,8 @@
 
 use super::Gpu;
 use super::vote::VoteUniform;
-use crate::identify::VoteResult;
-use crate::radial::{FEATURE_STARS, RadialTable, WORDS};
+use crate::solve::identify::VoteResult;
+use crate::solve::radial::{FEATURE_STARS, RadialTable, WORDS};
 use anyhow::{Result, bail};
 use bytemuck::{Pod, Zeroable};
 
@@ -116,7 +116,7 @@ impl Gpu {
         let scores = self.storage("votes", score_bytes);
         let cand_bytes = 4 * (n * stars * k) as u64;
         let cands = self.storage("candidates", cand_bytes);
-        let pl = &self.pipelines;
+        let pl = &self.kernels;
         let bg_radial = self.bind_group(
             &pl.radial,
             &[

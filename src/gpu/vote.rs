@@ -2,9 +2,9 @@
 //! back only the candidate lists and the hypothesis counts.
 
 use super::Gpu;
+use crate::catalog::table::PairTable;
 use crate::cpu::vote::PairRange;
-use crate::identify::VoteResult;
-use crate::table::PairTable;
+use crate::solve::identify::VoteResult;
 use anyhow::{Result, bail};
 use bytemuck::{Pod, Zeroable};
 
@@ -154,7 +154,7 @@ impl Gpu {
         let hyp = self.storage("hypotheses", 8 * n as u64);
         let cand_bytes = 4 * (n * stars * k) as u64;
         let cands = self.storage("candidates", cand_bytes);
-        let pl = &self.pipelines;
+        let pl = &self.kernels;
         let bg_vote = self.bind_group(
             &pl.vote,
             &[

@@ -14,15 +14,15 @@ pub mod particles;
 pub mod simulate;
 pub mod track;
 
-use crate::attitude::attitude_error;
-pub use crate::batch::Detected;
-use crate::batch::{Decoded, Solvers};
 use crate::camera::Camera;
-use crate::detect::Detection;
+pub use crate::pipeline::Detected;
+use crate::pipeline::{Decoded, Solvers};
 use crate::record::{ParticleRecord, Record, Timing};
-use crate::refine;
+use crate::sky::{Utc, exposure_from_header};
+use crate::solve::attitude::attitude_error;
+use crate::solve::detect::Detection;
+use crate::solve::refine;
 use crate::solve::{Outcome, Solution, Solver};
-use crate::streaks::sky::{Utc, exposure_from_header};
 use motion::{MotionSettings, Points};
 use nalgebra::{Matrix3, Vector3};
 use particles::{Decision, ParticleSettings, Seen, Tracker};
@@ -280,7 +280,7 @@ impl<'a> Sequencer<'a> {
         &self,
         solver: &Solver,
         f: &Detected,
-        frame: &crate::frame::Frame,
+        frame: &crate::io::frame::Frame,
         sol: &Solution,
         identify_ms: f64,
         warnings: Vec<String>,

@@ -4,8 +4,8 @@
 //! detection's direction through the camera model. Particles, each moving on its own, are the
 //! outliers: the stars are the one large set that a single rotation explains.
 
-use crate::attitude::wahba;
 use crate::camera::Camera;
+use crate::solve::attitude::wahba;
 use nalgebra::{Matrix3, Vector3};
 
 /// How the motion between two frames is searched for.
@@ -133,7 +133,7 @@ fn significant(
 ) -> bool {
     let area = camera.width as f64 * camera.height as f64;
     let p = (b.px.len() as f64 * std::f64::consts::PI * s.gate_px * s.gate_px / area).min(1.0);
-    crate::refine::binomial_tail(a.px.len(), n, p) * tried.max(1) as f64 <= MAX_CHANCE
+    crate::solve::refine::binomial_tail(a.px.len(), n, p) * tried.max(1) as f64 <= MAX_CHANCE
 }
 
 /// The largest chance probability a motion found by search may have.
@@ -353,7 +353,7 @@ mod tests {
         let a = Points { px: &pa, dirs: &da };
         let b = Points { px: &pb, dirs: &db };
         let m = estimate(&camera, &a, &b, 1.0, None, &MotionSettings::default()).unwrap();
-        let err = crate::attitude::attitude_error(&m.d, &turn).to_degrees() * 3600.0;
+        let err = crate::solve::attitude::attitude_error(&m.d, &turn).to_degrees() * 3600.0;
         assert!(err < 5.0, "rotation off by {err} arcsec");
         let right = m
             .inliers
@@ -376,6 +376,6 @@ mod tests {
         let d = Rotation3::new(Vector3::new(0.0, 0.01, 0.0)).into_inner();
         let e = at_rate(&d, 1.0, 2.5);
         let want = Rotation3::new(Vector3::new(0.0, 0.025, 0.0)).into_inner();
-        assert!(crate::attitude::attitude_error(&e, &want) < 1e-12);
+        assert!(crate::solve::attitude::attitude_error(&e, &want) < 1e-12);
     }
 }

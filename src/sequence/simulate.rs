@@ -9,7 +9,7 @@
 
 use crate::catalog::Catalog;
 use crate::simulate::{SimSettings, Spot, Truth, random_rotation, render_with};
-use crate::streaks::sky::Utc;
+use crate::sky::Utc;
 use anyhow::{Context, Result};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -226,8 +226,8 @@ fn write_frame(
         ("EXPTIME", format!("{}", q.exposure_s)),
         ("TIMESYS", quote("UTC")),
     ]
-    .map(|(k, v)| crate::fits::card(k, &v));
-    let bytes = crate::fits::encode_u16(truth.width, truth.height, &pixels, &cards);
+    .map(|(k, v)| crate::io::fits::card(k, &v));
+    let bytes = crate::io::fits::encode_u16(truth.width, truth.height, &pixels, &cards);
     let path = out.join(&truth.file);
     std::fs::write(&path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(SequenceTruth {

@@ -5,11 +5,11 @@
 //! and judged by the lost-in-space false-match test, which counts every hypothesis the cone
 //! admits (and the lost-in-space pass that follows a failure, as [`STAGES`] does there).
 
-use crate::attitude::wahba;
 use crate::camera::Camera;
 use crate::catalog::RefCatalog;
-use crate::detect::Detection;
-use crate::refine::{self, Refined};
+use crate::solve::attitude::wahba;
+use crate::solve::detect::Detection;
+use crate::solve::refine::{self, Refined};
 use crate::solve::{STAGES, Solver};
 use nalgebra::{Matrix3, Vector3};
 use std::sync::Arc;

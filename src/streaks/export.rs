@@ -104,14 +104,14 @@ impl Exports {
     /// that does not exist, or a file there that gpustar did not write (it is never replaced).
     pub fn check_paths(&self) -> Result<()> {
         if let Some(p) = &self.tdm {
-            crate::output::check_replaceable(
+            crate::io::output::check_replaceable(
                 p,
                 |text| text.starts_with("CCSDS_TDM_VERS"),
                 "a TDM",
             )?;
         }
         if let Some(p) = &self.iod {
-            crate::output::check_replaceable(p, formats::iod_like, "IOD lines")?;
+            crate::io::output::check_replaceable(p, formats::iod_like, "IOD lines")?;
         }
         Ok(())
     }
@@ -124,7 +124,7 @@ impl Exports {
             let text = formats::tdm_text(created_utc, "GPUSTAR", &self.tracks)
                 .map_err(anyhow::Error::msg)
                 .with_context(|| format!("cannot write {}", p.display()))?;
-            crate::output::write_atomically(p, text.as_bytes())?;
+            crate::io::output::write_atomically(p, text.as_bytes())?;
             said.push(format!(
                 "{} (TDM, {} streaks)",
                 p.display(),
@@ -136,7 +136,7 @@ impl Exports {
             if !text.is_empty() {
                 text.push('\n');
             }
-            crate::output::write_atomically(p, text.as_bytes())?;
+            crate::io::output::write_atomically(p, text.as_bytes())?;
             said.push(format!(
                 "{} (IOD, {} lines)",
                 p.display(),

@@ -16,12 +16,12 @@ pub mod formats;
 pub mod reduce;
 pub mod segments;
 pub mod simulate;
-pub mod sky;
 
 use crate::cpu::centroid::Blob;
 use crate::cpu::streak_filter::{BIN, StreakParams, grid, mask_runs, streak_mask};
 use crate::cpu::threshold::{DetectParams, TileStats, background_at, tile_stats};
-use crate::frame::Frame;
+use crate::io::frame::Frame;
+use crate::sky;
 use fit::StreakFit;
 use segments::{SegmentSettings, segments};
 

@@ -3,10 +3,10 @@
 //! header's time keywords, and topocentric Az/El for the station.
 
 use super::fit::StreakFit;
-use super::sky::{self, Exposure, Utc};
 use super::{StreakOptions, length};
 use crate::catalog::vector_to_radec;
 use crate::record::{StreakEnd, StreakRecord};
+use crate::sky::{self, Exposure, Utc};
 use crate::solve::{Outcome, Solution};
 use std::collections::BTreeMap;
 
@@ -119,8 +119,8 @@ pub fn records(
 /// A map from pixels to ICRS.
 enum Plate<'a> {
     /// gpustar's solution: the fitted camera, then the attitude.
-    Solved(&'a crate::refine::Refined),
-    Header(crate::wcs::HeaderWcs),
+    Solved(&'a crate::solve::refine::Refined),
+    Header(crate::io::wcs::HeaderWcs),
 }
 
 impl Plate<'_> {
@@ -150,7 +150,7 @@ fn plate<'a>(
         warnings.push("the frame is not solved: streak ends have no RA/Dec, Az or El".into());
         return None;
     }
-    match crate::wcs::HeaderWcs::from_keywords(keywords) {
+    match crate::io::wcs::HeaderWcs::from_keywords(keywords) {
         Ok(Some(w)) => Some(Plate::Header(w)),
         Ok(None) => {
             warnings.push(

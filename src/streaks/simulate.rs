@@ -8,9 +8,9 @@
 //! in electrons, with Poisson noise of its own added as a Gaussian of the same variance (the
 //! star frame's noise is already in its pixels; the sum of Poisson counts is Poisson).
 
-use super::sky::{Station, Utc};
 use crate::catalog::Catalog;
 use crate::simulate::{SimSettings, Truth, render};
+use crate::sky::{Station, Utc};
 use anyhow::{Context, Result, bail};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -212,8 +212,9 @@ pub fn write_set(catalog: &Catalog, s: &SimSettings, st: &StreakSim, out: &Path)
             ("OBSGEO-L", format!("{}", st.station.lon_deg)),
             ("OBSGEO-H", format!("{}", st.station.height_m)),
         ]
-        .map(|(k, v)| crate::fits::card(k, &v));
-        let bytes = crate::fits::encode_u16(truth.stars.width, truth.stars.height, &pixels, &cards);
+        .map(|(k, v)| crate::io::fits::card(k, &v));
+        let bytes =
+            crate::io::fits::encode_u16(truth.stars.width, truth.stars.height, &pixels, &cards);
         let path = out.join(&truth.stars.file);
         std::fs::write(&path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
         writeln!(truth_file, "{}", serde_json::to_string(&truth)?)?;

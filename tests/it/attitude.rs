@@ -1,7 +1,7 @@
 //! Attitude from known vectors (Wahba by SVD) and the record's pointing quantities.
 
-use gpustar::attitude::*;
 use gpustar::camera::Camera;
+use gpustar::solve::attitude::*;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 #[test]
@@ -123,7 +123,7 @@ fn records_carry_a_calibrated_attitude_sigma_and_orthonormality() {
     let (mut across, mut roll) = (Vec::new(), Vec::new());
     for k in 0..s.frames {
         let (pixels, truth) = gpustar::simulate::render(&catalog, &s, k).unwrap();
-        let frame = gpustar::frame::Frame {
+        let frame = gpustar::io::frame::Frame {
             width: camera.width,
             height: camera.height,
             pixels,

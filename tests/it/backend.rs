@@ -4,7 +4,7 @@
 
 use crate::common;
 
-use gpustar::batch::{Backend, BackendChoice, BackendNote};
+use gpustar::pipeline::{Backend, BackendChoice, BackendNote};
 
 #[test]
 fn auto_prefers_the_cpu_twins_to_a_software_rasterizer() {

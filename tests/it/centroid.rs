@@ -3,9 +3,9 @@
 
 use crate::common;
 
-use gpustar::detect::{DetectSettings, detect};
-use gpustar::frame::Frame;
+use gpustar::io::frame::Frame;
 use gpustar::simulate::add_spot;
+use gpustar::solve::detect::{DetectSettings, detect};
 
 /// A 64×64 frame with a flat background of 100 and one Gaussian spot (noise free).
 fn spot_frame(x: f64, y: f64, flux: f64, sigma: f64) -> Frame {

@@ -119,7 +119,7 @@ fn gpu_reruns_when_components_and_set_pixels_overflow_its_first_buffers() {
     let (w, h) = (512u32, 512u32);
     // Isolated bright pixels on every other column of every other row: 65,536 components,
     // more than the 4,096 the blob buffer holds at first.
-    let dots = gpustar::frame::Frame {
+    let dots = gpustar::io::frame::Frame {
         width: w,
         height: h,
         pixels: (0..w * h)
@@ -135,7 +135,7 @@ fn gpu_reruns_when_components_and_set_pixels_overflow_its_first_buffers() {
     };
     // A checkerboard: 131,072 set pixels, more than the 65,536 the set list holds at first,
     // all one component through their diagonals.
-    let checks = gpustar::frame::Frame {
+    let checks = gpustar::io::frame::Frame {
         pixels: (0..w * h)
             .map(|i| {
                 if ((i % w) + (i / w)) % 2 == 0 {

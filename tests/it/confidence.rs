@@ -4,8 +4,8 @@
 
 use crate::common;
 
-use gpustar::detect::Detection;
-use gpustar::refine::{RefineSettings, refine, stars_in_view};
+use gpustar::solve::detect::Detection;
+use gpustar::solve::refine::{RefineSettings, refine, stars_in_view};
 use nalgebra::Rotation3;
 use rand::{Rng, SeedableRng};
 

@@ -370,7 +370,7 @@ fn streak_set(dir: &Path, n: usize) {
 
 /// A FITS file of one BITPIX −32 image with these cards.
 fn fits_f32(w: u32, h: u32, pixels: &[f32], cards: &[String]) -> Vec<u8> {
-    let card = gpustar::fits::card;
+    let card = gpustar::io::fits::card;
     let mut head = vec![
         card("SIMPLE", "T"),
         card("BITPIX", "-32"),
@@ -395,15 +395,15 @@ fn fits_f32(w: u32, h: u32, pixels: &[f32], cards: &[String]) -> Vec<u8> {
 #[test]
 fn implausible_epochs_and_float_sentinels_do_not_cost_the_solution() {
     let s = set(1);
-    let f = gpustar::frame::Frame::read(&s.dir.join("sim_00000.png")).unwrap();
+    let f = gpustar::io::frame::Frame::read(&s.dir.join("sim_00000.png")).unwrap();
     let fits = s.root.join("fits");
     std::fs::create_dir(&fits).unwrap();
     let q = |v: &str| format!("'{v}'");
-    let card = gpustar::fits::card;
+    let card = gpustar::io::fits::card;
     let write16 = |name: &str, cards: &[String]| {
         std::fs::write(
             fits.join(name),
-            gpustar::fits::encode_u16(f.width, f.height, &f.pixels, cards),
+            gpustar::io::fits::encode_u16(f.width, f.height, &f.pixels, cards),
         )
         .unwrap();
     };
@@ -442,7 +442,7 @@ fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sim");
     streak_set(&dir, 3);
-    let card = gpustar::fits::card;
+    let card = gpustar::io::fits::card;
     let q = |v: &str| format!("'{v}'");
     let station = [
         card("OBSGEO-B", "35.7"),
@@ -451,7 +451,7 @@ fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
     ];
     for (k, exptime) in [(1, "1E10"), (2, "1E300")] {
         let path = dir.join(format!("sim_{k:05}.fits"));
-        let f = gpustar::frame::Frame::read(&path).unwrap();
+        let f = gpustar::io::frame::Frame::read(&path).unwrap();
         let mut cards = vec![
             card("DATE-OBS", &q("2024-03-15T20:00:00")),
             card("EXPTIME", exptime),
@@ -476,7 +476,7 @@ fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
         }
         std::fs::write(
             &path,
-            gpustar::fits::encode_u16(f.width, f.height, &f.pixels, &cards),
+            gpustar::io::fits::encode_u16(f.width, f.height, &f.pixels, &cards),
         )
         .unwrap();
     }

@@ -5,9 +5,9 @@
 use crate::common;
 
 use common::{gpu, gpustar, shared_dir};
-use gpustar::batch::{Backend, CameraSource, GpuRunner, Pipeline};
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
+use gpustar::pipeline::{Backend, CameraSource, GpuRunner, Pipeline};
 use gpustar::record::{Record, Timing};
 use gpustar::solve::Settings;
 use std::path::{Path, PathBuf};
@@ -47,7 +47,7 @@ fn simulate(dir: &Path, n: usize, fov: &str, size: &str) {
 }
 
 fn inputs(dir: &Path) -> Vec<(PathBuf, String)> {
-    gpustar::inputs::list(dir, false)
+    gpustar::io::inputs::list(dir, false)
         .unwrap()
         .into_iter()
         .map(|i| (i.path, i.name))

@@ -6,7 +6,7 @@ use crate::common;
 
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
-use gpustar::frame::Frame;
+use gpustar::io::frame::Frame;
 use gpustar::simulate::{SimSettings, Truth};
 use gpustar::solve::{PassKind, Settings, Solver};
 

@@ -4,8 +4,8 @@
 
 use crate::common;
 
-use gpustar::detect::{self, Centroid, DetectSettings};
 use gpustar::simulate::SimSettings;
+use gpustar::solve::detect::{self, Centroid, DetectSettings};
 
 #[test]
 fn ml_positions_beat_the_centre_of_gravity() {

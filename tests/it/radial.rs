@@ -4,11 +4,11 @@
 
 use crate::common;
 
-use gpustar::batch::{Backend, CameraSource, GpuRunner, Pipeline};
 use gpustar::catalog::Catalog;
 use gpustar::gpu::radial::RadialJob;
-use gpustar::radial::{self, Method};
+use gpustar::pipeline::{Backend, CameraSource, GpuRunner, Pipeline};
 use gpustar::simulate::SimSettings;
+use gpustar::solve::radial::{self, Method};
 use gpustar::solve::{Outcome, Settings, Solver};
 
 /// 4° frames of 2048² with 5 false stars: a narrow field where every catalog star (Hp ≤ 8)
@@ -45,7 +45,7 @@ fn radial_gpu_matches_cpu() {
     let t = solver.bands[0].radial.as_ref().unwrap();
     let mut jobs = Vec::new();
     for (frame, _) in common::rendered(&s, 4) {
-        let dets = gpustar::detect::detect(&frame, &solver.settings.detect);
+        let dets = gpustar::solve::detect::detect(&frame, &solver.settings.detect);
         let p = solver.prepare(&dets, 0).unwrap();
         jobs.push(RadialJob {
             features: radial::image_features(&p.vectors[..p.n_vote], t),
@@ -75,7 +75,7 @@ fn radial_gpu_matches_cpu() {
 /// Frames solved within 60″ of the truth by a method (and none beyond it).
 fn solved_by(
     method: Method,
-    frames: &[(gpustar::frame::Frame, gpustar::simulate::Truth)],
+    frames: &[(gpustar::io::frame::Frame, gpustar::simulate::Truth)],
 ) -> usize {
     let s = sim();
     let settings = Settings {
@@ -89,7 +89,7 @@ fn solved_by(
     for (frame, truth) in frames {
         let (sol, _, _) = solver.solve_frame(frame);
         if let Outcome::Solved(r, _) = &sol.outcome {
-            let err = gpustar::attitude::attitude_error(
+            let err = gpustar::solve::attitude::attitude_error(
                 &r.r,
                 &nalgebra::Matrix3::from_fn(|i, j| truth.rotation_matrix[i][j]),
             );

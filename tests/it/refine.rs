@@ -6,12 +6,12 @@
 
 use crate::common;
 
-use gpustar::attitude::attitude_error;
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
-use gpustar::frame::Frame;
-use gpustar::refine::CameraFit;
+use gpustar::io::frame::Frame;
 use gpustar::simulate::{SimSettings, Truth};
+use gpustar::solve::attitude::attitude_error;
+use gpustar::solve::refine::CameraFit;
 use gpustar::solve::{Outcome, Settings, Solver};
 use nalgebra::Matrix3;
 

@@ -6,7 +6,7 @@
 use crate::common;
 
 use common::{gpustar, run_records};
-use gpustar::attitude::attitude_error;
+use gpustar::solve::attitude::attitude_error;
 use nalgebra::Matrix3;
 use serde_json::Value;
 use std::path::{Path, PathBuf};

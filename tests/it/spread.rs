@@ -3,9 +3,9 @@
 
 use crate::common;
 
-use gpustar::detect::Detection;
-use gpustar::frame::Frame;
+use gpustar::io::frame::Frame;
 use gpustar::simulate::{SimSettings, Truth};
+use gpustar::solve::detect::Detection;
 use gpustar::solve::{PassKind, Solver, spread_order};
 
 fn det(x: f64, y: f64) -> Detection {

@@ -8,7 +8,7 @@ use gpustar::cpu::streak_filter::{
     StreakParams, mask_runs, streak_filter, streak_mask, streak_rows,
 };
 use gpustar::cpu::threshold::{DetectParams, background_at, tile_stats};
-use gpustar::frame::Frame;
+use gpustar::io::frame::Frame;
 use gpustar::streaks::{self, StreakSettings, fit::StreakFit};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -330,7 +330,7 @@ fn streak_mask_gpu_equals_cpu() {
             let cpu = streak_mask(&f.pixels, &tiles, &p, &sp);
             assert_eq!(pixels[k].mask, cpu, "{w}x{h} frame {k}: streak mask");
             // And the rest of detection is what it is without streaks.
-            assert_eq!(blobs[k], gpustar::detect::blobs_cpu(f, &p));
+            assert_eq!(blobs[k], gpustar::solve::detect::blobs_cpu(f, &p));
             let s = StreakSettings::default();
             assert_eq!(
                 streaks::measure(f, &pixels[k].tiles, &pixels[k].mask, &p, &s),

@@ -6,7 +6,7 @@ use crate::common;
 
 use common::{gpustar, run_records};
 use gpustar::camera::Camera;
-use gpustar::frame::Frame;
+use gpustar::io::frame::Frame;
 use gpustar::streaks::formats::{parse_iod_line, parse_tdm};
 use nalgebra::Matrix3;
 use serde_json::Value;
@@ -184,7 +184,7 @@ fn rewrite(src: &Path, dst: &Path, cards: &[String]) {
     let f = Frame::read(src).unwrap();
     std::fs::write(
         dst,
-        gpustar::fits::encode_u16(f.width, f.height, &f.pixels, cards),
+        gpustar::io::fits::encode_u16(f.width, f.height, &f.pixels, cards),
     )
     .unwrap();
 }
@@ -203,22 +203,22 @@ fn frames_without_time_or_station_keep_their_ends_and_say_why() {
         (
             "b_y2k.fits",
             vec![
-                gpustar::fits::card("DATE-OBS", &q("15/03/24")),
-                gpustar::fits::card("EXPTIME", "5"),
+                gpustar::io::fits::card("DATE-OBS", &q("15/03/24")),
+                gpustar::io::fits::card("EXPTIME", "5"),
             ],
         ),
         (
             "c_time_only.fits",
             vec![
-                gpustar::fits::card("TIME-OBS", &q("20:00:00")),
-                gpustar::fits::card("EXPTIME", "5"),
+                gpustar::io::fits::card("TIME-OBS", &q("20:00:00")),
+                gpustar::io::fits::card("EXPTIME", "5"),
             ],
         ),
         (
             "d_no_station.fits",
             vec![
-                gpustar::fits::card("DATE-OBS", &q("2024-03-15T20:00:00")),
-                gpustar::fits::card("EXPTIME", "5"),
+                gpustar::io::fits::card("DATE-OBS", &q("2024-03-15T20:00:00")),
+                gpustar::io::fits::card("EXPTIME", "5"),
             ],
         ),
     ];
@@ -290,7 +290,7 @@ fn header_astrometry_gives_the_solution_s_ra_dec() {
     rewrite(
         &dir.join(name),
         &one.join(name),
-        &gpustar::wcs::wcs_header(&camera, &r),
+        &gpustar::io::wcs::wcs_header(&camera, &r),
     );
     let header = batch(&one, &["--astrometry", "header"]);
     // Without a camera at all: the stars are not identified, the streaks the same.

@@ -1,7 +1,7 @@
 //! The distance table: range queries at bin edges, agreement with seed 000's Table 3, cache.
 
+use gpustar::catalog::table::{PairTable, chord_key, chord_of_angle};
 use gpustar::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
-use gpustar::table::{PairTable, chord_key, chord_of_angle};
 
 fn refs(mag: f64) -> RefCatalog {
     RefCatalog::select(
@@ -86,7 +86,7 @@ fn cached_table_is_read_back_identically() {
     let dir = tempfile::tempdir().unwrap();
     let cat = refs(4.5);
     let load_or_build = |cat: &RefCatalog, hash: u64, sep: f64, _: bool| {
-        gpustar::table::load_or_build_in(Some(dir.path()), cat, hash, sep)
+        gpustar::catalog::table::load_or_build_in(Some(dir.path()), cat, hash, sep)
     };
     let (built, o1) = load_or_build(&cat, 42, 0.2, true);
     assert!(o1.built && o1.cache_note.is_none(), "{:?}", o1.cache_note);
@@ -118,7 +118,7 @@ fn damaged_cache_files_are_rebuilt() {
     let dir = tempfile::tempdir().unwrap();
     let cat = refs(4.5);
     let table_at =
-        |dir: &std::path::Path| gpustar::table::load_or_build_in(Some(dir), &cat, 7, 0.2);
+        |dir: &std::path::Path| gpustar::catalog::table::load_or_build_in(Some(dir), &cat, 7, 0.2);
     let (built, o) = table_at(dir.path());
     let file = o.cache_file.unwrap();
     let good = std::fs::read(&file).unwrap();

@@ -140,7 +140,7 @@ fn gpu_equals_cpu_on_odd_sizes_and_one_pixel_frames() {
     common::assert_detect_stages_equal(&g, &common::sim_frames(2, (333, 77), 12.0, 8, 5), 16);
     common::assert_detect_stages_equal(&g, &common::sim_frames(1, (97, 131), 12.0, 16, 6), 64);
     for (w, h, v) in [(1, 1, 7u16), (1, 5, 0), (3, 1, 65535)] {
-        let f = gpustar::frame::Frame {
+        let f = gpustar::io::frame::Frame {
             width: w,
             height: h,
             pixels: vec![v; (w * h) as usize],
@@ -201,21 +201,21 @@ fn matched_filter_finds_a_faint_star_and_drops_a_hot_pixel() {
     }
     px[(40 * w + 45) as usize] += 120.0;
     let px: Vec<u16> = px.iter().map(|v| v.round() as u16).collect();
-    let frame = gpustar::frame::Frame {
+    let frame = gpustar::io::frame::Frame {
         width: w,
         height: h,
         pixels: px,
         saturation: 255,
     };
     let detect = |filter: bool| {
-        let s = gpustar::detect::DetectSettings {
+        let s = gpustar::solve::detect::DetectSettings {
             tile: 16,
             matched_filter: filter,
             ..Default::default()
         };
-        gpustar::detect::detect(&frame, &s)
+        gpustar::solve::detect::detect(&frame, &s)
     };
-    let near = |d: &[gpustar::detect::Detection], x: f64, y: f64| {
+    let near = |d: &[gpustar::solve::detect::Detection], x: f64, y: f64| {
         d.iter().any(|d| (d.x - x).hypot(d.y - y) < 1.5)
     };
     let raw = detect(false);
@@ -243,7 +243,7 @@ fn gpu_equals_cpu_with_the_matched_filter() {
         true,
     );
     for (w, h, v) in [(1, 1, 7u16), (2, 5, 0), (3, 1, 65535)] {
-        let f = gpustar::frame::Frame {
+        let f = gpustar::io::frame::Frame {
             width: w,
             height: h,
             pixels: vec![v; (w * h) as usize],

@@ -5,10 +5,10 @@
 use crate::common;
 
 use gpustar::camera::angle;
-use gpustar::identify::pair_ranges;
-use gpustar::refine::stars_in_view;
 use gpustar::simulate::random_rotation;
-use gpustar::triangle::triangles;
+use gpustar::solve::identify::pair_ranges;
+use gpustar::solve::refine::stars_in_view;
+use gpustar::solve::triangle::triangles;
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 
@@ -56,7 +56,7 @@ fn confirmed_triangles_find_the_true_stars_among_false_ones() {
                 assert!((d_img - d_cat).abs() <= e * 1.001, "side {a}{b} off: {t:?}");
             }
         }
-        let truth = |t: &gpustar::triangle::Triangle| {
+        let truth = |t: &gpustar::solve::triangle::Triangle| {
             t.stars.iter().zip(&t.refs).all(|(&i, &id)| ids[i] == id)
         };
         if tris.iter().any(truth) {

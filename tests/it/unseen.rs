@@ -43,7 +43,7 @@ fn the_detection_retry_solves_frames_of_faint_stars() {
     let (mut rescued, mut solved_without) = (0, 0);
     for k in 0..s.frames {
         let (pixels, truth) = render(&catalog, &s, k).unwrap();
-        let frame = gpustar::frame::Frame {
+        let frame = gpustar::io::frame::Frame {
             width: camera.width,
             height: camera.height,
             pixels,
@@ -52,7 +52,7 @@ fn the_detection_retry_solves_frames_of_faint_stars() {
         let right = |o: &Outcome| match o {
             Outcome::Solved(r, _) => {
                 let t = nalgebra::Matrix3::from_fn(|i, j| truth.rotation_matrix[i][j]);
-                Some(gpustar::attitude::attitude_error(&r.r, &t).to_degrees() < 0.1)
+                Some(gpustar::solve::attitude::attitude_error(&r.r, &t).to_degrees() < 0.1)
             }
             Outcome::Unsolved(_) => None,
         };

@@ -3,11 +3,11 @@
 use crate::common;
 
 use gpustar::camera::Camera;
+use gpustar::catalog::table::PairTable;
 use gpustar::catalog::{Catalog, DoubleStars, RefCatalog, Selection, vector_to_radec};
 use gpustar::cpu::select::unpack_candidate;
 use gpustar::gpu::vote::VoteJob;
-use gpustar::identify::{IdentifySettings, pair_ranges, verify, vote_cpu};
-use gpustar::table::PairTable;
+use gpustar::solve::identify::{IdentifySettings, pair_ranges, verify, vote_cpu};
 use nalgebra::{Rotation3, Vector3};
 
 /// Ten stars: six in a 10° field around (RA 30°, Dec 20°) at distinct separations, four far
@@ -139,7 +139,7 @@ fn gpu_votes_equal_cpu_on_simulated_frames() {
     let jobs: Vec<VoteJob> = common::sim_frames(6, size, 18.0, 8, 21)
         .iter()
         .filter_map(|f| {
-            let d = gpustar::detect::detect(f, &solver.settings.detect);
+            let d = gpustar::solve::detect::detect(f, &solver.settings.detect);
             solver.prepare(&d, 0).map(|p| VoteJob {
                 ranges: p.ranges,
                 stars: p.n_vote,

@@ -66,7 +66,7 @@ pub fn sim_frames(
     fov: f64,
     bits: u8,
     seed: u64,
-) -> Vec<gpustar::frame::Frame> {
+) -> Vec<gpustar::io::frame::Frame> {
     let s = gpustar::simulate::SimSettings {
         width: size.0,
         height: size.1,
@@ -87,7 +87,7 @@ pub struct CpuDetect {
 }
 
 pub fn cpu_detect(
-    f: &gpustar::frame::Frame,
+    f: &gpustar::io::frame::Frame,
     p: &gpustar::cpu::threshold::DetectParams,
 ) -> CpuDetect {
     use gpustar::cpu::*;
@@ -106,7 +106,7 @@ pub fn cpu_detect(
 /// statistics, mask, labels and blobs must be equal exactly. Returns the blobs compared.
 pub fn assert_detect_stages_equal(
     g: &gpustar::gpu::Gpu,
-    frames: &[gpustar::frame::Frame],
+    frames: &[gpustar::io::frame::Frame],
     tile: u32,
 ) -> usize {
     assert_detect_stages_equal_with(g, frames, tile, false)
@@ -115,7 +115,7 @@ pub fn assert_detect_stages_equal(
 /// As [`assert_detect_stages_equal`], with the matched filter on or off.
 pub fn assert_detect_stages_equal_with(
     g: &gpustar::gpu::Gpu,
-    frames: &[gpustar::frame::Frame],
+    frames: &[gpustar::io::frame::Frame],
     tile: u32,
     matched_filter: bool,
 ) -> usize {
@@ -128,7 +128,7 @@ pub fn assert_detect_stages_equal_with(
         f0.saturation as u32,
     )
     .with_filter(matched_filter);
-    let refs: Vec<&gpustar::frame::Frame> = frames.iter().collect();
+    let refs: Vec<&gpustar::io::frame::Frame> = frames.iter().collect();
     let (blobs, ins) = g.detect_inspect(&refs, &p).unwrap();
     let mut n = 0;
     for (k, f) in frames.iter().enumerate() {
@@ -146,7 +146,7 @@ pub fn assert_detect_stages_equal_with(
 }
 
 /// A 64×48 frame with '#' drawn as bright pixels (200) on a dark sky (10) from the top left.
-pub fn drawn(rows: &[&str]) -> gpustar::frame::Frame {
+pub fn drawn(rows: &[&str]) -> gpustar::io::frame::Frame {
     let (w, h) = (64u32, 48u32);
     let mut pixels = vec![10u16; (w * h) as usize];
     for (y, r) in rows.iter().enumerate() {
@@ -156,7 +156,7 @@ pub fn drawn(rows: &[&str]) -> gpustar::frame::Frame {
             }
         }
     }
-    gpustar::frame::Frame {
+    gpustar::io::frame::Frame {
         width: w,
         height: h,
         pixels,
@@ -168,13 +168,13 @@ pub fn drawn(rows: &[&str]) -> gpustar::frame::Frame {
 pub fn rendered(
     s: &gpustar::simulate::SimSettings,
     n: usize,
-) -> Vec<(gpustar::frame::Frame, gpustar::simulate::Truth)> {
+) -> Vec<(gpustar::io::frame::Frame, gpustar::simulate::Truth)> {
     let cat = gpustar::catalog::Catalog::builtin();
     let camera = s.camera().unwrap();
     (0..n)
         .map(|k| {
             let (pixels, truth) = gpustar::simulate::render(&cat, s, k).unwrap();
-            let frame = gpustar::frame::Frame {
+            let frame = gpustar::io::frame::Frame {
                 width: camera.width,
                 height: camera.height,
                 pixels,
@@ -209,7 +209,8 @@ pub fn assert_votes_equal(
     for (f, job) in jobs.iter().enumerate() {
         let (cpu_votes, hyp) = gpustar::cpu::vote::vote(&band.table, &job.ranges, job.stars, n_ref);
         assert!(cpu_votes == votes[f], "job {f}: vote counters differ");
-        let cpu = gpustar::identify::vote_cpu(&band.table, &job.ranges, job.stars, n_ref, job.k);
+        let cpu =
+            gpustar::solve::identify::vote_cpu(&band.table, &job.ranges, job.stars, n_ref, job.k);
         assert_eq!(results[f].hypotheses, hyp, "job {f}: hypotheses");
         assert_eq!(results[f].k, cpu.k);
         assert!(
@@ -221,7 +222,7 @@ pub fn assert_votes_equal(
 
 /// Paint `n` bright round spots (σ 1.2 px) into the top-right quarter of an 8-bit frame: a
 /// cluster brighter than most stars.
-pub fn crowd_corner(frame: &mut gpustar::frame::Frame, n: usize, seed: u64) {
+pub fn crowd_corner(frame: &mut gpustar::io::frame::Frame, n: usize, seed: u64) {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let (w, h) = (frame.width as f64, frame.height as f64);
@@ -243,7 +244,7 @@ pub fn crowd_corner(frame: &mut gpustar::frame::Frame, n: usize, seed: u64) {
 /// `wrong_deg` from the truth.
 pub fn solved_and_wrong(
     solver: &gpustar::solve::Solver,
-    set: &[(gpustar::frame::Frame, gpustar::simulate::Truth)],
+    set: &[(gpustar::io::frame::Frame, gpustar::simulate::Truth)],
     wrong_deg: f64,
 ) -> (usize, usize) {
     let (mut solved, mut wrong) = (0, 0);
@@ -251,7 +252,7 @@ pub fn solved_and_wrong(
         if let gpustar::solve::Outcome::Solved(r, _) = solver.solve_frame(f).0.outcome {
             solved += 1;
             let truth = nalgebra::Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
-            if gpustar::attitude::attitude_error(&r.r, &truth).to_degrees() > wrong_deg {
+            if gpustar::solve::attitude::attitude_error(&r.r, &truth).to_degrees() > wrong_deg {
                 wrong += 1;
             }
         }

@@ -8,15 +8,15 @@
 use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::cpu::centroid::Blob;
-use crate::dark::Darks;
-use crate::detect::{self, DetectSettings, Detection};
-use crate::frame::Frame;
 use crate::gpu::Gpu;
 use crate::gpu::radial::{GpuRadial, RadialJob};
 use crate::gpu::vote::{GpuTable, VoteJob};
+use crate::io::dark::Darks;
+use crate::io::frame::Frame;
 use crate::products::Products;
-use crate::radial;
 use crate::record::{Record, Timing};
+use crate::solve::detect::{self, DetectSettings, Detection};
+use crate::solve::radial;
 use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use anyhow::Result;
@@ -84,7 +84,7 @@ pub struct Solvers {
 /// message of its error record.
 pub struct Detected {
     pub decoded: Decoded,
-    pub detections: std::result::Result<Vec<crate::detect::Detection>, String>,
+    pub detections: std::result::Result<Vec<crate::solve::detect::Detection>, String>,
     pub detect_ms: f64,
     /// The `backend` field of its record.
     pub backend: String,
@@ -213,7 +213,11 @@ impl Solvers {
         let camera = match &self.camera {
             CameraSource::Fixed(c) => {
                 if (c.width, c.height) != (width, height) {
-                    return Err(crate::frame::wrong_size(width, height, (c.width, c.height)));
+                    return Err(crate::io::frame::wrong_size(
+                        width,
+                        height,
+                        (c.width, c.height),
+                    ));
                 }
                 c.clone()
             }

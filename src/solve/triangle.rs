@@ -10,8 +10,8 @@
 //! counts every triangle hypothesis tried, on top of the vote's).
 
 use crate::catalog::RefCatalog;
+use crate::catalog::table::PairTable;
 use crate::cpu::vote::PairRange;
-use crate::table::PairTable;
 use nalgebra::Vector3;
 use std::collections::HashMap;
 

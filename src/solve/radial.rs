@@ -15,9 +15,9 @@
 //! triangle that matched) accept the first that holds.
 
 use crate::catalog::RefCatalog;
+use crate::catalog::table::{PairTable, angle_of_chord, chord_key};
 use crate::cpu::vote::PairRange;
-use crate::table::{PairTable, angle_of_chord, chord_key};
-use crate::triangle::{Triangle, triangle_order};
+use crate::solve::triangle::{Triangle, triangle_order};
 use nalgebra::Vector3;
 
 pub use crate::cpu::radial::{BITS, WORDS};
@@ -61,7 +61,8 @@ impl RadialTable {
         let ring_rad = radius_rad / BITS as f64;
         let n = refs.stars.len();
         let mut features = vec![0u32; n * WORDS];
-        let top = table.lower_bound(chord_key(crate::table::chord_of_angle(radius_rad)) + 1);
+        let top =
+            table.lower_bound(chord_key(crate::catalog::table::chord_of_angle(radius_rad)) + 1);
         for row in 0..top {
             let (a, b) = table.pair(row);
             let theta =
@@ -114,7 +115,7 @@ impl RadialTable {
             table.max_sep_rad
         );
         let key = crate::catalog::fnv1a(text.as_bytes());
-        let file = crate::table::cache_dir()
+        let file = crate::catalog::table::cache_dir()
             .filter(|_| use_cache)
             .map(|d| d.join(format!("radial-{key:016x}.bin")));
         if let Some(t) = file
@@ -145,7 +146,7 @@ impl RadialTable {
 const MAGIC: &[u8; 8] = b"GPSRAD02";
 
 fn write_features(path: &std::path::Path, key: u64, t: &RadialTable) -> anyhow::Result<()> {
-    crate::table::write_cache(path, MAGIC, key, &[t.stars as u64], &t.features)
+    crate::catalog::table::write_cache(path, MAGIC, key, &[t.stars as u64], &t.features)
 }
 
 /// The cached features, if the file is whole (its checksum), made for this key and catalog
@@ -159,12 +160,13 @@ fn read_features(
     if !path.exists() {
         return None;
     }
-    let read = crate::table::read_cache(path, MAGIC, key, 1).and_then(|(head, features)| {
-        if head[0] != stars as u64 || features.len() != WORDS * stars {
-            anyhow::bail!("made for another catalog");
-        }
-        Ok(features)
-    });
+    let read =
+        crate::catalog::table::read_cache(path, MAGIC, key, 1).and_then(|(head, features)| {
+            if head[0] != stars as u64 || features.len() != WORDS * stars {
+                anyhow::bail!("made for another catalog");
+            }
+            Ok(features)
+        });
     match read {
         Ok(features) => Some(RadialTable::from_features(features, stars, table)),
         Err(e) => {
@@ -273,10 +275,14 @@ pub enum Method {
 }
 
 /// The CPU twins of the radial stages: score (`cpu::radial`) and select.
-pub fn candidates_cpu(t: &RadialTable, image: &[u32], k: usize) -> crate::identify::VoteResult {
+pub fn candidates_cpu(
+    t: &RadialTable,
+    image: &[u32],
+    k: usize,
+) -> crate::solve::identify::VoteResult {
     let n = image.len() / WORDS;
     let scores = crate::cpu::radial::radial(&t.features, &t.counts, image, n);
-    crate::identify::VoteResult {
+    crate::solve::identify::VoteResult {
         candidates: crate::cpu::select::select(&scores, n, t.stars, k),
         k,
         hypotheses: 0,

@@ -5,16 +5,16 @@
 //! the identification passes and retries that share its state; issue 23's layout step puts the
 //! passes in a `pipeline/` folder of their own.
 
-use crate::attitude::{pointing, wahba};
 use crate::camera::Camera;
+use crate::catalog::table::{self, PairTable, TableOrigin};
 use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection, vector_to_radec};
-use crate::detect::{self, DetectSettings, Detection};
-use crate::frame::Frame;
-use crate::identify::{self, IdentifySettings};
+use crate::io::frame::Frame;
 use crate::record::{MatchRecord, Record, Status, Timing};
-use crate::refine::{self, RefineSettings, Refined};
-use crate::table::{self, PairTable, TableOrigin};
-use crate::triangle;
+use crate::solve::attitude::{pointing, wahba};
+use crate::solve::detect::{self, DetectSettings, Detection};
+use crate::solve::identify::{self, IdentifySettings};
+use crate::solve::refine::{self, RefineSettings, Refined};
+use crate::solve::triangle;
 use anyhow::Result;
 use nalgebra::Vector3;
 use std::collections::HashMap;
@@ -47,7 +47,7 @@ pub struct Settings {
     /// and tried again, when the filter is not on already and `retry` is.
     pub detect_retry: bool,
     /// How stars are identified: the vote, or radial features + triangles.
-    pub method: crate::radial::Method,
+    pub method: crate::solve::radial::Method,
 }
 
 impl Default for Settings {
@@ -64,7 +64,7 @@ impl Default for Settings {
             scale_range: None,
             retry: true,
             detect_retry: true,
-            method: crate::radial::Method::Vote,
+            method: crate::solve::radial::Method::Vote,
         }
     }
 }
@@ -144,7 +144,7 @@ pub struct Band {
     pub table: PairTable,
     pub table_origin: TableOrigin,
     /// The reference stars' radial features (`--method radial`), from `table`.
-    pub radial: Option<crate::radial::RadialTable>,
+    pub radial: Option<crate::solve::radial::RadialTable>,
     /// `refs` moved to the epochs of frames that carry their own date, by day.
     epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
 }
@@ -176,9 +176,9 @@ impl Band {
             scaled(camera, lo).diagonal_rad(),
             settings.table_cache,
         );
-        let radial = (settings.method == crate::radial::Method::Radial).then(|| {
+        let radial = (settings.method == crate::solve::radial::Method::Radial).then(|| {
             let s = &settings.identify;
-            crate::radial::RadialTable::load_or_build(
+            crate::solve::radial::RadialTable::load_or_build(
                 &refs,
                 &table,
                 table::cache_key(&refs, catalog.content_hash, table.max_sep_rad),
@@ -579,12 +579,16 @@ impl Solver {
             };
             let band = &self.bands[p.band];
             outcome = match (self.settings.method, &band.radial) {
-                (crate::radial::Method::Triangle, _) => {
+                (crate::solve::radial::Method::Triangle, _) => {
                     self.finish_triangle_method(&detections, &p, epoch)
                 }
                 (_, Some(t)) => {
-                    let image = crate::radial::image_features(&p.vectors[..p.n_vote], t);
-                    let found = crate::radial::candidates_cpu(t, &image, crate::radial::CANDIDATES);
+                    let image = crate::solve::radial::image_features(&p.vectors[..p.n_vote], t);
+                    let found = crate::solve::radial::candidates_cpu(
+                        t,
+                        &image,
+                        crate::solve::radial::CANDIDATES,
+                    );
                     self.finish_radial(&detections, &p, &found, epoch)
                 }
                 _ => {
@@ -639,13 +643,13 @@ impl Solver {
     ) -> Outcome {
         let refs = self.bands[p.band].refs_at(epoch);
         let vectors = &p.vectors[..p.n_vote];
-        let triangles = crate::radial::triangles(
+        let triangles = crate::solve::radial::triangles(
             &found.candidates,
             found.k,
             &p.ranges,
             vectors,
             &self.bands[p.band].refs,
-            crate::radial::TRIANGLE_STARS,
+            crate::solve::radial::TRIANGLE_STARS,
         );
         if triangles.is_empty() {
             return Outcome::Unsolved("no_consistent_match");

@@ -424,7 +424,7 @@ const TIME_KEYS: [&str; 4] = ["TIME-OBS", "UTSTART", "UT", "UTC"];
 /// Keywords for the exposure length, seconds, in order of preference.
 const LENGTH_KEYS: [&str; 3] = ["EXPTIME", "XPOSURE", "TELAPSE"];
 
-pub use crate::fits::plausible_mjd;
+pub use crate::io::fits::plausible_mjd;
 
 /// The longest exposure taken as such (EXPTIME and the like): a day.
 const MAX_EXPOSURE_S: f64 = 86_400.0;

@@ -33,7 +33,7 @@
 //! camera may want to cache headers' SIP part if that ever matters.
 
 use crate::camera::Camera;
-use crate::fits::{card_comment, card_raw, card_real, card_str};
+use crate::io::fits::{card_comment, card_raw, card_real, card_str};
 use anyhow::{Context, Result, ensure};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use std::path::Path;
@@ -118,7 +118,7 @@ pub fn wcs_header(camera: &Camera, r: &Matrix3<f64>) -> Vec<String> {
     cards.push(card_comment(
         "WCS by gpustar. Pixel (1,1) = centre of the top-left pixel of the file.",
     ));
-    cards.push(crate::fits::card_end());
+    cards.push(crate::io::fits::card_end());
     cards
 }
 

@@ -3,9 +3,9 @@
 
 use crate::camera::Camera;
 use crate::catalog::RefCatalog;
+use crate::catalog::table::{PairTable, chord_key, chord_of_angle};
 use crate::cpu;
 use crate::cpu::vote::PairRange;
-use crate::table::{PairTable, chord_key, chord_of_angle};
 use nalgebra::Vector3;
 
 /// Settings of identification.

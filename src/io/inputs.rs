@@ -1,7 +1,7 @@
 //! The inputs of a run: the image files of a directory in a sorted, stable order, and the
 //! shard of them a process takes.
 
-use crate::frame::is_image_path;
+use crate::io::frame::is_image_path;
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 

@@ -4,22 +4,22 @@
 //! `info`, `merge`, the calibration loop). Issue 23's layout step splits it into `cli/`, one
 //! file per command; until then its sections follow the commands' order in [`Command`].
 
-use crate::batch::{Backend, BackendChoice, BackendNote, CameraSource, Pipeline, Solvers};
+use crate::batch::{self, RunOptions};
 use crate::camera::Camera;
 use crate::catalog::{Catalog, DoubleStars};
-use crate::dark::Darks;
-use crate::evaluate;
-use crate::inputs::{self, Input, Shard};
-use crate::output::{self, Format, RecordWriter};
+use crate::io::dark::Darks;
+use crate::io::inputs::{self, Input, Shard};
+use crate::io::output::{self, Format, RecordWriter};
+use crate::pipeline::{Backend, BackendChoice, BackendNote, CameraSource, Pipeline, Solvers};
 use crate::products::Products;
 use crate::record::Record;
-use crate::refine::CameraFit;
-use crate::run::{self as stream, RunOptions};
 use crate::sequence::SequenceOptions;
+use crate::simulate::evaluate;
 use crate::simulate::{self, SimSettings};
+use crate::sky::{Station, parse_station};
+use crate::solve::refine::CameraFit;
 use crate::solve::{PassKind, Settings, Solver, scaled};
 use crate::streaks::reduce::Astrometry;
-use crate::streaks::sky::{Station, parse_station};
 use crate::streaks::{StreakOptions, StreakSettings, export::Exports};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
@@ -65,7 +65,7 @@ pub enum Command {
         #[command(flatten)]
         opts: SolveOpts,
         #[command(flatten)]
-        run: BatchOpts,
+        run: RunArgs,
     },
     /// Solve one image; one record.
     Solve {
@@ -162,7 +162,7 @@ pub enum Command {
 }
 
 #[derive(Args, Debug, Clone)]
-pub struct BatchOpts {
+pub struct RunArgs {
     /// Also solve images in subdirectories (links to directories are not followed).
     #[arg(short, long)]
     pub recursive: bool,
@@ -363,13 +363,13 @@ pub struct SolveOpts {
     /// How star positions are measured: a maximum-likelihood fit of a pixel-integrated
     /// Gaussian on a 9x9 window (the centre of gravity where it does not settle; matches then
     /// carry their 1-sigma and weigh the attitude by it), or the centre of gravity.
-    #[arg(long, value_enum, default_value_t = crate::detect::Centroid::Ml)]
-    pub centroid: crate::detect::Centroid,
+    #[arg(long, value_enum, default_value_t = crate::solve::detect::Centroid::Ml)]
+    pub centroid: crate::solve::detect::Centroid,
     /// How stars are identified: geometric voting (triangles as its fallback), radial
     /// features as the candidate filter and triangles among the candidates (seed 002; for
     /// narrow, deep fields), or triangles alone (seed 002's baseline).
-    #[arg(long, value_enum, default_value_t = crate::radial::Method::Vote)]
-    pub method: crate::radial::Method,
+    #[arg(long, value_enum, default_value_t = crate::solve::radial::Method::Vote)]
+    pub method: crate::solve::radial::Method,
     /// Brightest detected stars that take part in the vote.
     #[arg(long, default_value_t = 40, value_parser = count_within(4, 200))]
     pub vote_stars: usize,
@@ -601,7 +601,7 @@ fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
 }
 
 /// Run the command line; errors are printed once by `main`.
-pub fn run(cli: Cli) -> Result<ExitCode> {
+pub fn execute(cli: Cli) -> Result<ExitCode> {
     init_logging(cli.verbose);
     if cli.verbose == 0 {
         give_the_driver_a_runtime_dir();
@@ -623,7 +623,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         }
         Command::Solve { image, opts } => {
             let name = image.display().to_string();
-            let run = BatchOpts {
+            let run = RunArgs {
                 recursive: false,
                 resume: false,
                 retry_errors: false,
@@ -806,7 +806,7 @@ fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
     }
 }
 
-fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCode> {
+fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Result<ExitCode> {
     if b.sequence && o.streaks.streaks {
         anyhow::bail!(
             "--sequence and --streaks do not go together yet: run the sequences and the \
@@ -936,7 +936,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
             ..SequenceOptions::default()
         }),
     };
-    let summary = stream::run(
+    let summary = batch::run(
         inputs,
         &solvers,
         &mut backend,
@@ -955,7 +955,7 @@ fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &BatchOpts) -> Result<ExitCod
     )?;
     bar.finish_and_clear();
     if exports.wanted() && summary.write_error.is_none() {
-        let said = exports.finish(&crate::streaks::sky::now_utc_iso())?;
+        let said = exports.finish(&crate::sky::now_utc_iso())?;
         if !o.quiet {
             eprintln!("gpustar: wrote {said}");
         }
@@ -1268,7 +1268,7 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
         // What `--method radial` would keep besides: built here from the table.
         let t0 = std::time::Instant::now();
         let middle = scaled(&camera, 0.5 * (band.lo + band.hi));
-        let radial = crate::radial::RadialTable::build(
+        let radial = crate::solve::radial::RadialTable::build(
             refs,
             t,
             s.identify.pair_tol_px * middle.ifov_rad(),
@@ -1278,7 +1278,7 @@ fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<Exi
             out,
             "radial features (--method radial): {} bytes ({} rings of {:.2} arcsec to {:.4} deg), built in {:.1} ms",
             radial.bytes(),
-            crate::radial::BITS,
+            crate::solve::radial::BITS,
             radial.ring_rad.to_degrees() * 3600.0,
             radial.radius_rad.to_degrees(),
             t0.elapsed().as_secs_f64() * 1e3
@@ -1321,7 +1321,7 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
     };
     let t0 = Instant::now();
     if a.streaks {
-        let start = crate::streaks::sky::Utc::parse(&a.start_utc)
+        let start = crate::sky::Utc::parse(&a.start_utc)
             .map_err(|e| anyhow::anyhow!("--start-utc: {e}"))?;
         let st = crate::streaks::simulate::StreakSim {
             start,
@@ -1334,7 +1334,7 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         // The stars where they are on the frames' date.
         let s = SimSettings {
             bits: 16,
-            epoch: crate::fits::julian_year(&a.start_utc).unwrap_or(a.epoch),
+            epoch: crate::io::fits::julian_year(&a.start_utc).unwrap_or(a.epoch),
             ..s
         };
         crate::streaks::simulate::write_set(&catalog, &s, &st, &a.out)?;
@@ -1356,12 +1356,12 @@ fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
             particle_ratio: a.particle_ratio,
             particle_speed_arcmin_s: a.particle_speed,
             particle_mag: a.particle_mag,
-            start: crate::streaks::sky::Utc::parse(&a.start_utc)
+            start: crate::sky::Utc::parse(&a.start_utc)
                 .map_err(|e| anyhow::anyhow!("--start-utc: {e}"))?,
             ..Default::default()
         };
         let s = SimSettings {
-            epoch: crate::fits::julian_year(&a.start_utc).unwrap_or(a.epoch),
+            epoch: crate::io::fits::julian_year(&a.start_utc).unwrap_or(a.epoch),
             ..s
         };
         crate::sequence::simulate::write_set(&catalog, &s, &q, &a.out, threads)?;
@@ -1559,7 +1559,7 @@ where
             return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
         }
     };
-    match run(cli) {
+    match execute(cli) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("gpustar: error: {e:#}");

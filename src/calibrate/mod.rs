@@ -7,8 +7,8 @@
 //! what is left to the camera is the shape of the projection: the scale (fx, fy), the
 //! distortion (k1, k2), and — through the perspective of a wide field — the principal point.
 
-use crate::attitude::wahba;
 use crate::camera::Camera;
+use crate::solve::attitude::wahba;
 use anyhow::{Result, bail};
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 
@@ -649,7 +649,7 @@ pub fn fit(initial: &Camera, frames: &[FrameStars], opts: &FitOptions) -> Result
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::attitude::attitude_error;
+    use crate::solve::attitude::attitude_error;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

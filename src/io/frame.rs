@@ -174,7 +174,7 @@ fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, FileInfo
     }
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
     let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64).min(MAX_ALLOC / 2);
-    let f = crate::fits::decode_fits(&bytes, max_pixels)
+    let f = crate::io::fits::decode_fits(&bytes, max_pixels)
         .with_context(|| format!("cannot decode {shown}"))?;
     Ok((
         Frame {

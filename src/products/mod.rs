@@ -2,10 +2,12 @@
 //! (`--wcs-dir`) and an annotated PNG for each decoded frame (`--annotate-dir`), at the
 //! input's relative path with the extension replaced (`a/b.png` → `DIR/a/b.wcs`, `DIR/a/b.png`).
 
-use crate::annotate::{self, Annotation, Mark};
-use crate::attitude::pointing;
-use crate::frame::Frame;
-use crate::refine::stars_in_view;
+pub mod annotate;
+
+use self::annotate::{Annotation, Mark};
+use crate::io::frame::Frame;
+use crate::solve::attitude::pointing;
+use crate::solve::refine::stars_in_view;
 use crate::solve::{Outcome, Solution};
 use crate::streaks::fit::StreakFit;
 use anyhow::{Result, bail};
@@ -29,7 +31,7 @@ impl Products {
         streaks: &[StreakFit],
     ) -> Result<()> {
         if let (Some(dir), Outcome::Solved(r, _)) = (&self.wcs_dir, &sol.outcome) {
-            crate::wcs::write_wcs_file(&product_path(dir, name, "wcs"), &r.camera, &r.r)?;
+            crate::io::wcs::write_wcs_file(&product_path(dir, name, "wcs"), &r.camera, &r.r)?;
         }
         if let Some(dir) = &self.annotate_dir {
             let out = product_path(dir, name, "png");

@@ -6,7 +6,7 @@
 //! first and loses the second. Subtracting it leaves faint stars on a flat background (the
 //! openstartracker frames need this: their fixed pattern is as bright as their stars).
 
-use crate::frame::{Frame, is_image_path};
+use crate::io::frame::{Frame, is_image_path};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};

@@ -2,10 +2,10 @@
 //! match detections to them one to one, refit, and judge the result by the probability that a
 //! wrong attitude would match as many stars by chance.
 
-use crate::attitude::{wahba, wahba_weighted};
 use crate::camera::{Camera, angle};
 use crate::catalog::RefCatalog;
-use crate::detect::Detection;
+use crate::solve::attitude::{wahba, wahba_weighted};
+use crate::solve::detect::Detection;
 use nalgebra::{Matrix3, Vector3};
 
 /// Settings of refinement and acceptance.

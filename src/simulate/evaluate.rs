@@ -1,11 +1,11 @@
 //! `gpustar evaluate`: compare result records with a truth file (simulated or real): how many
 //! frames are solved correctly, how many wrongly, the attitude errors and false star IDs.
 
-use crate::attitude::attitude_error;
 use crate::camera::Camera;
 use crate::catalog::radec_to_vector;
 use crate::record::{MatchRecord, Record, Status};
 use crate::simulate::Truth;
+use crate::solve::attitude::attitude_error;
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
 use std::collections::HashMap;

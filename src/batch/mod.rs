@@ -5,9 +5,9 @@
 //! being handed out and being written (the writer returns a ticket for each record it writes,
 //! and the feeder needs one to hand out the next input).
 
-use crate::batch::{Backend, Counts, Decoded, Solvers};
-use crate::inputs::Input;
-use crate::output::RecordWriter;
+use crate::io::inputs::Input;
+use crate::io::output::RecordWriter;
+use crate::pipeline::{Backend, Counts, Decoded, Solvers};
 use crate::record::Record;
 use crate::sequence::{Detected, SequenceOptions, Sequencer};
 use anyhow::Result;
@@ -166,7 +166,7 @@ pub fn run(
 /// The GPU thread: gather decoded frames into batches (as many as are ready, up to `batch`)
 /// and solve them.
 fn gpu_loop(
-    runner: &mut crate::batch::GpuRunner,
+    runner: &mut crate::pipeline::GpuRunner,
     solvers: &Solvers,
     frames: Receiver<(usize, Decoded)>,
     done: Sender<(usize, Record)>,
@@ -248,7 +248,7 @@ fn panicked_decode(input: &Input, p: &Box<dyn std::any::Any + Send>) -> Decoded 
 
 /// The GPU thread of a sequence run: batches of decoded frames through the pixel stages.
 fn gpu_detect_loop(
-    runner: &mut crate::batch::GpuRunner,
+    runner: &mut crate::pipeline::GpuRunner,
     solvers: &Solvers,
     frames: Receiver<(usize, Decoded)>,
     done: Sender<(usize, Detected)>,
@@ -322,7 +322,7 @@ fn guarded_detect(input: &Input, f: impl FnOnce() -> Detected) -> Detected {
         decoded: panicked_decode(input, &p),
         detections: Err(panic_message(&p)),
         detect_ms: 0.0,
-        backend: crate::batch::BACKEND_CPU.to_string(),
+        backend: crate::pipeline::BACKEND_CPU.to_string(),
     })
 }
 
@@ -330,7 +330,7 @@ fn guarded_detect(input: &Input, f: impl FnOnce() -> Detected) -> Detected {
 /// error record instead of ending the run.
 fn guarded(name: &str, f: impl FnOnce() -> Record) -> Record {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
-        .unwrap_or_else(|p| Record::error(name, panic_message(&p), crate::batch::BACKEND_CPU))
+        .unwrap_or_else(|p| Record::error(name, panic_message(&p), crate::pipeline::BACKEND_CPU))
 }
 
 fn panic_message(p: &Box<dyn std::any::Any + Send>) -> String {

@@ -4,9 +4,11 @@
 //!
 //! Frames are reproducible from `--seed`: frame k uses its own ChaCha8 stream.
 
-use crate::attitude::{pointing, quaternion};
+pub mod evaluate;
+
 use crate::camera::Camera;
 use crate::catalog::Catalog;
+use crate::solve::attitude::{pointing, quaternion};
 use anyhow::{Context, Result, bail};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};

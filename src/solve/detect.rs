@@ -4,7 +4,7 @@ use crate::cpu;
 use crate::cpu::centroid::Blob;
 use crate::cpu::psf_fit::{PsfFit, Window};
 use crate::cpu::threshold::DetectParams;
-use crate::frame::Frame;
+use crate::io::frame::Frame;
 use serde::Serialize;
 
 /// Settings of detection.

@@ -1,0 +1,14 @@
+//! Lost-in-space identification of one frame, stage by stage: [`detect`] → [`identify`] (the
+//! vote) or [`radial`] (ring features) with [`triangle`] checks → [`attitude`] (Wahba) →
+//! [`refine`] (match, refit, false-match probability). [`Solver`] holds one camera's catalog
+//! selection and distance table and runs the stages for a frame.
+
+pub mod attitude;
+pub mod detect;
+pub mod identify;
+pub mod radial;
+pub mod refine;
+mod solver;
+pub mod triangle;
+
+pub use solver::*;
