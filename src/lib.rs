@@ -16,7 +16,6 @@ pub mod batch;
 pub mod calibrate;
 pub mod camera;
 pub mod catalog;
-pub mod cli;
 pub mod cpu;
 pub mod gpu;
 pub mod io;

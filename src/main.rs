@@ -1,3 +1,7 @@
+//! The `gpustar` command line; the library does the work.
+
+mod cli;
+
 fn main() -> std::process::ExitCode {
-    gpustar::cli::main_with_args(std::env::args_os())
+    cli::main_with_args(std::env::args_os())
 }

@@ -1,0 +1,456 @@
+//! Argument types shared by the commands, with the range parsers that refuse bad values.
+
+use clap::{Args, Subcommand};
+use gpustar::catalog::DoubleStars;
+use gpustar::io::inputs::Shard;
+use gpustar::io::output::Format;
+use gpustar::pipeline::BackendChoice;
+use gpustar::sky::{Station, parse_station};
+use gpustar::solve::refine::CameraFit;
+use gpustar::streaks::reduce::Astrometry;
+use std::path::PathBuf;
+
+#[derive(Args, Debug, Clone)]
+pub struct RunArgs {
+    /// Also solve images in subdirectories (links to directories are not followed).
+    #[arg(short, long)]
+    pub recursive: bool,
+    /// Skip inputs that already have a complete record in --output and append the rest (an
+    /// incomplete last line, left by a crash, is cut off first). A file that is not gpustar
+    /// output of this --format is refused untouched. Error records already there count in the
+    /// exit status. An unfinished --sequence is tracked again from its first frame (its records
+    /// not written twice), so the records that follow are an uninterrupted run's.
+    #[arg(long, requires = "output")]
+    pub resume: bool,
+    /// With --resume: take the error records out of --output and try their inputs again.
+    #[arg(long, requires = "resume")]
+    pub retry_errors: bool,
+    /// Only the inputs whose stable hash of the relative path falls in shard K of N (0-based),
+    /// e.g. 3/16: run N processes (a job array) and `gpustar merge` their outputs.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<Shard>,
+    /// Worker threads for decoding (and solving on the CPU) [default: all cores].
+    #[arg(short = 'j', long, value_parser = count_within(1, 4096))]
+    pub threads: Option<usize>,
+    /// Each directory's frames (with -r, each subdirectory's) are one sequence of a camera
+    /// head, in name order: detections moving against the stars are judged particles (they
+    /// never vote or match), and frames are identified from the attitude the previous ones
+    /// predict (lost-in-space when that fails). Records add sequence_mode and particles.
+    /// A sequence is never split across shards.
+    #[arg(long, help_heading = "Sequences")]
+    pub sequence: bool,
+    /// Seconds between frames, for frames without a time in their header (FITS DATE-OBS).
+    #[arg(long, value_name = "SECONDS", requires = "sequence", help_heading = "Sequences",
+          value_parser = parse_positive)]
+    pub frame_interval: Option<f64>,
+}
+
+/// A number greater than zero.
+/// A value parser for a number within `lo..=hi` (NaN and infinities refused): absurd values
+/// are told at once (exit 2), not found out by a run that takes hours.
+pub(crate) fn within(
+    lo: f64,
+    hi: f64,
+) -> impl Fn(&str) -> std::result::Result<f64, String> + Clone {
+    move |s: &str| match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (lo..=hi).contains(&v) => Ok(v),
+        Ok(_) => Err(format!("{s} is outside {lo} to {hi}")),
+        Err(_) => Err(format!("{s:?} is not a number")),
+    }
+}
+
+/// [`within`] for single-precision options.
+pub(crate) fn within_f32(
+    lo: f64,
+    hi: f64,
+) -> impl Fn(&str) -> std::result::Result<f32, String> + Clone {
+    move |s: &str| within(lo, hi)(s).map(|v| v as f32)
+}
+
+/// [`within`] for counts.
+pub(crate) fn count_within(
+    lo: usize,
+    hi: usize,
+) -> impl Fn(&str) -> std::result::Result<usize, String> + Clone {
+    move |s: &str| match s.trim().parse::<usize>() {
+        Ok(v) if (lo..=hi).contains(&v) => Ok(v),
+        Ok(_) => Err(format!("{s} is outside {lo} to {hi}")),
+        Err(_) => Err(format!("{s:?} is not a whole number")),
+    }
+}
+
+pub(crate) fn parse_positive(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("expected a number of seconds above 0, got {s:?}")),
+    }
+}
+
+#[derive(Subcommand, Debug)]
+pub enum CatalogCommand {
+    /// Make gpustar's catalog CSV from Hipparcos-2 hip2.dat (CDS I/311).
+    Import {
+        /// Path of hip2.dat.
+        hip2: PathBuf,
+        /// Keep stars with Hp at or below this.
+        #[arg(long, default_value_t = 8.0)]
+        max_mag: f64,
+        /// Output file (default: stdout).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct CameraOpts {
+    /// Camera model (TOML: width, height, fov_x_deg or fx_px, fy_px, cx_px, cy_px, k1, k2,
+    /// mirrored, mag_limit).
+    #[arg(long, conflicts_with = "fov_deg")]
+    pub camera: Option<PathBuf>,
+    /// Horizontal field of view in degrees: square pixels, centred, no distortion. A range
+    /// (e.g. 8..20) searches the scale; the records give the fitted FOV.
+    #[arg(long, value_parser = parse_fov)]
+    pub fov_deg: Option<FovArg>,
+    /// The camera's focal length is only known to within this fraction (e.g. 0.01): search
+    /// the scale within it and fit it.
+    #[arg(long)]
+    pub fov_tolerance: Option<f64>,
+    /// What refinement fits besides the attitude: nothing, the scale (field of view), or the
+    /// scale and radial distortion k1 (reported as distortion_k1).
+    #[arg(long, value_enum, default_value_t = CameraFit::None)]
+    pub fit: CameraFit,
+}
+
+/// Detection's matched filter (`--detect-filter`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum DetectFilter {
+    None,
+    Binomial,
+}
+
+/// `--fov-deg`: one value or a range.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FovArg {
+    Exact(f64),
+    Range(f64, f64),
+}
+
+pub(crate) fn parse_fov(s: &str) -> std::result::Result<FovArg, String> {
+    let num = |v: &str| -> std::result::Result<f64, String> {
+        let x: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| format!("bad field of view {v:?}"))?;
+        if x > 0.0 && x < 170.0 {
+            Ok(x)
+        } else {
+            Err(format!(
+                "field of view must be between 0 and 170 degrees, got {x}"
+            ))
+        }
+    };
+    match s.split_once("..") {
+        Some((a, b)) => {
+            let (a, b) = (num(a)?, num(b)?);
+            if a >= b {
+                return Err(format!("expected LOW..HIGH, got {s:?}"));
+            }
+            Ok(FovArg::Range(a, b))
+        }
+        None => Ok(FovArg::Exact(num(s)?)),
+    }
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct CatalogOpts {
+    /// Catalog CSV (default: the built-in Hipparcos-2 catalog, Hp ≤ 8).
+    #[arg(long)]
+    pub catalog: Option<PathBuf>,
+    /// Observation epoch (decimal year) for proper motion.
+    #[arg(long, default_value_t = 2000.0, value_parser = within(1000.0, 3000.0))]
+    pub epoch: f64,
+    /// Faintest catalog magnitude used [default: the camera file's mag_limit, else chosen from
+    /// the field of view so that about 40 catalog stars are in view; in a scale search, each
+    /// band's middle field's for the vote, the fitted field's for the final refinement].
+    #[arg(long, value_parser = within(-2.0, 20.0), allow_negative_numbers = true)]
+    pub mag_limit: Option<f64>,
+    /// Stars the camera cannot separate: merge them into one at their photocentre, drop
+    /// them, or keep them.
+    #[arg(long, value_enum, default_value_t = DoubleStars::Merge)]
+    pub double_stars: DoubleStars,
+    /// Stars closer than this many pixels count as one.
+    #[arg(long, default_value_t = 2.0, value_parser = within(0.0, 100.0))]
+    pub double_star_px: f64,
+    /// Do not read or write the distance-table cache.
+    #[arg(long)]
+    pub no_cache: bool,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct SolveOpts {
+    #[command(flatten)]
+    pub camera: CameraOpts,
+    #[command(flatten)]
+    pub catalog: CatalogOpts,
+    /// Write the records here instead of stdout.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Record format.
+    #[arg(long, value_enum, default_value_t = Format::Jsonl)]
+    pub format: Format,
+    /// Where the kernels run: the GPU if there is a hardware one, else the CPU twins (auto;
+    /// a software rasterizer such as lavapipe is slower than the twins), the GPU whatever it
+    /// is, or the CPU. The adapter is the best one found, or the first whose name contains
+    /// $GPUSTAR_ADAPTER.
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    pub backend: BackendChoice,
+    /// Frames per GPU batch (one submission for detection and one for voting per batch).
+    #[arg(long, default_value_t = 32, value_parser = count_within(1, 4096))]
+    pub batch_size: usize,
+    /// Detection threshold above the local background, in noise sigmas.
+    #[arg(long, default_value_t = 5.0, value_parser = within_f32(0.5, 100.0))]
+    pub sigma: f32,
+    /// Detection's matched filter: `binomial` thresholds each pixel's 3x3 binomial smoothing
+    /// (about a star's PSF) at --sigma sigmas of the smoothed noise, and the pixel at 0.375 of
+    /// that, which finds stars of about half the peak SNR; `none` thresholds the pixels alone.
+    #[arg(long, value_enum, default_value_t = DetectFilter::None)]
+    pub detect_filter: DetectFilter,
+    /// How star positions are measured: a maximum-likelihood fit of a pixel-integrated
+    /// Gaussian on a 9x9 window (the centre of gravity where it does not settle; matches then
+    /// carry their 1-sigma and weigh the attitude by it), or the centre of gravity.
+    #[arg(long, value_enum, default_value_t = gpustar::solve::detect::Centroid::Ml)]
+    pub centroid: gpustar::solve::detect::Centroid,
+    /// How stars are identified: geometric voting (triangles as its fallback), radial
+    /// features as the candidate filter and triangles among the candidates (seed 002; for
+    /// narrow, deep fields), or triangles alone (seed 002's baseline).
+    #[arg(long, value_enum, default_value_t = gpustar::solve::radial::Method::Vote)]
+    pub method: gpustar::solve::radial::Method,
+    /// Brightest detected stars that take part in the vote.
+    #[arg(long, default_value_t = 40, value_parser = count_within(4, 200))]
+    pub vote_stars: usize,
+    /// Pair distance tolerance from centroid errors, pixels.
+    #[arg(long, default_value_t = 0.4, value_parser = within(0.01, 5.0))]
+    pub pair_tol_px: f64,
+    /// Do not retry frames that fail: first with up to 60 voting stars, then with the voters
+    /// spread over a grid of 16 cells (both when there are more stars than --vote-stars), then
+    /// with wide tolerances (pair 4 px, match radius 5 px).
+    #[arg(long)]
+    pub no_retry: bool,
+    /// Pair distance tolerance from focal-length and distortion errors, relative.
+    #[arg(long, default_value_t = 0.0002, value_parser = within(0.0, 0.05))]
+    pub scale_tol: f64,
+    /// A detection matches a catalog star within this many pixels in refinement.
+    #[arg(long, default_value_t = 2.0, value_parser = within(0.1, 20.0))]
+    pub match_radius_px: f64,
+    /// Report `solved` only when the probability of a chance match is below this.
+    #[arg(long, default_value_t = 1e-6, value_parser = within(1e-300, 0.5))]
+    pub max_false_prob: f64,
+    /// Subtract this dark frame (same size, any readable format) from every frame before
+    /// detection: removes hot pixels and fixed-pattern noise.
+    #[arg(long, value_name = "FILE", conflicts_with = "dark_median")]
+    pub dark: Option<PathBuf>,
+    /// Subtract from each frame the per-pixel median of up to 25 frames of its directory (of
+    /// the same size): a dark made from the data, for cameras with fixed-pattern noise and
+    /// no dark frame. Needs at least 3 frames per directory, pointing at different skies.
+    #[arg(long)]
+    pub dark_median: bool,
+    /// Write a FITS WCS header (TAN, plus SIP when distortion is fitted or given) for each
+    /// solved frame here, at the input's relative path with the extension .wcs.
+    #[arg(long, value_name = "DIR")]
+    pub wcs_dir: Option<PathBuf>,
+    /// Write an annotated PNG of each readable frame here (identified stars circled in green
+    /// with their HIP number, other detections in red, catalog stars in the frame that
+    /// nothing matched as cyan crosses), at the input's relative path with the extension .png.
+    #[arg(long, value_name = "DIR")]
+    pub annotate_dir: Option<PathBuf>,
+    /// No progress bar, warnings or summary on stderr.
+    #[arg(short, long)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub streaks: StreakOpts,
+}
+
+/// Satellite streaks (optical-tracking frames).
+#[derive(Args, Debug, Clone)]
+pub struct StreakOpts {
+    /// Find satellite streaks: sub-pixel ends (edge-flagged where they leave the frame),
+    /// width, flux, SNR, RA/Dec and Az/El of the ends; detections on a streak are kept out of
+    /// star identification. Records get a "streaks" list.
+    #[arg(long, help_heading = "Streaks")]
+    pub streaks: bool,
+    /// The station for Az/El (geodetic WGS-84, east longitude positive) [default: each FITS
+    /// header's OBSGEO-B/L/H, OBSGEO-X/Y/Z or SITELAT/SITELONG/SITEELEV].
+    #[arg(long, value_name = "LAT,LON,HEIGHT_M", value_parser = parse_station,
+          requires = "streaks", help_heading = "Streaks")]
+    pub station: Option<Station>,
+    /// Where the RA/Dec of streak ends come from: gpustar's solution, the FITS header's
+    /// TAN/TAN-SIP WCS, or the solution when the frame solves and else the header (auto).
+    #[arg(long, value_enum, default_value_t = Astrometry::Auto, help_heading = "Streaks")]
+    pub astrometry: Astrometry,
+    /// UT1 − UTC in seconds for Az/El [default: interpolated in the bundled IERS table
+    /// (catalog/eop.csv); beyond its end its last value, with a warning].
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        allow_negative_numbers = true,
+        requires = "streaks",
+        help_heading = "Streaks",
+        value_parser = within(-1.0, 1.0)
+    )]
+    pub dut1: Option<f64>,
+    /// Streak mask threshold, noise sigmas of the smoothed frame.
+    #[arg(long, default_value_t = 3.5, help_heading = "Streaks",
+          value_parser = within_f32(0.5, 100.0))]
+    pub streak_sigma: f32,
+    /// Write the streaks' midpoints at mid-exposure as a CCSDS TDM (KVN): RADEC, and AZEL
+    /// when the station is known.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "streaks",
+        help_heading = "Streaks"
+    )]
+    pub tdm: Option<PathBuf>,
+    /// Write the streaks' midpoints at mid-exposure as IOD lines (angle format 2, J2000).
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "streaks",
+        help_heading = "Streaks"
+    )]
+    pub iod: Option<PathBuf>,
+    /// COSPAR station number for the IOD lines.
+    #[arg(long, default_value_t = 9999, value_parser = clap::value_parser!(u16).range(0..=9999),
+          help_heading = "Streaks")]
+    pub iod_station: u16,
+}
+
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Number of frames.
+    #[arg(short = 'n', long, default_value_t = 10)]
+    pub frames: usize,
+    /// Horizontal field of view, degrees.
+    #[arg(long, default_value_t = 18.0)]
+    pub fov_deg: f64,
+    /// Frame size, WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size, default_value = "1024x1024")]
+    pub size: (u32, u32),
+    /// Faintest catalog star drawn (Hp).
+    #[arg(long, default_value_t = 6.0)]
+    pub mag_limit: f64,
+    /// False stars per frame.
+    #[arg(long, default_value_t = 3)]
+    pub false_stars: usize,
+    /// Hot pixels per frame.
+    #[arg(long, default_value_t = 5)]
+    pub hot_pixels: usize,
+    /// Centroid noise: draw each catalog star this far off its true place (Gaussian sigma in
+    /// x and in y, pixels); the truth keeps the true places.
+    #[arg(long, default_value_t = 0.0)]
+    pub centroid_noise_px: f64,
+    /// Bits per pixel: 8 or 16.
+    #[arg(long, default_value_t = 8)]
+    pub bits: u8,
+    /// Random seed: the same seed gives the same frames.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Epoch of the star positions (decimal year).
+    #[arg(long, default_value_t = 2000.0)]
+    pub epoch: f64,
+    /// Gaussian PSF sigma, pixels.
+    #[arg(long, default_value_t = 1.0)]
+    pub psf_sigma: f64,
+    /// Sky background at the centre, electrons per pixel.
+    #[arg(long, default_value_t = 400.0)]
+    pub sky: f64,
+    /// Read noise, electrons.
+    #[arg(long, default_value_t = 15.0)]
+    pub read_noise: f64,
+    /// Fall-off of sky and stars from centre to corner (0 = none).
+    #[arg(long, default_value_t = 0.3)]
+    pub vignetting: f64,
+    /// Catalog CSV to draw stars from (default: built-in).
+    #[arg(long)]
+    pub catalog: Option<PathBuf>,
+    /// Take the frames with this camera model (TOML, as for batch: non-square pixels,
+    /// principal point, distortion, mirror) instead of --size and --fov-deg.
+    #[arg(long, conflicts_with_all = ["size", "fov_deg"])]
+    pub camera: Option<PathBuf>,
+    /// Satellite streaks of known ends: 16-bit FITS frames with DATE-BEG, DATE-END, EXPTIME
+    /// and the station (OBSGEO-B/L/H) in the header; truth.jsonl adds each streak's ends.
+    /// Every fifth frame has none, the others one or two, many crossing the frame's edge.
+    #[arg(long, conflicts_with = "camera", help_heading = "Streaks")]
+    pub streaks: bool,
+    /// Exposure start of the first frame (UTC); each next frame starts a minute later. With
+    /// --sequence: mid-exposure of each sequence's first frame.
+    #[arg(long, default_value = "2024-03-15T20:00:00", help_heading = "Streaks")]
+    pub start_utc: String,
+    /// Exposure time, seconds.
+    #[arg(long, default_value_t = 5.0, help_heading = "Streaks")]
+    pub exposure: f64,
+    /// The station written into the headers: LAT,LON,HEIGHT_M.
+    #[arg(long, default_value = "35.7,51.4,1200", value_parser = parse_station,
+          help_heading = "Streaks")]
+    pub station: Station,
+    /// Peak SNR per pixel of the streaks, LOW..HIGH (drawn uniformly).
+    #[arg(long, default_value = "4..25", value_parser = parse_range, help_heading = "Streaks")]
+    pub streak_snr: (f64, f64),
+    /// Sequences of a turning star tracker with moving particles: --sequences directories
+    /// seq_NNN of -n frames each, 16-bit FITS with DATE-OBS, DATE-END and EXPTIME;
+    /// truth.jsonl adds each frame's sequence, index, time and particles.
+    #[arg(long, conflicts_with_all = ["camera", "streaks"], help_heading = "Sequences")]
+    pub sequence: bool,
+    /// Number of sequences.
+    #[arg(long, default_value_t = 2, help_heading = "Sequences")]
+    pub sequences: usize,
+    /// Seconds between frames.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive,
+          help_heading = "Sequences")]
+    pub frame_interval: f64,
+    /// The camera's turn rate, LOW..HIGH degrees per second (drawn per sequence).
+    #[arg(long, default_value = "0.05..0.5", value_parser = parse_range,
+          help_heading = "Sequences")]
+    pub turn_rate: (f64, f64),
+    /// Particles per catalog star in view of the first frame (0: none).
+    #[arg(long, default_value_t = 1.5, help_heading = "Sequences")]
+    pub particle_ratio: f64,
+    /// Particle speeds against the stars, LOW..HIGH arcmin per second.
+    #[arg(long, default_value = "6..40", value_parser = parse_range,
+          help_heading = "Sequences")]
+    pub particle_speed: (f64, f64),
+    /// Particle magnitudes, LOW..HIGH (on the stars' scale: most are brighter than most
+    /// stars).
+    #[arg(long, default_value = "1.5..5", value_parser = parse_range,
+          help_heading = "Sequences")]
+    pub particle_mag: (f64, f64),
+}
+
+/// `LOW..HIGH`, two positive numbers.
+pub(crate) fn parse_range(s: &str) -> std::result::Result<(f64, f64), String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("expected LOW..HIGH, got {s:?}"))?;
+    let num = |v: &str| v.trim().parse::<f64>().ok().filter(|x| *x > 0.0);
+    match (num(a), num(b)) {
+        (Some(a), Some(b)) if a < b => Ok((a, b)),
+        _ => Err(format!("expected LOW..HIGH with 0 < LOW < HIGH, got {s:?}")),
+    }
+}
+
+pub(crate) fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|&n| n > 0)
+            .ok_or_else(|| format!("bad size {s:?}"))
+    };
+    Ok((p(w)?, p(h)?))
+}

@@ -1,0 +1,162 @@
+//! `gpustar info`: what a camera sees of the catalog and which identifier it gets.
+
+use super::args::*;
+use super::console::*;
+use super::solve::*;
+use anyhow::{Context, Result, bail};
+use gpustar::camera::Camera;
+use gpustar::catalog::Catalog;
+use gpustar::pipeline::CameraSource;
+use gpustar::solve::{PassKind, Settings, Solver, scaled};
+use std::process::ExitCode;
+
+pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<ExitCode> {
+    use std::fmt::Write as _;
+    // Written at the end in one piece, so that `| head` ends it quietly (see `print_all`).
+    let mut out = String::new();
+    let adapters = gpustar::gpu::adapters();
+    writeln!(out, "GPU adapters: {}", adapters.len())?;
+    for a in &adapters {
+        writeln!(
+            out,
+            "  {} ({}, {}, driver {})",
+            a.name, a.backend, a.device_type, a.driver
+        )?;
+    }
+    match gpustar::gpu::Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref()) {
+        Ok(g) => {
+            writeln!(out, "chosen: {}", g.backend_name())?;
+            writeln!(
+                out,
+                "  limits: Limits::default() with max_storage_buffer_binding_size {} MB, \
+                 max_buffer_size {} MB (the adapter's); no optional features",
+                g.limits.max_storage_buffer_binding_size >> 20,
+                g.limits.max_buffer_size >> 20
+            )?;
+        }
+        Err(e) => writeln!(out, "chosen: none ({e:#})")?,
+    }
+    let catalog = Catalog::load(o.catalog.as_deref())?;
+    writeln!(out, "catalog: {}", catalog.source)?;
+    writeln!(
+        out,
+        "  stars: {} (Hp {:.2} to {:.2}), positions at J1991.25, propagated to epoch {}",
+        catalog.stars.len(),
+        catalog.stars.iter().map(|s| s.mag).fold(f64::MAX, f64::min),
+        catalog.faintest(),
+        o.epoch
+    )?;
+    if c.camera.is_none() && c.fov_deg.is_none() {
+        writeln!(
+            out,
+            "(give --camera FILE, or --fov-deg DEG --size WxH, to see the distance table)"
+        )?;
+        return print_all(&out);
+    }
+    let (source, camera_mag, scale_range) = camera_source(c, false)?;
+    let camera = match source {
+        CameraSource::Fixed(cam) => cam,
+        CameraSource::None => bail!("give the camera: --camera FILE or --fov-deg DEG"),
+        CameraSource::Fov(fov) => {
+            let (w, h) = size.context("--fov-deg needs --size WIDTHxHEIGHT here")?;
+            Camera::from_fov(w, h, fov)?
+        }
+    };
+    let s = Settings {
+        scale_range,
+        ..settings(o, camera_mag)
+    };
+    writeln!(
+        out,
+        "camera: {}x{} px, FOV {:.4} x {:.4} deg, diagonal {:.4} deg, {:.2} arcsec/px",
+        camera.width,
+        camera.height,
+        camera.fov_x_deg(),
+        camera.fov_y_deg(),
+        camera.diagonal_rad().to_degrees(),
+        camera.ifov_rad().to_degrees() * 3600.0
+    )?;
+    // What a run with these options votes with: the solver's own selections and tables.
+    let solver = Solver::new(&catalog, camera.clone(), s)?;
+    for (k, band) in solver.bands.iter().enumerate() {
+        if Some(k) == solver.shallow_band {
+            writeln!(
+                out,
+                "shallow pass (frames that show few stars): {} stars in view on average",
+                gpustar::solve::SHALLOW_STARS_IN_VIEW
+            )?;
+        } else if scale_range.is_some() {
+            writeln!(
+                out,
+                "scale band: FOV {:.4} to {:.4} deg ({} scales tried)",
+                scaled(&camera, band.hi).fov_x_deg(),
+                scaled(&camera, band.lo).fov_x_deg(),
+                solver
+                    .passes
+                    .iter()
+                    .filter(|p| p.band == k && p.kind == PassKind::First)
+                    .count()
+            )?;
+        }
+        let (refs, t, origin) = (&band.refs, &band.table, &band.table_origin);
+        writeln!(
+            out,
+            "reference stars: {} with Hp <= {}{}; double stars ({:?}, < {} px): {} removed",
+            refs.len(),
+            refs.selection.mag_limit,
+            if s.mag_limit.is_none() {
+                " (chosen from the FOV)"
+            } else {
+                ""
+            },
+            s.double_stars,
+            s.double_star_px,
+            refs.doubles_removed
+        )?;
+        writeln!(
+            out,
+            "distance table: {} rows, {} bytes (keys + pairs + k-vector of {} bins), pairs closer than {:.4} deg",
+            t.len(),
+            t.bytes(),
+            t.kvector.len() - 1,
+            t.max_sep_rad.to_degrees()
+        )?;
+        writeln!(
+            out,
+            "  {} in {:.1} ms{}",
+            if origin.built {
+                "built"
+            } else {
+                "read from cache"
+            },
+            origin.seconds * 1e3,
+            origin
+                .cache_file
+                .as_ref()
+                .map(|f| format!("; cache {}", f.display()))
+                .unwrap_or_default()
+        )?;
+        if let Some(n) = &origin.cache_note {
+            writeln!(out, "  note: {n}")?;
+        }
+        // What `--method radial` would keep besides: built here from the table.
+        let t0 = std::time::Instant::now();
+        let middle = scaled(&camera, 0.5 * (band.lo + band.hi));
+        let radial = gpustar::solve::radial::RadialTable::build(
+            refs,
+            t,
+            s.identify.pair_tol_px * middle.ifov_rad(),
+            s.identify.scale_tol,
+        );
+        writeln!(
+            out,
+            "radial features (--method radial): {} bytes ({} rings of {:.2} arcsec to {:.4} deg), built in {:.1} ms",
+            radial.bytes(),
+            gpustar::solve::radial::BITS,
+            radial.ring_rad.to_degrees() * 3600.0,
+            radial.radius_rad.to_degrees(),
+            t0.elapsed().as_secs_f64() * 1e3
+        )?;
+    }
+    print_all(&out)
+}

@@ -1,0 +1,281 @@
+//! `gpustar solve` and `gpustar batch`: the camera and settings from the options, then one run.
+
+use super::args::*;
+use super::console::*;
+use anyhow::{Context, Result, bail};
+use gpustar::batch::{self, RunOptions};
+use gpustar::camera::Camera;
+use gpustar::catalog::Catalog;
+use gpustar::io::dark::Darks;
+use gpustar::io::inputs::Input;
+use gpustar::io::output::{self, RecordWriter};
+use gpustar::pipeline::{Backend, BackendNote, CameraSource, Solvers};
+use gpustar::products::Products;
+use gpustar::sequence::SequenceOptions;
+use gpustar::solve::Settings;
+use gpustar::streaks::reduce::Astrometry;
+use gpustar::streaks::{StreakOptions, StreakSettings, export::Exports};
+use std::io::Write;
+use std::process::ExitCode;
+
+/// Range of focal-length factors (low, high) to search when the scale is uncertain.
+pub(crate) type ScaleRange = (f64, f64);
+
+/// The camera source, its optional magnitude limit, and the scale range to search. With
+/// `header_only` (`--streaks --astrometry header`) no camera is needed.
+pub(crate) fn camera_source(
+    c: &CameraOpts,
+    header_only: bool,
+) -> Result<(CameraSource, Option<f64>, Option<ScaleRange>)> {
+    let tolerance = match c.fov_tolerance {
+        Some(t) if !(t > 0.0 && t < 0.5) => bail!("--fov-tolerance must be between 0 and 0.5"),
+        Some(t) => Some((1.0 - t, 1.0 + t)),
+        None => None,
+    };
+    match (&c.camera, c.fov_deg) {
+        (Some(path), _) => {
+            let (cam, mag) = Camera::from_toml_file(path)?;
+            Ok((CameraSource::Fixed(cam), mag, tolerance))
+        }
+        (None, Some(FovArg::Exact(fov))) => Ok((CameraSource::Fov(fov), None, tolerance)),
+        (None, Some(FovArg::Range(lo, hi))) => {
+            // The camera of the middle FOV; focal lengths scale as 1 / tan(FOV / 2).
+            let mid = (lo + hi) / 2.0;
+            let f = |fov: f64| 1.0 / (fov.to_radians() / 2.0).tan();
+            Ok((
+                CameraSource::Fov(mid),
+                None,
+                Some((f(hi) / f(mid), f(lo) / f(mid))),
+            ))
+        }
+        (None, None) if header_only => Ok((CameraSource::None, None, None)),
+        (None, None) => bail!(
+            "give the camera: --camera FILE or --fov-deg DEG (or, for streaks reduced through \
+             each FITS header's WCS alone, --streaks --astrometry header)"
+        ),
+    }
+}
+
+pub(crate) fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
+    Settings {
+        epoch: c.epoch,
+        mag_limit: c.mag_limit.or(camera_mag),
+        double_stars: c.double_stars,
+        double_star_px: c.double_star_px,
+        table_cache: !c.no_cache,
+        ..Settings::default()
+    }
+}
+
+pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Result<ExitCode> {
+    if b.sequence && o.streaks.streaks {
+        anyhow::bail!(
+            "--sequence and --streaks do not go together yet: run the sequences and the \
+             streak frames separately"
+        );
+    }
+    let header_only = o.streaks.streaks && o.streaks.astrometry == Astrometry::Header;
+    let (camera, camera_mag, scale_range) = camera_source(&o.camera, header_only)?;
+    let catalog = Catalog::load(o.catalog.catalog.as_deref())?;
+    let mut s = settings(&o.catalog, camera_mag);
+    s.detect.k_sigma = o.sigma;
+    s.detect.matched_filter = o.detect_filter == DetectFilter::Binomial;
+    s.detect.centroid = o.centroid;
+    s.method = o.method;
+    s.identify.vote_stars = o.vote_stars;
+    s.retry = !o.no_retry;
+    s.identify.pair_tol_px = o.pair_tol_px;
+    s.identify.scale_tol = o.scale_tol;
+    s.refine.match_radius_px = o.match_radius_px;
+    s.refine.max_false_prob = o.max_false_prob;
+    s.refine.fit = o.camera.fit;
+    s.scale_range = scale_range;
+    let so = &o.streaks;
+    let mut exports = Exports::new(
+        so.tdm.clone(),
+        so.iod.clone(),
+        so.iod_station,
+        so.station.map_or_else(
+            || "STATION".to_string(),
+            |s| format!("{:.5},{:.5},{:.1}", s.lat_deg, s.lon_deg, s.height_m),
+        ),
+    );
+    exports.check_paths()?;
+    // The output, and what an earlier run already wrote to it.
+    let mut inputs = inputs;
+    let mut header = true;
+    let mut errors_before = 0;
+    let out: Box<dyn Write + Send> = match &o.output {
+        Some(p) => {
+            let opened = output::open_output(p, o.format, b.resume, b.retry_errors)?;
+            let prev = opened.previous;
+            let before = inputs.len();
+            let already = inputs
+                .iter()
+                .filter(|i| prev.done.contains(&i.name))
+                .count();
+            inputs = resumed_inputs(inputs, &prev.done, b.sequence);
+            if b.resume && !o.quiet {
+                if prev.truncated > 0 {
+                    eprintln!(
+                        "gpustar: cut an incomplete last record ({} bytes) off {}",
+                        prev.truncated,
+                        p.display()
+                    );
+                }
+                let replayed = inputs.iter().filter(|i| i.replay).count();
+                eprintln!(
+                    "gpustar: resuming: {already} of {before} inputs already have a record{}{}{}",
+                    match prev.errors {
+                        0 => String::new(),
+                        n => format!(" ({n} of them errors; --retry-errors tries them again)"),
+                    },
+                    match prev.retried {
+                        0 => String::new(),
+                        n => format!("; {n} error records taken out to be tried again"),
+                    },
+                    match replayed {
+                        0 => String::new(),
+                        n => format!(
+                            "; {n} of those are tracked again, unwritten, so that unfinished \
+                             sequences go on as an uninterrupted run does"
+                        ),
+                    }
+                );
+            }
+            // The exports are written whole at the end: they take the streaks of the records
+            // already in the file too, or a resumed run's TDM would hold only its own part.
+            if b.resume && exports.wanted() {
+                for r in &prev.streaks {
+                    exports.add(r);
+                }
+            }
+            errors_before = prev.errors;
+            header = !prev.has_header;
+            Box::new(opened.file)
+        }
+        None => Box::new(std::io::stdout()),
+    };
+    let (mut backend, note) = Backend::open(o.backend)?;
+    match note {
+        Some(BackendNote::Warning(w)) => tracing::warn!("{w}"),
+        Some(BackendNote::Info(i)) => tracing::info!("{i}"),
+        None => {}
+    }
+    let mut solvers = Solvers::new(catalog, s, camera);
+    solvers.darks = match (&o.dark, o.dark_median) {
+        (Some(path), _) => Darks::from_file(path).context("--dark")?,
+        (None, true) => Darks::directory_median(),
+        (None, false) => Darks::None,
+    };
+    solvers.products = Products {
+        wcs_dir: o.wcs_dir.clone(),
+        annotate_dir: o.annotate_dir.clone(),
+    };
+    solvers.streaks = so.streaks.then_some(StreakOptions {
+        settings: StreakSettings {
+            k_sigma: so.streak_sigma,
+            ..StreakSettings::default()
+        },
+        station: so.station,
+        dut1_s: so.dut1,
+        astrometry: so.astrometry,
+    });
+    let mut writer = RecordWriter::new(out, o.format, header);
+    let stop = interrupt_flag();
+    let to_do = inputs.iter().filter(|i| !i.replay).count();
+    let bar = progress_bar(to_do as u64, o.quiet);
+    let threads = b
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let opts = RunOptions {
+        threads,
+        batch_size: o.batch_size,
+        flush_every: std::time::Duration::from_millis(250),
+        sequence: b.sequence.then(|| SequenceOptions {
+            frame_interval_s: b.frame_interval,
+            ..SequenceOptions::default()
+        }),
+    };
+    let summary = batch::run(
+        inputs,
+        &solvers,
+        &mut backend,
+        &mut writer,
+        opts,
+        stop,
+        |r, c| {
+            exports.add(r);
+            bar.inc(1);
+            bar.set_message(format!(
+                "{} solved, {} unsolved, {} errors",
+                c.solved, c.unsolved, c.errors
+            ));
+            tracing::debug!("{}: {:?}", r.file, r.status);
+        },
+    )?;
+    bar.finish_and_clear();
+    if exports.wanted() && summary.write_error.is_none() {
+        let said = exports.finish(&gpustar::sky::now_utc_iso())?;
+        if !o.quiet {
+            eprintln!("gpustar: wrote {said}");
+        }
+    }
+    let c = summary.counts;
+    if !o.quiet {
+        eprintln!(
+            "gpustar: {} files: {} solved, {} unsolved, {} errors in {:.2} s ({:.1} images/s, {}){}",
+            c.total(),
+            c.solved,
+            c.unsolved,
+            c.errors,
+            summary.seconds,
+            c.total() as f64 / summary.seconds.max(1e-9),
+            backend.name(),
+            match (&summary.write_error, summary.interrupted, c.total() < to_do) {
+                (Some(e), ..) => format!(
+                    "; stopped: {e}; records before it are whole: make room and rerun with \
+                     --resume"
+                ),
+                (None, true, true) => "; interrupted: rerun with --resume to finish".into(),
+                (None, true, false) => {
+                    "; interrupted after the last input: every input has a record".into()
+                }
+                (None, false, _) => String::new(),
+            }
+        );
+    }
+    Ok(if summary.write_error.is_some() {
+        ExitCode::from(3)
+    } else if summary.interrupted {
+        ExitCode::from(130)
+    } else if c.errors + errors_before > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
+}
+
+/// The inputs still to do after an earlier run recorded `done`. Sequences are tracked frame
+/// to frame, so an unfinished sequence is taken from its first frame, the recorded ones marked
+/// `replay` (tracked, not written): the records that follow are those of an uninterrupted run.
+pub(crate) fn resumed_inputs(
+    inputs: Vec<Input>,
+    done: &std::collections::HashSet<String>,
+    sequence: bool,
+) -> Vec<Input> {
+    use gpustar::sequence::sequence_of;
+    let unfinished: std::collections::HashSet<&str> = inputs
+        .iter()
+        .filter(|i| sequence && !done.contains(&i.name))
+        .map(|i| sequence_of(&i.name))
+        .collect();
+    inputs
+        .iter()
+        .filter(|i| !done.contains(&i.name) || unfinished.contains(sequence_of(&i.name)))
+        .map(|i| Input {
+            replay: done.contains(&i.name),
+            ..i.clone()
+        })
+        .collect()
+}
