@@ -2,7 +2,7 @@
 //! (conventions of spec/INTERFACE.md: x = column, y = row, (0,0) = centre of the top-left
 //! pixel; camera +X = increasing column, +Y = increasing row, +Z = boresight).
 
-use anyhow::{Context, Result, bail};
+use crate::error::{AsKind, Context, Error, Result, fail};
 use nalgebra::Vector3;
 use serde::Deserialize;
 use std::path::Path;
@@ -52,10 +52,13 @@ impl Camera {
     /// FOV is the angle between the midpoints of the left and right image edges.
     pub fn from_fov(width: u32, height: u32, fov_x_deg: f64) -> Result<Camera> {
         if width == 0 || height == 0 {
-            bail!("camera size must be positive, got {width}x{height}");
+            fail!(Config, "camera size must be positive, got {width}x{height}");
         }
         if !(fov_x_deg > 0.0 && fov_x_deg < 170.0) {
-            bail!("field of view must be between 0 and 170 degrees, got {fov_x_deg}");
+            fail!(
+                Config,
+                "field of view must be between 0 and 170 degrees, got {fov_x_deg}"
+            );
         }
         let fx = width as f64 / 2.0 / (fov_x_deg.to_radians() / 2.0).tan();
         Ok(Camera {
@@ -79,7 +82,7 @@ impl Camera {
     }
 
     pub fn from_toml(text: &str) -> Result<(Camera, Option<f64>)> {
-        let f: CameraFile = toml::from_str(text)?;
+        let f: CameraFile = toml::from_str(text).as_kind(Error::Config)?;
         let mut cam = match (f.fov_x_deg, f.fx_px) {
             (Some(fov), None) => Camera::from_fov(f.width, f.height, fov)?,
             (None, Some(fx)) if fx > 0.0 => {
@@ -88,12 +91,15 @@ impl Camera {
                 c.fy = fx;
                 c
             }
-            (Some(_), Some(_)) => bail!("give fov_x_deg or fx_px, not both"),
-            _ => bail!("give fov_x_deg (degrees) or fx_px (a positive focal length in pixels)"),
+            (Some(_), Some(_)) => fail!(Config, "give fov_x_deg or fx_px, not both"),
+            _ => fail!(
+                Config,
+                "give fov_x_deg (degrees) or fx_px (a positive focal length in pixels)"
+            ),
         };
         if let Some(fy) = f.fy_px {
             if fy <= 0.0 {
-                bail!("fy_px must be positive");
+                fail!(Config, "fy_px must be positive");
             }
             cam.fy = fy;
         }

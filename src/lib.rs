@@ -17,6 +17,7 @@ pub mod calibrate;
 pub mod camera;
 pub mod catalog;
 pub mod cpu;
+pub mod error;
 pub mod gpu;
 pub mod io;
 pub mod pipeline;
@@ -27,6 +28,8 @@ pub mod simulate;
 pub mod sky;
 pub mod solve;
 pub mod streaks;
+
+pub use error::{Error, Result};
 
 #[cfg(test)]
 mod fuzz;

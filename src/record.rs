@@ -1,7 +1,7 @@
 //! The result record: one JSON object per input file (spec/INTERFACE.md). Scripts parse these;
 //! fields are only ever added.
 
-use anyhow::{Context, Result, bail};
+use crate::error::{AsKind, Context, Error, Result, fail};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -226,7 +226,8 @@ pub fn read_jsonl<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Re
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read {what}s {}", path.display()))?;
     if !text.is_empty() && !text.ends_with('\n') {
-        bail!(
+        fail!(
+            Input,
             "{} ends with an incomplete {what}: that run did not finish; run it again with \
              --resume",
             path.display()
@@ -237,6 +238,7 @@ pub fn read_jsonl<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Re
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(n, l)| {
             serde_json::from_str(l)
+                .as_kind(Error::Input)
                 .with_context(|| format!("{}: line {}: not a {what}", path.display(), n + 1))
         })
         .collect()

@@ -5,12 +5,12 @@
 //! being handed out and being written (the writer returns a ticket for each record it writes,
 //! and the feeder needs one to hand out the next input).
 
+use crate::error::Result;
 use crate::io::inputs::Input;
 use crate::io::output::RecordWriter;
 use crate::pipeline::{Backend, Counts, Decoded, Solvers};
 use crate::record::Record;
 use crate::sequence::{Detected, SequenceOptions, Sequencer};
-use anyhow::Result;
 use crossbeam_channel::{Receiver, Sender, bounded};
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};

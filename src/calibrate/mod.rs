@@ -8,8 +8,8 @@
 //! distortion (k1, k2), and — through the perspective of a wide field — the principal point.
 
 use crate::camera::Camera;
+use crate::error::{Result, fail};
 use crate::solve::attitude::wahba;
-use anyhow::{Result, bail};
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 
 /// A detection and its catalog direction.
@@ -437,7 +437,8 @@ fn check_monotonic(cam: &Camera) -> Result<()> {
         let r = u.sqrt();
         let rd = r * (1.0 + cam.k1 * u + cam.k2 * u * u);
         if rd <= rd_max {
-            bail!(
+            fail!(
+                Config,
                 "the fitted distortion k1 = {:.5}, k2 = {:.5} folds the image: r(1 + k1 r² + k2 r⁴) \
                  stops increasing {:.0} px from the principal point, inside the image corner at {:.0} px; \
                  the stars do not constrain the distortion (fit without k2, or use frames with stars \
@@ -461,7 +462,10 @@ fn check_monotonic(cam: &Camera) -> Result<()> {
 pub fn fit(initial: &Camera, frames: &[FrameStars], opts: &FitOptions) -> Result<Fit> {
     let finite = params_of(initial).iter().all(|v| v.is_finite());
     if !(finite && initial.fx > 0.0 && initial.fy > 0.0) {
-        bail!("the initial camera must have finite parameters and positive focal lengths");
+        fail!(
+            Config,
+            "the initial camera must have finite parameters and positive focal lengths"
+        );
     }
     let usable = |inl: &[Vec<bool>]| -> (Vec<bool>, usize) {
         let counts: Vec<usize> = inl
@@ -480,7 +484,8 @@ pub fn fit(initial: &Camera, frames: &[FrameStars], opts: &FitOptions) -> Result
     let need = |active: &[bool], n: usize, what: &str| -> Result<()> {
         let nf = active.iter().filter(|&&a| a).count();
         if n < MIN_STARS || nf == 0 {
-            bail!(
+            fail!(
+                Config,
                 "calibration needs at least {MIN_STARS} identified stars over at least 1 frame \
                  (counting frames with {MIN_FRAME_STARS} or more stars); got {n} stars over {nf} \
                  frames{what} ({} frames given)",

@@ -1,6 +1,6 @@
 //! `gpustar catalog import`: make the shipped catalog from Hipparcos-2 (`hip2.dat`, CDS I/311).
 
-use anyhow::{Context, Result, bail};
+use crate::error::{AsKind, Context, Error, Result, fail};
 use std::fmt::Write as _;
 
 /// Convert the whitespace-separated `hip2.dat` of I/311 into gpustar's catalog CSV, keeping
@@ -15,7 +15,8 @@ pub fn import_hip2(text: &str, max_mag: f64) -> Result<String> {
         }
         let f: Vec<&str> = line.split_whitespace().collect();
         if f.len() < 20 {
-            bail!(
+            fail!(
+                Catalog,
                 "hip2.dat line {}: {} columns, expected at least 20 (is this CDS I/311 hip2.dat?)",
                 n + 1,
                 f.len()
@@ -23,32 +24,40 @@ pub fn import_hip2(text: &str, max_mag: f64) -> Result<String> {
         }
         let mag: f64 = f[19]
             .parse()
+            .as_kind(Error::Catalog)
             .with_context(|| format!("hip2.dat line {}: bad Hpmag {:?}", n + 1, f[19]))?;
         if mag > max_mag {
             continue;
         }
         for i in [0, 4, 5, 7, 8] {
             f[i].parse::<f64>()
+                .as_kind(Error::Catalog)
                 .with_context(|| format!("hip2.dat line {}: bad number {:?}", n + 1, f[i]))?;
         }
         rows.push([f[0], f[4], f[5], f[7], f[8], f[19]].join(","));
     }
     if rows.is_empty() {
-        bail!("no star with Hp <= {max_mag} found: is this hip2.dat?");
+        fail!(
+            Catalog,
+            "no star with Hp <= {max_mag} found: is this hip2.dat?"
+        );
     }
     let mut out = String::new();
     writeln!(
         out,
         "# gpustar catalog: Hipparcos, the new reduction (van Leeuwen 2007, CDS I/311; public domain)"
-    )?;
+    )
+    .expect("writing to a String");
     writeln!(
         out,
         "# {} stars with Hp <= {max_mag}; positions ICRS at epoch J1991.25. Made by: gpustar catalog import hip2.dat --max-mag {max_mag}",
         rows.len()
-    )?;
-    writeln!(out, "hip,ra_rad,dec_rad,pmra_mas_yr,pmdec_mas_yr,hp_mag")?;
+    )
+    .expect("writing to a String");
+    writeln!(out, "hip,ra_rad,dec_rad,pmra_mas_yr,pmdec_mas_yr,hp_mag")
+        .expect("writing to a String");
     for r in rows {
-        writeln!(out, "{r}")?;
+        writeln!(out, "{r}").expect("writing to a String");
     }
     Ok(out)
 }

@@ -9,7 +9,7 @@ pub mod table;
 
 pub use import::import_hip2;
 
-use anyhow::{Context, Result, bail};
+use crate::error::{AsKind, Context, Error, Result, fail};
 use nalgebra::Vector3;
 use std::path::Path;
 
@@ -100,7 +100,8 @@ impl Catalog {
             }
             if !header_seen {
                 if !line.starts_with("hip,") {
-                    bail!(
+                    fail!(
+                        Catalog,
                         "{source}: line {}: expected the header 'hip,ra_rad,...'",
                         n + 1
                     );
@@ -110,7 +111,8 @@ impl Catalog {
             }
             let f: Vec<&str> = line.split(',').collect();
             if f.len() != 6 {
-                bail!(
+                fail!(
+                    Catalog,
                     "{source}: line {}: expected 6 fields, found {}",
                     n + 1,
                     f.len()
@@ -118,11 +120,13 @@ impl Catalog {
             }
             let num = |i: usize| -> Result<f64> {
                 f[i].parse::<f64>()
+                    .as_kind(Error::Catalog)
                     .with_context(|| format!("{source}: line {}: bad number {:?}", n + 1, f[i]))
             };
             stars.push(Star {
                 hip: f[0]
-                    .parse()
+                    .parse::<u32>()
+                    .as_kind(Error::Catalog)
                     .with_context(|| format!("{source}: line {}: bad HIP {:?}", n + 1, f[0]))?,
                 ra_rad: num(1)?,
                 dec_rad: num(2)?,
@@ -132,7 +136,7 @@ impl Catalog {
             });
         }
         if stars.is_empty() {
-            bail!("{source}: no stars");
+            fail!(Catalog, "{source}: no stars");
         }
         Ok(Catalog {
             stars,
@@ -223,7 +227,8 @@ impl RefCatalog {
         // Brightest first, ties by HIP: a stable id order that does not depend on the file.
         stars.sort_by(|a, b| a.mag.total_cmp(&b.mag).then(a.hip.cmp(&b.hip)));
         if stars.len() > MAX_REF_STARS {
-            bail!(
+            fail!(
+                Catalog,
                 "{} catalog stars are brighter than magnitude {}: at most {} fit the distance \
                  table's 16-bit ids; lower --mag-limit",
                 stars.len(),
@@ -232,7 +237,8 @@ impl RefCatalog {
             );
         }
         if stars.len() < 3 {
-            bail!(
+            fail!(
+                Catalog,
                 "only {} catalog stars are brighter than magnitude {}; raise --mag-limit",
                 stars.len(),
                 selection.mag_limit

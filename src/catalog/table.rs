@@ -7,7 +7,7 @@
 //! compares keys, never angles (see STYLE.md: f32 trig is off by arcseconds).
 
 use crate::catalog::RefCatalog;
-use anyhow::{Context, Result, bail};
+use crate::error::{AsKind, Context, Error, Result, fail};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -321,18 +321,21 @@ pub(crate) fn read_cache(
     let buf = std::fs::read(path)?;
     let fixed = 16 + 8 * heads;
     if buf.len() < fixed + 4 || !(buf.len() - fixed - 4).is_multiple_of(4) {
-        bail!("truncated ({} bytes)", buf.len());
+        fail!(Catalog, "truncated ({} bytes)", buf.len());
     }
     if &buf[..8] != magic.as_slice() {
-        bail!("not a gpustar cache file of this version");
+        fail!(Catalog, "not a gpustar cache file of this version");
     }
     let u64_at = |o: usize| u64::from_le_bytes(buf[o..o + 8].try_into().expect("8 bytes"));
     if u64_at(8) != key {
-        bail!("key mismatch");
+        fail!(Catalog, "key mismatch");
     }
     let (data, crc) = buf.split_at(buf.len() - 4);
     if crc32fast::hash(data) != u32::from_le_bytes(crc.try_into().expect("4 bytes")) {
-        bail!("checksum mismatch (the file was changed or damaged)");
+        fail!(
+            Catalog,
+            "checksum mismatch (the file was changed or damaged)"
+        );
     }
     let head = (0..heads).map(|i| u64_at(16 + 8 * i)).collect();
     let body = data[fixed..]
@@ -348,7 +351,8 @@ fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<P
     let (head, words) = read_cache(path, MAGIC, key, 4)?;
     let (rows, kvlen) = (head[0] as usize, head[1] as usize);
     if words.len() != 2 * rows + kvlen {
-        bail!(
+        fail!(
+            Catalog,
             "{} words where {rows} rows and a k-vector of {kvlen} need {}",
             words.len(),
             2 * rows + kvlen
@@ -358,26 +362,26 @@ fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<P
         keys: words[..rows].to_vec(),
         pairs: words[rows..2 * rows].to_vec(),
         kvector: words[2 * rows..].to_vec(),
-        shift: u32::try_from(head[2])?,
+        shift: u32::try_from(head[2]).as_kind(Error::Catalog)?,
         max_sep_rad,
-        max_key: u32::try_from(head[3])?,
+        max_key: u32::try_from(head[3]).as_kind(Error::Catalog)?,
     };
     if t.max_key != chord_key(chord_of_angle(max_sep_rad))
         || t.shift != kvector_shift(t.max_key, rows)
     {
-        bail!("made for another separation");
+        fail!(Catalog, "made for another separation");
     }
     if !t.keys.windows(2).all(|w| w[0] <= w[1]) || t.keys.last().is_some_and(|&k| k > t.max_key) {
-        bail!("keys not sorted or beyond the largest separation");
+        fail!(Catalog, "keys not sorted or beyond the largest separation");
     }
     if !t.pairs.iter().all(|&p| {
         let (a, b) = (p & 0xFFFF, p >> 16);
         a < b && (b as usize) < stars
     }) {
-        bail!("a pair names a star the catalog does not have");
+        fail!(Catalog, "a pair names a star the catalog does not have");
     }
     if t.kvector != build_kvector(&t.keys, t.shift, t.max_key) {
-        bail!("the k-vector does not index the keys");
+        fail!(Catalog, "the k-vector does not index the keys");
     }
     Ok(t)
 }

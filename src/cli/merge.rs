@@ -18,7 +18,7 @@ pub(crate) fn merge_cmd(
     let records: Vec<_> = parts
         .iter()
         .map(|p| output::read_records(p))
-        .collect::<Result<_>>()?;
+        .collect::<gpustar::Result<_>>()?;
     let expected: Option<Vec<String>> = match &dir {
         Some(d) => Some(
             inputs::list(d, recursive)?

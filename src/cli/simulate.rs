@@ -47,7 +47,7 @@ pub(crate) fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         // The stars where they are on the frames' date.
         let s = SimSettings {
             bits: 16,
-            epoch: gpustar::io::fits::julian_year(&a.start_utc).unwrap_or(a.epoch),
+            epoch: gpustar::sky::julian_year(&a.start_utc).unwrap_or(a.epoch),
             ..s
         };
         gpustar::streaks::simulate::write_set(&catalog, &s, &st, &a.out)?;
@@ -74,7 +74,7 @@ pub(crate) fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
             ..Default::default()
         };
         let s = SimSettings {
-            epoch: gpustar::io::fits::julian_year(&a.start_utc).unwrap_or(a.epoch),
+            epoch: gpustar::sky::julian_year(&a.start_utc).unwrap_or(a.epoch),
             ..s
         };
         gpustar::sequence::simulate::write_set(&catalog, &s, &q, &a.out, threads)?;

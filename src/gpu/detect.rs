@@ -7,8 +7,8 @@ use crate::cpu::centroid::Blob;
 use crate::cpu::components::NO_LABEL;
 use crate::cpu::streak_filter::StreakParams;
 use crate::cpu::threshold::{DetectParams, TileStats};
+use crate::error::{Result, fail};
 use crate::io::frame::Frame;
-use anyhow::{Result, bail};
 use bytemuck::{Pod, Zeroable};
 
 /// How a batch lies in the buffers. Keep in sync with `shaders/shared/detect.wgsl`.
@@ -153,7 +153,7 @@ impl Gpu {
     ) -> Result<(Vec<Vec<Blob>>, DetectInspect, Vec<StreakPixels>)> {
         for f in frames {
             if (f.width, f.height) != (p.width, p.height) {
-                bail!("a GPU batch holds frames of one size");
+                fail!(Gpu, "a GPU batch holds frames of one size");
             }
         }
         let mut blobs = Vec::with_capacity(frames.len());

@@ -11,7 +11,7 @@ pub mod psf_fit;
 pub mod radial;
 pub mod vote;
 
-use anyhow::{Context, Result, anyhow, bail};
+use crate::error::{AsKind, Context, Error, Result, error, fail};
 use std::cell::Cell;
 use std::sync::Arc;
 
@@ -191,7 +191,7 @@ pub fn best_adapter(name: Option<&str>) -> Result<AdapterSummary> {
 fn pick_adapter(instance: &wgpu::Instance, name: Option<&str>) -> Result<wgpu::Adapter> {
     let mut all = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
     if all.is_empty() {
-        bail!("{NO_ADAPTER_HELP}");
+        fail!(Gpu, "{NO_ADAPTER_HELP}");
     }
     all.sort_by_key(|a| preference(a.get_info().device_type));
     Ok(match name {
@@ -202,7 +202,8 @@ fn pick_adapter(instance: &wgpu::Instance, name: Option<&str>) -> Result<wgpu::A
                 .position(|a| a.get_info().name.to_lowercase().contains(&n));
             match found {
                 Some(i) => all.swap_remove(i),
-                None => bail!(
+                None => fail!(
+                    Gpu,
                     "no GPU adapter's name contains {n:?} (GPUSTAR_ADAPTER); found: {}",
                     all.iter()
                         .map(|a| a.get_info().name)
@@ -242,6 +243,7 @@ impl Gpu {
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
         }))
+        .as_kind(Error::Gpu)
         .with_context(|| format!("cannot open the GPU device {}", info.name))?;
         // Errors outside an error scope are logged, not raised as panics.
         device.on_uncaptured_error(Arc::new(|e| eprintln!("gpustar: GPU error: {e}")));
@@ -262,7 +264,7 @@ impl Gpu {
             radial: pipeline(&device, "radial"),
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
-            bail!("building the GPU kernels failed on {}: {e}", info.name);
+            fail!(Gpu, "building the GPU kernels failed on {}: {e}", info.name);
         }
         Ok(Gpu {
             device,
@@ -386,10 +388,13 @@ impl Gpu {
         c.submissions += 1;
         self.counters.set(c);
         if let Some(e) = pollster::block_on(oom.pop()) {
-            bail!("the GPU ran out of memory: {e}; use smaller batches or --backend cpu");
+            fail!(
+                Gpu,
+                "the GPU ran out of memory: {e}; use smaller batches or --backend cpu"
+            );
         }
         if let Some(e) = pollster::block_on(scope.pop()) {
-            bail!("GPU error: {e}");
+            fail!(Gpu, "GPU error: {e}");
         }
         Ok(())
     }
@@ -412,17 +417,17 @@ impl Gpu {
         self.counters.set(c);
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| anyhow!("waiting for the GPU failed: {e}"))?;
+            .map_err(|e| error!(Gpu, "waiting for the GPU failed: {e}"))?;
         let mut out = Vec::with_capacity(buffers.len());
         for ((b, len), r) in buffers.iter().zip(&results) {
             match r.lock().unwrap().take() {
                 Some(Ok(())) => {}
-                Some(Err(e)) => bail!("reading GPU results failed: {e}"),
-                None => bail!("reading GPU results did not complete"),
+                Some(Err(e)) => fail!(Gpu, "reading GPU results failed: {e}"),
+                None => fail!(Gpu, "reading GPU results did not complete"),
             }
             let mut bytes = b
                 .get_mapped_range(..(*len).max(4).next_multiple_of(4))
-                .map_err(|e| anyhow!("reading GPU results failed: {e}"))?
+                .map_err(|e| error!(Gpu, "reading GPU results failed: {e}"))?
                 .to_vec();
             bytes.truncate(*len as usize);
             b.unmap();

@@ -4,7 +4,7 @@
 
 use super::Gpu;
 use crate::cpu::psf_fit::{PsfFit, WINDOW, Window};
-use anyhow::Result;
+use crate::error::Result;
 use bytemuck::{Pod, Zeroable};
 
 /// The kernel's uniform. Keep in sync with `shaders/psf_fit.wgsl` (PsfUniform).

@@ -3,9 +3,9 @@
 
 use super::Gpu;
 use super::vote::VoteUniform;
+use crate::error::{Result, fail};
 use crate::solve::identify::VoteResult;
 use crate::solve::radial::{FEATURE_STARS, RadialTable, WORDS};
-use anyhow::{Result, bail};
 use bytemuck::{Pod, Zeroable};
 
 /// The radial kernel's uniform. Keep in sync with `shaders/radial.wgsl` (RadialUniform).
@@ -41,7 +41,8 @@ impl Gpu {
     /// Upload a band's features.
     pub fn upload_radial(&self, t: &RadialTable) -> Result<GpuRadial> {
         if t.bytes() as u64 > self.max_binding() {
-            bail!(
+            fail!(
+                Gpu,
                 "the radial features ({} MB) exceed the GPU's largest buffer",
                 t.bytes() >> 20
             );

@@ -4,8 +4,8 @@
 use super::Gpu;
 use crate::catalog::table::PairTable;
 use crate::cpu::vote::PairRange;
+use crate::error::{Result, fail};
 use crate::solve::identify::VoteResult;
-use anyhow::{Result, bail};
 use bytemuck::{Pod, Zeroable};
 
 /// The identification kernels' uniform. Keep in sync with `shaders/shared/vote.wgsl`.
@@ -52,7 +52,8 @@ impl Gpu {
     pub fn upload_table(&self, t: &PairTable, refs: usize) -> Result<GpuTable> {
         let bytes = 4 * t.len() as u64;
         if bytes > self.max_binding() {
-            bail!(
+            fail!(
+                Gpu,
                 "the distance table ({} rows, {} MB) exceeds the GPU's largest buffer ({} MB): \
                  lower --mag-limit or use --backend cpu",
                 t.len(),
@@ -133,7 +134,7 @@ impl Gpu {
         ];
         for (f, job) in jobs.iter().enumerate() {
             if job.ranges.len() > pairs_per_image || job.stars > stars {
-                bail!("a vote job has more pairs than its stars allow");
+                fail!(Gpu, "a vote job has more pairs than its stars allow");
             }
             ranges[f * pairs_per_image..][..job.ranges.len()].copy_from_slice(&job.ranges);
         }

@@ -36,7 +36,7 @@ type DarkResult = Result<Arc<Frame>, String>;
 
 impl Darks {
     /// Read the dark frame of `--dark FILE`.
-    pub fn from_file(path: &Path) -> anyhow::Result<Darks> {
+    pub fn from_file(path: &Path) -> crate::error::Result<Darks> {
         let frame = Frame::read(path)?;
         Ok(Darks::File {
             path: path.to_path_buf(),

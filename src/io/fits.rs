@@ -27,7 +27,7 @@
 //! headers (TFIELDS, ZNAXIS) without bound. So a small scan checks every header first, and
 //! fitsrs only ever sees copies of the headers of the HDUs used, both already checked.
 
-use anyhow::{Result, anyhow, bail};
+use crate::error::{Result, error, fail};
 use fitsrs::card::Value;
 use fitsrs::hdu::header::Header;
 use fitsrs::hdu::header::extension::image::Image;
@@ -163,13 +163,19 @@ const CARD: usize = 80;
 /// do not name the file, which the caller adds.
 pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
     if bytes.is_empty() {
-        bail!("the file is empty (0 bytes)");
+        fail!(Input, "the file is empty (0 bytes)");
     }
     if bytes.starts_with(&[0x1f, 0x8b]) {
-        bail!("gzip-compressed FITS is not supported: gunzip the file first");
+        fail!(
+            Input,
+            "gzip-compressed FITS is not supported: gunzip the file first"
+        );
     }
     if !bytes.starts_with(b"SIMPLE  =") {
-        bail!("not a FITS file: it does not begin with the card SIMPLE = T");
+        fail!(
+            Input,
+            "not a FITS file: it does not begin with the card SIMPLE = T"
+        );
     }
     let primary = scan_header(bytes, 0, "FITS primary HDU".to_string())?;
     let ext = if primary.naxis.is_empty() {
@@ -179,7 +185,9 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
     };
     let headers = parse_headers(bytes, &primary, ext.as_ref())?;
     let image = ext.as_ref().unwrap_or(&primary);
-    let header = headers.last().ok_or_else(|| anyhow!("no FITS header"))?;
+    let header = headers
+        .last()
+        .ok_or_else(|| error!(Input, "no FITS header"))?;
 
     let dims = &image.naxis;
     if dims.len() < 2 || dims[2..].iter().any(|&d| d != 1) {
@@ -191,7 +199,8 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
                 .collect::<Vec<_>>()
                 .join("×")
         };
-        bail!(
+        fail!(
+            Input,
             "{} has NAXIS = {} ({shape}): gpustar needs a 2-D image",
             image.what,
             dims.len()
@@ -199,12 +208,13 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
     }
     let (w, h) = (dims[0], dims[1]);
     if w == 0 || h == 0 {
-        bail!("{} has an empty image ({w}×{h} pixels)", image.what);
+        fail!(Input, "{} has an empty image ({w}×{h} pixels)", image.what);
     }
     // The scan checked that all axes times 8 bytes fit in u64.
     let count = w * h;
     if count > max_pixels || w > u64::from(u32::MAX) || h > u64::from(u32::MAX) {
-        bail!(
+        fail!(
+            Input,
             "the FITS image is {w}×{h} ({count} pixels), larger than gpustar reads \
              ({max_pixels} pixels at most)"
         );
@@ -212,7 +222,10 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
     let need = count * image.bytes_per_value;
     let have = bytes.len().saturating_sub(image.data_start) as u64;
     if have < need {
-        bail!("FITS data truncated: expected {need} bytes, file holds {have}");
+        fail!(
+            Input,
+            "FITS data truncated: expected {need} bytes, file holds {have}"
+        );
     }
     // `need` <= `have`, so these fit in usize.
     let data = &bytes[image.data_start..image.data_start + need as usize];
@@ -239,7 +252,7 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
         64 => convert_int::<i64>(data, scaling, blank, count)?,
         -32 => with_warning(convert_float::<f32>(data, scaling, count)?, &mut warnings),
         -64 => with_warning(convert_float::<f64>(data, scaling, count)?, &mut warnings),
-        b => bail!("FITS BITPIX = {b} is not supported"),
+        b => fail!(Input, "FITS BITPIX = {b} is not supported"),
     };
     Ok(FitsFrame {
         width: w as u32,
@@ -283,77 +296,7 @@ fn keywords(headers: &[Header<Image>]) -> BTreeMap<String, String> {
     out
 }
 
-/// Julian year of an ISO-8601 DATE-OBS value ("2019-07-29T20:47:26.5", "2019-07-29", old "29/07/19" form -> None is fine)
-///
-/// The calendar date is Gregorian and the time is taken as is (UTC, or whatever TIMESYS says:
-/// seconds do not matter at this precision). Accepts `T` or a space before the time, a time
-/// of hh:mm, hh:mm:ss or hh:mm:ss.fff, and a trailing `Z`; anything else is None.
-pub fn julian_year(date_obs: &str) -> Option<f64> {
-    let s = date_obs.trim();
-    let s = s.strip_suffix('Z').unwrap_or(s);
-    let (date, time) = match s.find(['T', ' ']) {
-        Some(i) => (&s[..i], Some(&s[i + 1..])),
-        None => (s, None),
-    };
-    let mut parts = date.split('-');
-    let year = fixed_digits(parts.next()?, 4)?;
-    let month = fixed_digits(parts.next()?, 2)?;
-    let day = fixed_digits(parts.next()?, 2)?;
-    if parts.next().is_some() || !(1..=12).contains(&month) {
-        return None;
-    }
-    let leap = year % 4 == 0 && (year % 100 != 0 || year % 400 == 0);
-    let month_days = match month {
-        2 if leap => 29,
-        2 => 28,
-        4 | 6 | 9 | 11 => 30,
-        _ => 31,
-    };
-    if !(1..=month_days).contains(&day) {
-        return None;
-    }
-    let seconds_of_day = match time {
-        None => 0.0,
-        Some(t) => {
-            let mut parts = t.split(':');
-            let hour = fixed_digits(parts.next()?, 2)?;
-            let minute = fixed_digits(parts.next()?, 2)?;
-            let second = match parts.next() {
-                None => 0.0,
-                Some(sec) => seconds(sec)?,
-            };
-            if parts.next().is_some() || hour > 23 || minute > 59 || second >= 61.0 {
-                return None;
-            }
-            (hour * 3600 + minute * 60) as f64 + second
-        }
-    };
-    // Julian day number of the date (the JD at its noon), Fliegel & Van Flandern (1968).
-    let a = (14 - month) / 12;
-    let y = year + 4800 - a;
-    let m = month + 12 * a - 3;
-    let jdn = day + (153 * m + 2) / 5 + 365 * y + y / 4 - y / 100 + y / 400 - 32045;
-    // JD − 2451545.0 kept as an integer part plus a fraction, so J2000.0 comes out exact.
-    let days = (jdn - 2_451_545) as f64 + (seconds_of_day - 43_200.0) / 86_400.0;
-    Some(2000.0 + days / 365.25)
-}
-
-/// A run of exactly `n` ASCII digits as a number.
-fn fixed_digits(s: &str, n: usize) -> Option<i64> {
-    (s.len() == n && s.bytes().all(|b| b.is_ascii_digit()))
-        .then(|| s.parse().ok())
-        .flatten()
-}
-
-/// Seconds as "ss" or "ss.fff" (f64 parsing alone would also take "1e1", "inf", ...).
-fn seconds(s: &str) -> Option<f64> {
-    let (whole, frac) = s.split_once('.').unwrap_or((s, "0"));
-    fixed_digits(whole, 2)?;
-    if frac.is_empty() || !frac.bytes().all(|b| b.is_ascii_digit()) {
-        return None;
-    }
-    s.parse().ok()
-}
+use crate::sky::julian_year;
 
 /// What the safety scan reads from one header, before fitsrs sees it.
 #[derive(Debug)]
@@ -379,7 +322,8 @@ impl Scan {
     fn next_start(&self, file_len: usize) -> Result<usize> {
         let have = file_len.saturating_sub(self.data_start) as u64;
         if have < self.data_len {
-            bail!(
+            fail!(
+                Input,
                 "FITS data truncated: {} expected {} bytes, file holds {have}",
                 self.what,
                 self.data_len
@@ -426,36 +370,45 @@ fn scan_header(bytes: &[u8], start: usize, what: String) -> Result<Scan> {
         }
     }
     let Some(end) = end else {
-        bail!("{what}: the header has no END card (not a FITS file, or one cut short)");
+        fail!(
+            Input,
+            "{what}: the header has no END card (not a FITS file, or one cut short)"
+        );
     };
     let int = |key: &str| -> Result<Option<i64>> {
         match ints.get(key) {
             None => Ok(None),
             Some(Some(v)) => Ok(Some(*v)),
-            Some(None) => bail!("{what}: {key} is not an integer"),
+            Some(None) => fail!(Input, "{what}: {key} is not an integer"),
         }
     };
-    let bitpix = int("BITPIX")?.ok_or_else(|| anyhow!("{what}: the header lacks BITPIX"))?;
+    let bitpix = int("BITPIX")?.ok_or_else(|| error!(Input, "{what}: the header lacks BITPIX"))?;
     if ![8, 16, 32, 64, -32, -64].contains(&bitpix) {
-        bail!("{what} has BITPIX = {bitpix}; FITS allows only 8, 16, 32, 64, -32 and -64");
+        fail!(
+            Input,
+            "{what} has BITPIX = {bitpix}; FITS allows only 8, 16, 32, 64, -32 and -64"
+        );
     }
-    let naxis = int("NAXIS")?.ok_or_else(|| anyhow!("{what}: the header lacks NAXIS"))?;
+    let naxis = int("NAXIS")?.ok_or_else(|| error!(Input, "{what}: the header lacks NAXIS"))?;
     if !(0..=999).contains(&naxis) {
-        bail!("{what} has NAXIS = {naxis}; FITS allows 0 to 999");
+        fail!(Input, "{what} has NAXIS = {naxis}; FITS allows 0 to 999");
     }
     let mut axes = Vec::new();
     for n in 1..=naxis {
         let key = format!("NAXIS{n}");
         match int(&key)? {
-            None => bail!("{what}: the header lacks {key}"),
-            Some(v) if v < 0 => bail!("{what} has {key} = {v}, a negative size"),
+            None => fail!(Input, "{what}: the header lacks {key}"),
+            Some(v) if v < 0 => fail!(Input, "{what} has {key} = {v}, a negative size"),
             Some(v) => axes.push(v as u64),
         }
     }
     let pcount = int("PCOUNT")?.unwrap_or(0);
     let gcount = int("GCOUNT")?.unwrap_or(1);
     if pcount < 0 || gcount < 0 {
-        bail!("{what} has PCOUNT = {pcount}, GCOUNT = {gcount}: they cannot be negative");
+        fail!(
+            Input,
+            "{what} has PCOUNT = {pcount}, GCOUNT = {gcount}: they cannot be negative"
+        );
     }
     let bytes_per_value = bitpix.unsigned_abs() / 8;
     let values = if axes.is_empty() {
@@ -475,7 +428,10 @@ fn scan_header(bytes: &[u8], start: usize, what: String) -> Result<Scan> {
             .map(u64::to_string)
             .collect::<Vec<_>>()
             .join("×");
-        bail!("{what} declares a data unit too large to exist ({shape})");
+        fail!(
+            Input,
+            "{what} declares a data unit too large to exist ({shape})"
+        );
     };
     Ok(Scan {
         what,
@@ -520,16 +476,18 @@ fn find_image_extension(bytes: &[u8], primary: &Scan) -> Result<Scan> {
         let scan = scan_header(bytes, pos, format!("FITS extension {index}"))?;
         match scan.xtension.as_deref() {
             Some("IMAGE" | "IUEIMAGE") => return Ok(scan),
-            Some("BINTABLE") if scan.zimage => bail!(
+            Some("BINTABLE") if scan.zimage => fail!(
+                Input,
                 "FITS extension {index} holds a tile-compressed image (fpack): compressed FITS is \
                  not supported; decompress it first (e.g. funpack)"
             ),
             Some(_) => {}
-            None => bail!("FITS extension {index}: the header lacks XTENSION"),
+            None => fail!(Input, "FITS extension {index}: the header lacks XTENSION"),
         }
         pos = scan.next_start(bytes.len())?;
     }
-    bail!(
+    fail!(
+        Input,
         "FITS primary HDU holds no image (NAXIS = 0) and no IMAGE extension follows{}",
         if index > 0 { " (only tables)" } else { "" }
     )
@@ -565,14 +523,15 @@ fn parse_headers(bytes: &[u8], primary: &Scan, ext: Option<&Scan>) -> Result<Vec
     for scan in std::iter::once(primary).chain(ext) {
         let header = match fits.next() {
             Some(Ok(HDU::Primary(hdu) | HDU::XImage(hdu))) => hdu.get_header().clone(),
-            Some(Ok(_)) => bail!("{}: not an image HDU", scan.what),
-            Some(Err(e)) => bail!("{}: cannot parse the header: {e}", scan.what),
-            None => bail!("{}: the header is missing", scan.what),
+            Some(Ok(_)) => fail!(Input, "{}: not an image HDU", scan.what),
+            Some(Err(e)) => fail!(Input, "{}: cannot parse the header: {e}", scan.what),
+            None => fail!(Input, "{}: the header is missing", scan.what),
         };
         // The data are sliced with the scan's sizes: both readings must agree.
         let x = header.get_xtension();
         if x.get_naxis() != scan.naxis.as_slice() || x.get_bitpix() as i64 != scan.bitpix {
-            bail!(
+            fail!(
+                Input,
                 "{}: the header is inconsistent (BITPIX or NAXISn read two ways)",
                 scan.what
             );
@@ -589,25 +548,19 @@ fn number(header: &Header<Image>, key: &str) -> Result<Option<f64>> {
         Some(Value::Integer { value, .. }) => *value as f64,
         Some(Value::Float { value, .. }) => *value,
         Some(Value::String { value, .. } | Value::Invalid(value)) => {
-            bail!("FITS keyword {key} is not a number: {value}")
+            fail!(Input, "FITS keyword {key} is not a number: {value}")
         }
-        Some(Value::Logical { value, .. }) => bail!("FITS keyword {key} is not a number: {value}"),
+        Some(Value::Logical { value, .. }) => {
+            fail!(Input, "FITS keyword {key} is not a number: {value}")
+        }
     };
     if !v.is_finite() {
-        bail!("FITS keyword {key} is not a finite number: {v}");
+        fail!(Input, "FITS keyword {key} is not a finite number: {v}");
     }
     Ok(Some(v))
 }
 
-/// Plausible observation dates, MJD: 1960-01-01 (UTC begins) to 2100-01-01.
-const MJD_PLAUSIBLE: (f64, f64) = (36_934.0, 88_069.0);
-
-/// The one plausibility rule for a time read from a file, whatever it is used for (the epoch
-/// of proper motion here, exposure times in `streaks::sky`): within 1960..2100, which a JD
-/// written into an MJD keyword, a year 9999 placeholder or a wrong century are not.
-pub fn plausible_mjd(mjd: f64) -> bool {
-    (MJD_PLAUSIBLE.0..MJD_PLAUSIBLE.1).contains(&mjd)
-}
+use crate::sky::plausible_mjd;
 
 /// The epoch of proper motion (Julian year) from the first of DATE-BEG, DATE-OBS, MJD-BEG and
 /// MJD-OBS (the order the exposure times are read in) that a header holds in a form read and
@@ -889,11 +842,17 @@ fn float_range<I: Iterator<Item = f64>>(stored: impl Fn() -> I) -> (f64, f64) {
 /// The pixel buffer, or an error when there is no memory for it or nothing valid to put in.
 fn new_pixels(count: u64, blanks: u64) -> Result<Vec<u16>> {
     if blanks == count {
-        bail!("every pixel of the FITS image is blank (NaN or BLANK)");
+        fail!(
+            Input,
+            "every pixel of the FITS image is blank (NaN or BLANK)"
+        );
     }
     let mut pixels = Vec::new();
     if usize::try_from(count).map_or(true, |n| pixels.try_reserve_exact(n).is_err()) {
-        bail!("not enough memory for a FITS image of {count} pixels");
+        fail!(
+            Input,
+            "not enough memory for a FITS image of {count} pixels"
+        );
     }
     Ok(pixels)
 }

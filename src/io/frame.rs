@@ -1,6 +1,6 @@
 //! Decoding image files into a grey frame of u16 pixels (8-bit images keep values 0–255).
 
-use anyhow::{Context, Result, anyhow, bail};
+use crate::error::{Context, Error, Result, error, fail};
 use image::{DynamicImage, ImageDecoder, ImageError, ImageFormat, ImageReader, Limits};
 use std::io::{BufRead, Cursor, Seek};
 use std::path::Path;
@@ -73,20 +73,25 @@ impl Frame {
         let shown = path.display().to_string();
         // Follows links: a dangling or looping one fails here, with where it leads.
         let meta = std::fs::metadata(path).map_err(|e| match std::fs::read_link(path) {
-            Ok(to) => anyhow!(
+            Ok(to) => error!(
+                Input,
                 "cannot open {shown}: symbolic link to {} that cannot be followed: {e}",
                 to.display()
             ),
-            Err(_) => anyhow!("cannot open {shown}: {e}"),
+            Err(_) => Error::Io {
+                context: format!("cannot open {shown}"),
+                error: e,
+            },
         })?;
         if !meta.is_file() {
-            bail!(
+            fail!(
+                Input,
                 "cannot read {shown}: not a regular file but {}",
                 file_kind(&meta.file_type())
             );
         }
         if meta.len() == 0 {
-            bail!("cannot decode {shown}: the file is empty (0 bytes)");
+            fail!(Input, "cannot decode {shown}: the file is empty (0 bytes)");
         }
         if is_fits(path)? {
             return read_fits(path, &shown, meta.len());
@@ -103,7 +108,10 @@ impl Frame {
         // Named FITS, and not another format by its content either: say what is wrong with it
         // rather than that the extension is unknown to the image decoders.
         if fits_name && reader.format().is_none() {
-            bail!("cannot decode {shown}: not a FITS file (it does not start with SIMPLE  =)");
+            fail!(
+                Input,
+                "cannot decode {shown}: not a FITS file (it does not start with SIMPLE  =)"
+            );
         }
         if reader.format() == Some(ImageFormat::Png)
             && let Some(frame) = read_grey_png(path, &shown, meta.len(), expect)?
@@ -114,7 +122,8 @@ impl Frame {
             // The JPEG decoder reads the whole file anyway.
             let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
             if !jpeg_reaches_end(&bytes) {
-                bail!(
+                fail!(
+                    Input,
                     "cannot decode {shown}: the JPEG data stop before their end-of-image marker \
                      (truncated file?)"
                 );
@@ -134,7 +143,7 @@ impl Frame {
     pub fn from_image(img: DynamicImage) -> Result<Frame> {
         let (width, height) = (img.width(), img.height());
         if width == 0 || height == 0 {
-            bail!("the image is empty ({width}x{height})");
+            fail!(Input, "the image is empty ({width}x{height})");
         }
         // Plain loops over the raw buffers: the compiler vectorises the widening.
         let widen = |v: Vec<u8>| -> Vec<u16> { v.into_iter().map(u16::from).collect() };
@@ -170,7 +179,10 @@ fn is_fits(path: &Path) -> Result<bool> {
 /// A FITS file's primary image (or first image extension), with its DATE-OBS.
 fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, FileInfo)> {
     if file_len > MAX_ALLOC {
-        bail!("cannot decode {shown}: the FITS file is larger than gpustar reads (2 GiB)");
+        fail!(
+            Input,
+            "cannot decode {shown}: the FITS file is larger than gpustar reads (2 GiB)"
+        );
     }
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
     let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64).min(MAX_ALLOC / 2);
@@ -230,22 +242,31 @@ fn read_grey_png(
     {
         return Ok(None);
     }
-    let size = reader
-        .output_buffer_size()
-        .ok_or_else(|| anyhow!("cannot decode {shown}: the image is {w}x{h}, too large"))?;
+    let size = reader.output_buffer_size().ok_or_else(|| {
+        error!(
+            Input,
+            "cannot decode {shown}: the image is {w}x{h}, too large"
+        )
+    })?;
     let mut buf = Vec::new();
     if buf
         .try_reserve_exact(size + 2 * (w as usize) * (h as usize))
         .is_err()
     {
-        bail!("cannot decode {shown}: not enough memory for a {w}x{h} image");
+        fail!(
+            Input,
+            "cannot decode {shown}: not enough memory for a {w}x{h} image"
+        );
     }
     buf.resize(size, 0);
     reader.next_frame(&mut buf).map_err(|e| match e {
         png::DecodingError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
-            anyhow!("cannot decode {shown}: the file ends before the image does (truncated file?)")
+            error!(
+                Input,
+                "cannot decode {shown}: the file ends before the image does (truncated file?)"
+            )
         }
-        e => anyhow!("cannot decode {shown}: {e}"),
+        e => error!(Input, "cannot decode {shown}: {e}"),
     })?;
     let (pixels, saturation) = if depth == png::BitDepth::Eight {
         (buf.into_iter().map(u16::from).collect(), 255)
@@ -278,7 +299,7 @@ pub fn wrong_size(width: u32, height: u32, expect: (u32, u32)) -> String {
 /// their own refusal, which says more).
 fn check_size(w: u32, h: u32, expect: Option<(u32, u32)>) -> Result<()> {
     match expect {
-        Some(e) if (w, h) != e && w.max(h) <= MAX_SIDE => bail!("{}", wrong_size(w, h, e)),
+        Some(e) if (w, h) != e && w.max(h) <= MAX_SIDE => fail!(Input, "{}", wrong_size(w, h, e)),
         _ => Ok(()),
     }
 }
@@ -298,7 +319,8 @@ fn decode<R: BufRead + Seek>(
     let (w, h) = decoder.dimensions();
     let bytes = decoder.total_bytes();
     if w > MAX_SIDE || h > MAX_SIDE || bytes > MAX_ALLOC {
-        bail!(
+        fail!(
+            Input,
             "cannot decode {shown}: the image is {w}x{h} ({} MiB of pixels), larger than gpustar \
              reads (at most {MAX_SIDE} pixels a side and {} MiB)",
             bytes >> 20,
@@ -314,7 +336,8 @@ fn decode<R: BufRead + Seek>(
         .ok()
         .is_some_and(|n| Vec::<u8>::new().try_reserve_exact(n).is_ok());
     if !available {
-        bail!(
+        fail!(
+            Input,
             "cannot decode {shown}: not enough memory for a {w}x{h} image ({} MiB)",
             need >> 20
         );
@@ -332,17 +355,21 @@ fn decode<R: BufRead + Seek>(
 
 /// The message of a decoder error: said once (the image crate's messages repeat their
 /// source), with a hint for a file that ends early.
-fn decode_error(shown: &str, e: ImageError) -> anyhow::Error {
+fn decode_error(shown: &str, e: ImageError) -> crate::error::Error {
     match &e {
         ImageError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
-            anyhow!("cannot decode {shown}: the file ends before the image does (truncated file?)")
+            error!(
+                Input,
+                "cannot decode {shown}: the file ends before the image does (truncated file?)"
+            )
         }
-        ImageError::Limits(_) => anyhow!(
+        ImageError::Limits(_) => error!(
+            Input,
             "cannot decode {shown}: {e} (gpustar reads at most {MAX_SIDE} pixels a side and \
              {} MiB)",
             MAX_ALLOC >> 20
         ),
-        _ => anyhow!("cannot decode {shown}: {e}"),
+        _ => error!(Input, "cannot decode {shown}: {e}"),
     }
 }
 

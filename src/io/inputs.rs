@@ -1,8 +1,8 @@
 //! The inputs of a run: the image files of a directory in a sorted, stable order, and the
 //! shard of them a process takes.
 
+use crate::error::{AsKind, Context, Error, Result, fail};
 use crate::io::frame::is_image_path;
-use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 
 /// An input file and its name in the records (its path relative to the directory, with '/').
@@ -53,7 +53,7 @@ pub(crate) fn escape_component(c: &std::ffi::OsStr) -> String {
 /// Unreadable directories are skipped with a warning.
 pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
     if !dir.is_dir() {
-        bail!("{} is not a directory", dir.display());
+        fail!(Input, "{} is not a directory", dir.display());
     }
     let mut out = Vec::new();
     let walk = walkdir::WalkDir::new(dir)
@@ -82,6 +82,7 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
             let rel = entry
                 .path()
                 .strip_prefix(dir)
+                .as_kind(Error::Input)
                 .context("walked outside the directory")?;
             out.push(Input {
                 path: entry.path().to_path_buf(),
@@ -97,7 +98,8 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
     // (`a\xff.png` beside a file whose name holds the byte 0xff): refuse rather than give
     // two inputs one record.
     if let Some(w) = out.windows(2).find(|w| w[0].name == w[1].name) {
-        bail!(
+        fail!(
+            Input,
             "{} and {} would have the same record name {:?}: rename one",
             w[0].path.display(),
             w[1].path.display(),

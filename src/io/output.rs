@@ -1,8 +1,8 @@
 //! Writing records (JSON Lines or CSV) so that they are never torn, reading back what an
 //! earlier run wrote (`--resume`), and merging shard outputs.
 
+use crate::error::{Context, Result, fail};
 use crate::record::{Record, Status};
-use anyhow::{Context, Result, bail};
 use std::collections::{HashMap, HashSet};
 use std::io::{Read, Seek, Write};
 use std::path::Path;
@@ -255,7 +255,10 @@ pub fn open_output(
         && !m.is_file()
     {
         if resume {
-            bail!("cannot resume into {shown}: it is not a regular file");
+            fail!(
+                Output,
+                "cannot resume into {shown}: it is not a regular file"
+            );
         }
         let file = OpenOptions::new()
             .append(true)
@@ -280,7 +283,8 @@ pub fn open_output(
     if !resume {
         let first = bytes.split(|&b| b == b'\n').next().unwrap_or_default();
         if !bytes.is_empty() && !looks_like_output(first) {
-            bail!(
+            fail!(
+                Output,
                 "{shown} exists and does not hold gpustar results (its first line is neither a \
                  record nor the CSV header): not overwritten; remove it or choose another \
                  --output"
@@ -297,7 +301,8 @@ pub fn open_output(
     let (mut lines, complete) = parse_lines(&bytes, format, path)?;
     let tail = &bytes[complete..];
     if !tail.is_empty() && lines.is_empty() && !looks_like_output(tail) {
-        bail!(
+        fail!(
+            Output,
             "{shown} does not hold gpustar results (no complete line, and it does not start \
              like a record): not resumed, not touched"
         );
@@ -364,7 +369,8 @@ pub fn open_output(
 fn lock(file: &std::fs::File, path: &Path) -> Result<()> {
     match file.try_lock() {
         Ok(()) => Ok(()),
-        Err(std::fs::TryLockError::WouldBlock) => bail!(
+        Err(std::fs::TryLockError::WouldBlock) => fail!(
+            Output,
             "{} is being written by another gpustar process (it holds the file's lock): \
              not touched; wait for that run to end, or write elsewhere",
             path.display()
@@ -429,7 +435,8 @@ fn parse_lines(bytes: &[u8], format: Format, path: &Path) -> Result<(Vec<Line>, 
             } else {
                 "a gpustar record"
             };
-            bail!(
+            fail!(
+                Output,
                 "{shown}: line {} is not {what}{}: not resumed, not touched",
                 n + 1,
                 other(&text)
@@ -455,10 +462,15 @@ pub fn check_replaceable(path: &Path, ours: impl Fn(&str) -> bool, what: &str) -
         _ => Path::new("."),
     };
     if !dir.is_dir() {
-        bail!("cannot write {shown}: {} is not a directory", dir.display());
+        fail!(
+            Output,
+            "cannot write {shown}: {} is not a directory",
+            dir.display()
+        );
     }
     if tempfile::NamedTempFile::new_in(dir).is_err() {
-        bail!(
+        fail!(
+            Output,
             "cannot write {shown}: cannot create a file in {}",
             dir.display()
         );
@@ -467,7 +479,8 @@ pub fn check_replaceable(path: &Path, ours: impl Fn(&str) -> bool, what: &str) -
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(e).with_context(|| format!("cannot read {shown}")),
         Ok(b) if b.is_empty() || std::str::from_utf8(&b).is_ok_and(&ours) => Ok(()),
-        Ok(_) => bail!(
+        Ok(_) => fail!(
+            Output,
             "{shown} exists and does not hold {what}: not replaced; remove it or choose \
              another path"
         ),
@@ -487,6 +500,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         .and_then(|_| tmp.as_file().sync_all())
         .with_context(|| format!("cannot write {}", path.display()))?;
     tmp.persist(path)
+        .map_err(|e| e.error)
         .with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }
@@ -527,7 +541,8 @@ pub fn merge(parts: &[Vec<Record>], expected: Option<&[String]>) -> Result<Vec<R
             s.join(", ")
         };
         let dup: Vec<&String> = duplicated.iter().collect();
-        bail!(
+        fail!(
+            Output,
             "the shard outputs do not hold every input exactly once: {} missing [{}], {} \
              duplicated [{}], {} not inputs of the directory [{}]",
             missing.len(),

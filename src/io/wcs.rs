@@ -33,8 +33,8 @@
 //! camera may want to cache headers' SIP part if that ever matters.
 
 use crate::camera::Camera;
+use crate::error::{Context, Result, fail};
 use crate::io::fits::{card_comment, card_raw, card_real, card_str};
-use anyhow::{Context, Result, ensure};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use std::path::Path;
 
@@ -125,31 +125,42 @@ pub fn wcs_header(camera: &Camera, r: &Matrix3<f64>) -> Vec<String> {
 /// Write the header of [`wcs_header`] as a header-only FITS file, padded with blanks to a
 /// multiple of 2880 bytes.
 pub fn write_wcs_file(path: &Path, camera: &Camera, r: &Matrix3<f64>) -> Result<()> {
-    ensure!(
-        camera.fx.is_finite() && camera.fy.is_finite() && camera.fx > 0.0 && camera.fy > 0.0,
-        "cannot write a WCS for focal lengths fx = {}, fy = {}",
-        camera.fx,
-        camera.fy
-    );
-    ensure!(
-        [camera.cx, camera.cy, camera.k1, camera.k2]
-            .iter()
-            .all(|v| v.is_finite()),
-        "cannot write a WCS for a camera with non-finite principal point or distortion"
-    );
-    ensure!(
-        r.iter().all(|v| v.is_finite()) && (r.transpose() * r - Matrix3::identity()).norm() < 1e-6,
-        "cannot write a WCS for an attitude that is not a rotation matrix"
-    );
+    if !(camera.fx.is_finite() && camera.fy.is_finite() && camera.fx > 0.0 && camera.fy > 0.0) {
+        fail!(
+            Config,
+            "cannot write a WCS for focal lengths fx = {}, fy = {}",
+            camera.fx,
+            camera.fy
+        );
+    }
+    if !([camera.cx, camera.cy, camera.k1, camera.k2]
+        .iter()
+        .all(|v| v.is_finite()))
+    {
+        fail!(
+            Config,
+            "cannot write a WCS for a camera with non-finite principal point or distortion"
+        );
+    }
+    if !(r.iter().all(|v| v.is_finite()) && (r.transpose() * r - Matrix3::identity()).norm() < 1e-6)
+    {
+        fail!(
+            Config,
+            "cannot write a WCS for an attitude that is not a rotation matrix"
+        );
+    }
     let cards = wcs_header(camera, r);
     // A distortion that folds over within the image has no inverse to fit (the fit error
     // comment then says NaN).
-    ensure!(
-        !cards
-            .iter()
-            .any(|c| c.contains("NaN") || (&c[8..10] == "= " && c[10..30].contains("inf"))),
-        "cannot write a WCS: the camera's distortion cannot be inverted over the image"
-    );
+    if !(!cards
+        .iter()
+        .any(|c| c.contains("NaN") || (&c[8..10] == "= " && c[10..30].contains("inf"))))
+    {
+        fail!(
+            Config,
+            "cannot write a WCS: the camera's distortion cannot be inverted over the image"
+        );
+    }
     let mut text: String = cards.concat();
     let padded = text.len().div_ceil(2880) * 2880;
     text.extend(std::iter::repeat_n(' ', padded - text.len()));

@@ -8,6 +8,7 @@
 use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::cpu::centroid::Blob;
+use crate::error::{Result, error, fail};
 use crate::gpu::Gpu;
 use crate::gpu::radial::{GpuRadial, RadialJob};
 use crate::gpu::vote::{GpuTable, VoteJob};
@@ -19,7 +20,6 @@ use crate::solve::detect::{self, DetectSettings, Detection};
 use crate::solve::radial;
 use crate::solve::{Outcome, Prepared, Settings, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
-use anyhow::Result;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -386,7 +386,7 @@ impl GpuRunner {
             let batch: Vec<&Frame> = group.iter().map(|&i| decoded_frame(&frames[i])).collect();
             let t0 = Instant::now();
             let stars = if self.failed {
-                Err(anyhow::anyhow!("the GPU failed earlier"))
+                Err(error!(Gpu, "the GPU failed earlier"))
             } else {
                 self.gpu
                     .detect(&batch, &detect::params(batch[0], s))
@@ -546,7 +546,7 @@ impl GpuRunner {
                 });
                 let table = match table {
                     Ok(t) => t,
-                    Err(e) => anyhow::bail!("{e}"),
+                    Err(e) => fail!(Gpu, "{e}"),
                 };
                 let jobs: Vec<RadialJob> = prepared
                     .iter()
@@ -571,7 +571,7 @@ impl GpuRunner {
             }
             let table = match &self.tables[&key] {
                 Ok(t) => t,
-                Err(e) => anyhow::bail!("{e}"),
+                Err(e) => fail!(Gpu, "{e}"),
             };
             let jobs: Vec<VoteJob> = prepared
                 .iter()
@@ -725,7 +725,7 @@ impl Backend {
             BackendChoice::Cpu => Ok((Backend::Cpu, None)),
             BackendChoice::Gpu => Ok((gpu(Gpu::new(name.as_deref())?), None)),
             BackendChoice::Auto => {
-                let fallback = |e: anyhow::Error| {
+                let fallback = |e: crate::error::Error| {
                     let w = BackendNote::Warning(format!("{e:#}; using the CPU"));
                     Ok((Backend::Cpu, Some(w)))
                 };

@@ -19,7 +19,7 @@
 
 use std::path::Path;
 
-use anyhow::{Context, bail};
+use crate::error::{AsKind, Context, Error, fail};
 use image::{Rgb, RgbImage};
 
 /// A position on the frame: `(x, y)` = (column, row), `(0, 0)` = centre of the
@@ -158,9 +158,10 @@ pub fn render(a: &Annotation) -> RgbImage {
 }
 
 /// Renders and writes the PNG, creating parent directories.
-pub fn write_png(path: &Path, a: &Annotation) -> anyhow::Result<()> {
+pub fn write_png(path: &Path, a: &Annotation) -> crate::error::Result<()> {
     if pixel_count(a).is_none() {
-        bail!(
+        fail!(
+            Output,
             "cannot annotate {}: frame is {}x{} with {} pixels",
             path.display(),
             a.width,
@@ -174,6 +175,7 @@ pub fn write_png(path: &Path, a: &Annotation) -> anyhow::Result<()> {
     }
     render(a)
         .save_with_format(path, image::ImageFormat::Png)
+        .as_kind(Error::Output)
         .with_context(|| format!("writing annotated PNG {}", path.display()))
 }
 

@@ -5,12 +5,12 @@
 pub mod annotate;
 
 use self::annotate::{Annotation, Mark};
+use crate::error::{Result, fail};
 use crate::io::frame::Frame;
 use crate::solve::attitude::pointing;
 use crate::solve::refine::stars_in_view;
 use crate::solve::{Outcome, Solution};
 use crate::streaks::fit::StreakFit;
-use anyhow::{Result, bail};
 use std::path::{Component, Path, PathBuf};
 
 /// Where per-frame products go; None = not written.
@@ -36,7 +36,8 @@ impl Products {
         if let Some(dir) = &self.annotate_dir {
             let out = product_path(dir, name, "png");
             if same_file(&out, input) {
-                bail!(
+                fail!(
+                    Output,
                     "not writing the annotated image over its input {}: choose another \
                      --annotate-dir",
                     input.display()

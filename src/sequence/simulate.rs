@@ -8,9 +8,9 @@
 //! the frame is replaced by a new one at a random place. Smear during the exposure is not drawn.
 
 use crate::catalog::Catalog;
+use crate::error::{AsKind, Context, Error, Result, error};
 use crate::simulate::{SimSettings, Spot, Truth, random_rotation, render_with};
 use crate::sky::Utc;
-use anyhow::{Context, Result};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -282,8 +282,12 @@ pub fn write_set(
         let truth = r
             .into_inner()
             .unwrap_or_else(|e| e.into_inner())
-            .context("a frame was not rendered")??;
-        writeln!(truth_file, "{}", serde_json::to_string(&truth)?)?;
+            .ok_or_else(|| error!(Config, "a frame was not rendered"))??;
+        writeln!(
+            truth_file,
+            "{}",
+            serde_json::to_string(&truth).as_kind(Error::Output)?
+        )?;
     }
     truth_file.flush()?;
     let text = format!(

@@ -8,8 +8,8 @@ pub mod evaluate;
 
 use crate::camera::Camera;
 use crate::catalog::Catalog;
+use crate::error::{AsKind, Context, Error, Result, fail};
 use crate::solve::attitude::{pointing, quaternion};
-use anyhow::{Context, Result, bail};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -204,6 +204,7 @@ pub fn render_with(
     let noise = (s.centroid_noise_px > 0.0)
         .then(|| Normal::new(0.0, s.centroid_noise_px))
         .transpose()
+        .as_kind(Error::Config)
         .context("centroid noise")?;
     let mut signal = vec![0f64; (w * h) as usize];
     let mut stars = Vec::new();
@@ -259,7 +260,9 @@ pub fn render_with(
         add_spot(&mut signal, w, h, e.x, e.y, e.electrons, e.sigma_px);
     }
     let full = if s.bits == 8 { 255.0 } else { 65535.0 };
-    let read = Normal::new(0.0, s.read_noise_e).context("read noise")?;
+    let read = Normal::new(0.0, s.read_noise_e)
+        .as_kind(Error::Config)
+        .context("read noise")?;
     let mut pixels = vec![0u16; (w * h) as usize];
     for y in 0..h {
         for x in 0..w {
@@ -314,7 +317,7 @@ pub fn write_set(
     mut progress: impl FnMut(usize),
 ) -> Result<()> {
     if s.bits != 8 && s.bits != 16 {
-        bail!("--bits must be 8 or 16, got {}", s.bits);
+        fail!(Config, "--bits must be 8 or 16, got {}", s.bits);
     }
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let camera = s.camera()?;
@@ -356,7 +359,11 @@ pub fn write_set(
         std::fs::File::create(out.join("truth.jsonl")).context("cannot create truth.jsonl")?,
     );
     for truth in truths.iter().flatten() {
-        writeln!(truth_file, "{}", serde_json::to_string(truth)?)?;
+        writeln!(
+            truth_file,
+            "{}",
+            serde_json::to_string(truth).as_kind(Error::Output)?
+        )?;
     }
     truth_file.flush()?;
     // The camera file carries the limiting magnitude, so that batch uses the catalog as deep
@@ -386,10 +393,14 @@ fn write_png(path: &Path, width: u32, height: u32, pixels: &[u16], bits: u8) -> 
     let encoder = PngEncoder::new_with_quality(file, CompressionType::Fast, FilterType::Sub);
     if bits == 8 {
         let buf: Vec<u8> = pixels.iter().map(|&p| p as u8).collect();
-        encoder.write_image(&buf, width, height, image::ExtendedColorType::L8)?;
+        encoder
+            .write_image(&buf, width, height, image::ExtendedColorType::L8)
+            .as_kind(Error::Output)?;
     } else {
         let buf: Vec<u8> = pixels.iter().flat_map(|p| p.to_ne_bytes()).collect();
-        encoder.write_image(&buf, width, height, image::ExtendedColorType::L16)?;
+        encoder
+            .write_image(&buf, width, height, image::ExtendedColorType::L16)
+            .as_kind(Error::Output)?;
     }
     Ok(())
 }

@@ -4,6 +4,7 @@ use crate::cpu;
 use crate::cpu::centroid::Blob;
 use crate::cpu::psf_fit::{PsfFit, Window};
 use crate::cpu::threshold::DetectParams;
+use crate::error::fail;
 use crate::io::frame::Frame;
 use serde::Serialize;
 
@@ -135,8 +136,8 @@ pub fn stars_with(
     frames: &[&Frame],
     blobs: &[&[Blob]],
     s: &DetectSettings,
-    fit: impl FnOnce(&[Window]) -> anyhow::Result<Vec<Option<PsfFit>>>,
-) -> anyhow::Result<Vec<Vec<Detection>>> {
+    fit: impl FnOnce(&[Window]) -> crate::error::Result<Vec<Option<PsfFit>>>,
+) -> crate::error::Result<Vec<Vec<Detection>>> {
     let mut lists: Vec<Vec<Detection>> = blobs.iter().map(|b| star_list(b, s)).collect();
     if s.centroid != Centroid::Ml {
         return Ok(lists);
@@ -154,7 +155,9 @@ pub fn stars_with(
         }
     }
     let fits = fit(&windows)?;
-    anyhow::ensure!(fits.len() == windows.len(), "one PSF fit per window");
+    if !(fits.len() == windows.len()) {
+        fail!(Gpu, "one PSF fit per window");
+    }
     for ((f, k), fit) in at.into_iter().zip(fits) {
         if let Some(p) = fit {
             let d = &mut lists[f][k];

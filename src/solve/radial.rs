@@ -17,6 +17,7 @@
 use crate::catalog::RefCatalog;
 use crate::catalog::table::{PairTable, angle_of_chord, chord_key};
 use crate::cpu::vote::PairRange;
+use crate::error::fail;
 use crate::solve::triangle::{Triangle, triangle_order};
 use nalgebra::Vector3;
 
@@ -145,7 +146,7 @@ impl RadialTable {
 /// Version 2 adds the checksum.
 const MAGIC: &[u8; 8] = b"GPSRAD02";
 
-fn write_features(path: &std::path::Path, key: u64, t: &RadialTable) -> anyhow::Result<()> {
+fn write_features(path: &std::path::Path, key: u64, t: &RadialTable) -> crate::error::Result<()> {
     crate::catalog::table::write_cache(path, MAGIC, key, &[t.stars as u64], &t.features)
 }
 
@@ -163,7 +164,7 @@ fn read_features(
     let read =
         crate::catalog::table::read_cache(path, MAGIC, key, 1).and_then(|(head, features)| {
             if head[0] != stars as u64 || features.len() != WORDS * stars {
-                anyhow::bail!("made for another catalog");
+                fail!(Catalog, "made for another catalog");
             }
             Ok(features)
         });

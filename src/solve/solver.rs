@@ -8,6 +8,7 @@
 use crate::camera::Camera;
 use crate::catalog::table::{self, PairTable, TableOrigin};
 use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection, vector_to_radec};
+use crate::error::Result;
 use crate::io::frame::Frame;
 use crate::record::{MatchRecord, Record, Status, Timing};
 use crate::solve::attitude::{pointing, wahba};
@@ -15,7 +16,6 @@ use crate::solve::detect::{self, DetectSettings, Detection};
 use crate::solve::identify::{self, IdentifySettings};
 use crate::solve::refine::{self, RefineSettings, Refined};
 use crate::solve::triangle;
-use anyhow::Result;
 use nalgebra::Vector3;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};

@@ -5,8 +5,8 @@
 //! streak that leaves the frame has no point at a known time and is left out (counted).
 
 use super::formats::{self, AngleObs, IodObs, Track};
+use crate::error::{Context, Result};
 use crate::record::Record;
-use anyhow::{Context, Result};
 use std::path::PathBuf;
 
 /// The observations of a run, collected record by record (in input order).
@@ -122,7 +122,7 @@ impl Exports {
         let mut said = Vec::new();
         if let Some(p) = &self.tdm {
             let text = formats::tdm_text(created_utc, "GPUSTAR", &self.tracks)
-                .map_err(anyhow::Error::msg)
+                .map_err(crate::error::Error::Output)
                 .with_context(|| format!("cannot write {}", p.display()))?;
             crate::io::output::write_atomically(p, text.as_bytes())?;
             said.push(format!(

@@ -9,9 +9,9 @@
 //! star frame's noise is already in its pixels; the sum of Poisson counts is Poisson).
 
 use crate::catalog::Catalog;
+use crate::error::{AsKind, Context, Error, Result, fail};
 use crate::simulate::{SimSettings, Truth, render};
 use crate::sky::{Station, Utc};
-use anyhow::{Context, Result, bail};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -70,7 +70,10 @@ pub fn render_streaks(
     index: usize,
 ) -> Result<(Vec<u16>, StreakTruth)> {
     if s.bits != 16 {
-        bail!("simulate --streaks writes 16-bit FITS: give --bits 16");
+        fail!(
+            Config,
+            "simulate --streaks writes 16-bit FITS: give --bits 16"
+        );
     }
     let (mut pixels, mut truth) = render(catalog, s, index)?;
     truth.file = frame_name(index);
@@ -217,7 +220,11 @@ pub fn write_set(catalog: &Catalog, s: &SimSettings, st: &StreakSim, out: &Path)
             crate::io::fits::encode_u16(truth.stars.width, truth.stars.height, &pixels, &cards);
         let path = out.join(&truth.stars.file);
         std::fs::write(&path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
-        writeln!(truth_file, "{}", serde_json::to_string(&truth)?)?;
+        writeln!(
+            truth_file,
+            "{}",
+            serde_json::to_string(&truth).as_kind(Error::Output)?
+        )?;
     }
     truth_file.flush()?;
     let text = format!(
