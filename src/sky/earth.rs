@@ -12,16 +12,16 @@ pub(crate) const ROTATION_ARCSEC_PER_S: f64 = 15.041;
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct EopRow {
     /// TAI of the row as an MJD: the interpolation variable, continuous across leap seconds.
-    tai_mjd: f64,
+    pub(crate) tai_mjd: f64,
     /// UT1-TAI, seconds: smooth where UT1-UTC steps at leap seconds.
-    ut1_tai: f64,
+    pub(crate) ut1_tai: f64,
     /// UT1-UTC, seconds, as tabulated.
-    dut1: f64,
+    pub(crate) dut1: f64,
     /// Polar motion, arcsec.
-    xp: f64,
-    yp: f64,
+    pub(crate) xp: f64,
+    pub(crate) yp: f64,
     /// The UTC MJD as tabulated.
-    mjd: f64,
+    pub(crate) mjd: f64,
 }
 
 /// The bundled table (scripts/make_eop.py): IERS C04 every 5 days, then IERS-A (observed and predicted).
