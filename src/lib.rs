@@ -29,7 +29,19 @@ pub mod sky;
 pub mod solve;
 pub mod streaks;
 
+// The library's API: what a user needs to solve frames, read the records and handle errors.
+// Everything else stays reachable through its module.
+pub use batch::{RunOptions, RunSummary, run};
+pub use camera::Camera;
+pub use catalog::Catalog;
 pub use error::{Error, Result};
+pub use io::frame::Frame;
+pub use pipeline::{Backend, CameraSource, Pipeline};
+pub use record::{MatchRecord, Record, Status};
+pub use sequence::SequenceOptions;
+pub use sky::{Station, Utc};
+pub use solve::{Settings, Solver};
+pub use streaks::StreakOptions;
 
 #[cfg(test)]
 mod fuzz;

@@ -759,9 +759,19 @@ impl Backend {
     }
 }
 
-/// A single-threaded pipeline: decode the files in turn, then solve them as one batch. `run`
-/// streams large runs over threads (`batch` and `solve` go through it); this serves
-/// `calibrate`, tests and library users.
+/// A single-threaded pipeline: decode the files in turn, then solve them as one batch on the
+/// backend given. [`crate::batch::run`] streams large runs over threads (the `batch` and
+/// `solve` commands go through it); this serves `calibrate`, tests and library users:
+///
+/// ```no_run
+/// use gpustar::{Backend, Camera, CameraSource, Catalog, Pipeline, Settings};
+/// let camera = Camera::from_fov(1024, 1024, 10.0)?;
+/// let mut p = Pipeline::new(Catalog::load(None)?, Settings::default(), CameraSource::Fixed(camera), Backend::Cpu);
+/// for r in p.process_batch(&[("frame.png".into(), "frame.png".to_string())]) {
+///     println!("{}: {:?} {:?}", r.file, r.status, r.ra_deg);
+/// }
+/// # Ok::<(), gpustar::Error>(())
+/// ```
 pub struct Pipeline {
     pub solvers: Solvers,
     pub backend: Backend,

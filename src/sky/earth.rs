@@ -25,7 +25,8 @@ pub(crate) struct EopRow {
 }
 
 /// The bundled table (scripts/make_eop.py): IERS C04 every 5 days, then IERS-A (observed and predicted).
-pub(crate) const EOP_CSV: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/catalog/eop.csv"));
+pub(crate) const EOP_CSV: &str =
+    include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/catalog/eop.csv"));
 
 /// Parses `mjd,ut1_minus_utc_s,xp_arcsec,yp_arcsec` rows ('#' comments, one header line).
 pub(crate) fn parse_eop(text: &str) -> Result<Vec<EopRow>, String> {
