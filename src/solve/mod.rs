@@ -4,11 +4,15 @@
 //! selection and distance table and runs the stages for a frame.
 
 pub mod attitude;
+mod bands;
 pub mod detect;
 pub mod identify;
 pub mod radial;
 pub mod refine;
+mod report;
 mod solver;
 pub mod triangle;
 
+pub use bands::*;
+pub use report::*;
 pub use solver::*;

@@ -1,0 +1,377 @@
+//! The GPU side of a batch: frames grouped by size, detected, voted and fitted in few submissions; a failure moves the rest of the run to the CPU.
+
+use super::*;
+use crate::cpu::centroid::Blob;
+use crate::error::{Result, error, fail};
+use crate::gpu::Gpu;
+use crate::gpu::radial::{GpuRadial, RadialJob};
+use crate::gpu::vote::{GpuTable, VoteJob};
+use crate::io::frame::Frame;
+use crate::record::{Record, Timing};
+use crate::solve::detect::{self, DetectSettings, Detection};
+use crate::solve::radial;
+use crate::solve::{Outcome, Prepared, Solution, Solver};
+use crate::streaks::{self, StreakOptions, fit::StreakFit};
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// The GPU side of a run: the context and the tables uploaded to it. It lives on one thread.
+pub struct GpuRunner {
+    pub gpu: Gpu,
+    /// By frame size and band of the solver for that size.
+    pub(crate) tables: HashMap<(u32, u32, usize), std::result::Result<GpuTable, String>>,
+    /// The bands' radial features (`--method radial`), uploaded like the tables.
+    pub(crate) radial: HashMap<(u32, u32, usize), std::result::Result<GpuRadial, String>>,
+    /// Set once the GPU failed: the rest of the run is on the CPU.
+    pub(crate) failed: bool,
+}
+
+impl GpuRunner {
+    pub fn new(gpu: Gpu) -> GpuRunner {
+        GpuRunner {
+            gpu,
+            tables: HashMap::new(),
+            radial: HashMap::new(),
+            failed: false,
+        }
+    }
+
+    /// Solve decoded frames: each size as one GPU batch (detection, then voting), the rest
+    /// on the CPU. One record per frame, in the order given.
+    pub fn solve(&mut self, solvers: &Solvers, frames: Vec<Decoded>) -> Vec<Record> {
+        if matches!(solvers.camera, CameraSource::None) {
+            // Streaks alone, through the headers' WCS: the CPU twins (see `streaks_only`).
+            return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
+        }
+        let mut records: Vec<Option<Record>> = (0..frames.len()).map(|_| None).collect();
+        for (i, d) in frames.iter().enumerate() {
+            if let Err(e) = &d.frame {
+                records[i] = Some(Record::error(&d.name, e.clone(), &self.name()));
+            }
+        }
+        let groups = size_groups(&frames);
+        let mut frames: Vec<Option<Decoded>> = frames.into_iter().map(Some).collect();
+        let by_size: Vec<SizeGroup> = groups
+            .into_iter()
+            .map(|(size, idx)| {
+                let g = idx
+                    .into_iter()
+                    .map(|i| (i, frames[i].take().expect("each frame in one group")))
+                    .collect();
+                (size, g)
+            })
+            .collect();
+        for ((w, h, _), group) in by_size {
+            let indices: Vec<usize> = group.iter().map(|(i, _)| *i).collect();
+            let solver = solvers.get(w, h);
+            let recs: Vec<Record> = match solver.as_ref() {
+                Err(e) => group
+                    .iter()
+                    .map(|(_, d)| Record::error(&d.name, e.clone(), &self.name()))
+                    .collect(),
+                Ok(s) if self.failed => group
+                    .iter()
+                    .map(|(_, d)| solve_with(solvers, s, d, decoded_frame(d)))
+                    .collect(),
+                Ok(s) => self.solve_group(solvers, s, &group),
+            };
+            for (i, r) in indices.into_iter().zip(recs) {
+                records[i] = Some(r);
+            }
+        }
+        records
+            .into_iter()
+            .map(|r| r.expect("one record per frame"))
+            .collect()
+    }
+
+    /// The pixel stages alone (`--sequence`), keeping the brightest `max_stars`: each size as
+    /// one GPU batch; on a GPU error the CPU takes over for good. One result per frame, in the
+    /// order given.
+    pub fn detect(
+        &mut self,
+        solvers: &Solvers,
+        frames: Vec<Decoded>,
+        max_stars: usize,
+    ) -> Vec<Detected> {
+        let by_size = size_groups(&frames);
+        let mut found: Vec<Option<(Vec<Detection>, f64)>> = vec![None; frames.len()];
+        let s = &DetectSettings {
+            max_stars,
+            ..solvers.settings.detect
+        };
+        for (_, group) in by_size {
+            let batch: Vec<&Frame> = group.iter().map(|&i| decoded_frame(&frames[i])).collect();
+            let t0 = Instant::now();
+            let stars = if self.failed {
+                Err(error!(Gpu, "the GPU failed earlier"))
+            } else {
+                self.gpu
+                    .detect(&batch, &detect::params(batch[0], s))
+                    .and_then(|blobs| gpu_stars(&self.gpu, &batch, &blobs, s))
+            };
+            match stars {
+                Ok(stars) => {
+                    let ms = t0.elapsed().as_secs_f64() * 1e3 / group.len() as f64;
+                    for (&i, d) in group.iter().zip(stars) {
+                        found[i] = Some((d, ms));
+                    }
+                }
+                Err(e) => {
+                    if !self.failed {
+                        tracing::warn!("{e:#}; this batch and the rest of the run use the CPU");
+                        self.failed = true;
+                    }
+                    for &i in &group {
+                        let t0 = Instant::now();
+                        let dets = detect::detect(decoded_frame(&frames[i]), s);
+                        found[i] = Some((dets, t0.elapsed().as_secs_f64() * 1e3));
+                    }
+                }
+            }
+        }
+        let backend = self.name();
+        frames
+            .into_iter()
+            .zip(found)
+            .map(|(decoded, found)| {
+                let (detections, detect_ms) = match (&decoded.frame, found) {
+                    (Err(e), _) => (Err(e.clone()), 0.0),
+                    (Ok(_), Some((d, ms))) => (Ok(d), ms),
+                    (Ok(_), None) => unreachable!("every decoded frame is in a group"),
+                };
+                Detected {
+                    decoded,
+                    detections,
+                    detect_ms,
+                    backend: backend.clone(),
+                }
+            })
+            .collect()
+    }
+
+    /// The records' `backend` field.
+    pub fn name(&self) -> String {
+        if self.failed {
+            BACKEND_CPU.to_string()
+        } else {
+            self.gpu.backend_name()
+        }
+    }
+
+    /// Frames of one size on the GPU; on a GPU error, the CPU takes over for good.
+    pub(crate) fn solve_group(
+        &mut self,
+        solvers: &Solvers,
+        solver: &Solver,
+        group: &[(usize, Decoded)],
+    ) -> Vec<Record> {
+        let frames: Vec<&Frame> = group.iter().map(|(_, d)| decoded_frame(d)).collect();
+        let epochs: Vec<Option<f64>> = group.iter().map(|(_, d)| d.epoch).collect();
+        match self.gpu_group(solver, &frames, &epochs, solvers.streaks.as_ref()) {
+            Ok((solutions, found, detect_ms, identify_ms)) => {
+                let backend = self.gpu.backend_name();
+                let n = group.len() as f64;
+                group
+                    .iter()
+                    .zip(solutions)
+                    .zip(found)
+                    .zip(&frames)
+                    .map(|((((_, d), sol), found), frame)| {
+                        let timing = Timing {
+                            decode: d.decode_ms,
+                            detect: detect_ms / n,
+                            identify: identify_ms / n,
+                            total: d.decode_ms + (detect_ms + identify_ms) / n,
+                        };
+                        let (solver, found) = (Some(solver), found.as_deref());
+                        solvers.record(solver, d, frame, &sol, found, timing, &backend)
+                    })
+                    .collect()
+            }
+            Err(e) => {
+                tracing::warn!("{e:#}; this batch and the rest of the run use the CPU");
+                self.failed = true;
+                group
+                    .iter()
+                    .map(|(_, d)| solve_with(solvers, solver, d, decoded_frame(d)))
+                    .collect()
+            }
+        }
+    }
+
+    /// One batch on the GPU: detection (with the streak mask, when asked) in one submission,
+    /// then for each scale tried (one, unless the scale is searched) a vote of the frames not
+    /// solved yet in one submission; streak fits, verification and refinement on the CPU.
+    /// Returns the solutions, the streaks, and the batch's detection and identification times
+    /// (ms).
+    pub(crate) fn gpu_group(
+        &mut self,
+        solver: &Solver,
+        frames: &[&Frame],
+        epochs: &[Option<f64>],
+        streak_opts: Option<&StreakOptions>,
+    ) -> Result<GroupOut> {
+        let settings = &solver.settings.detect;
+        let t0 = Instant::now();
+        let p = detect::params(frames[0], settings);
+        let (blobs, found) = match streak_opts {
+            None => (self.gpu.detect(frames, &p)?, vec![None; frames.len()]),
+            Some(o) => {
+                let sp = o.settings.params(&p, settings.k_sigma);
+                let (blobs, pixels) = self.gpu.detect_streaks(frames, &p, &sp)?;
+                let mut kept = Vec::with_capacity(blobs.len());
+                let mut found = Vec::with_capacity(blobs.len());
+                for ((b, px), f) in blobs.iter().zip(&pixels).zip(frames) {
+                    let s = streaks::measure(f, &px.tiles, &px.mask, &p, &o.settings);
+                    kept.push(streaks::off_streaks(b, &s));
+                    found.push(Some(s));
+                }
+                (kept, found)
+            }
+        };
+        let detections = gpu_stars(&self.gpu, frames, &blobs, settings)?;
+        let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let t1 = Instant::now();
+        let mut outcomes: Vec<Outcome> = vec![Outcome::Unsolved("too_few_stars"); frames.len()];
+        for h in 0..solver.passes.len() {
+            let prepared: Vec<(usize, Prepared)> = detections
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
+                .filter_map(|(i, d)| solver.prepare(d, h).map(|p| (i, p)))
+                .collect();
+            if prepared.is_empty() {
+                continue;
+            }
+            let key = (
+                solver.camera.width,
+                solver.camera.height,
+                solver.passes[h].band,
+            );
+            if solver.settings.method == radial::Method::Triangle {
+                // Triangles read the distance table on the CPU: no GPU stage.
+                for (i, p) in &prepared {
+                    outcomes[*i] = solver.finish_triangle_method(&detections[*i], p, epochs[*i]);
+                }
+                continue;
+            }
+            if let Some(features) = &solver.bands[key.2].radial {
+                let table = self.radial.entry(key).or_insert_with(|| {
+                    self.gpu
+                        .upload_radial(features)
+                        .map_err(|e| format!("{e:#}"))
+                });
+                let table = match table {
+                    Ok(t) => t,
+                    Err(e) => fail!(Gpu, "{e}"),
+                };
+                let jobs: Vec<RadialJob> = prepared
+                    .iter()
+                    .map(|(_, p)| RadialJob {
+                        features: radial::image_features(&p.vectors[..p.n_vote], features),
+                        k: radial::CANDIDATES,
+                    })
+                    .collect();
+                let found = self.gpu.radial(table, &jobs)?;
+                for ((i, p), f) in prepared.iter().zip(found) {
+                    outcomes[*i] = solver.finish_radial(&detections[*i], p, &f, epochs[*i]);
+                }
+                continue;
+            }
+            if !self.tables.contains_key(&key) {
+                let band = &solver.bands[key.2];
+                let t = self
+                    .gpu
+                    .upload_table(&band.table, band.refs.len())
+                    .map_err(|e| format!("{e:#}"));
+                self.tables.insert(key, t);
+            }
+            let table = match &self.tables[&key] {
+                Ok(t) => t,
+                Err(e) => fail!(Gpu, "{e}"),
+            };
+            let jobs: Vec<VoteJob> = prepared
+                .iter()
+                .map(|(_, p)| VoteJob {
+                    ranges: p.ranges.clone(),
+                    stars: p.n_vote,
+                    k: p.k,
+                })
+                .collect();
+            let voted = self.gpu.vote(table, &jobs)?;
+            for ((i, p), v) in prepared.iter().zip(voted) {
+                outcomes[*i] = solver.finish(&detections[*i], p, &v, epochs[*i]);
+            }
+        }
+        let mut solutions: Vec<Solution> = detections
+            .into_iter()
+            .zip(outcomes)
+            .zip(epochs)
+            .map(|((detections, outcome), &epoch)| Solution {
+                detections,
+                outcome,
+                epoch,
+            })
+            .collect();
+        // The detection retry: frames that did not solve, detected again with the matched
+        // filter (on the GPU, in one submission) and identified again (the CPU twin's vote).
+        if streak_opts.is_none() && solver.detection_stages() > 1 {
+            let unsolved: Vec<usize> = (0..frames.len())
+                .filter(|&i| matches!(solutions[i].outcome, Outcome::Unsolved(_)))
+                .collect();
+            if !unsolved.is_empty() {
+                let subset: Vec<&Frame> = unsolved.iter().map(|&i| frames[i]).collect();
+                let filtered = solver.filtered_settings();
+                let blobs = self
+                    .gpu
+                    .detect(&subset, &detect::params(frames[0], &filtered))?;
+                let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
+                for (&i, d) in unsolved.iter().zip(stars) {
+                    let again = solver.identify(d, epochs[i]);
+                    if matches!(again.outcome, Outcome::Solved(..)) {
+                        solutions[i] = again;
+                    }
+                }
+            }
+        }
+        Ok((
+            solutions,
+            found,
+            detect_ms,
+            t1.elapsed().as_secs_f64() * 1e3,
+        ))
+    }
+}
+
+/// The star lists of a GPU batch's frames from their blobs, the PSF fits (`--centroid ml`) by
+/// the GPU kernel in one submission.
+pub(crate) fn gpu_stars(
+    gpu: &Gpu,
+    frames: &[&Frame],
+    blobs: &[Vec<Blob>],
+    s: &DetectSettings,
+) -> Result<Vec<Vec<Detection>>> {
+    let blobs: Vec<&[Blob]> = blobs.iter().map(|b| b.as_slice()).collect();
+    detect::stars_with(frames, &blobs, s, |w| gpu.psf_fit(w))
+}
+
+/// What a GPU batch gives: solutions, streaks (with `--streaks`), detection and
+/// identification times (ms).
+pub(crate) type GroupOut = (Vec<Solution>, Vec<Option<Vec<StreakFit>>>, f64, f64);
+
+/// The decoded frames (by index) grouped by size and saturation, in order of first
+/// appearance; frames that failed to decode are in no group.
+pub(crate) fn size_groups(frames: &[Decoded]) -> Vec<(DetectKey, Vec<usize>)> {
+    let mut groups: Vec<(DetectKey, Vec<usize>)> = Vec::new();
+    for (i, d) in frames.iter().enumerate() {
+        if let Ok(f) = &d.frame {
+            let size = (f.width, f.height, f.saturation);
+            match groups.iter_mut().find(|(s, _)| *s == size) {
+                Some((_, v)) => v.push(i),
+                None => groups.push((size, vec![i])),
+            }
+        }
+    }
+    groups
+}

@@ -1,0 +1,258 @@
+//! Scale bands (one distance table per band of focal-length factors), the passes and retries
+//! of identification, and the order detections are tried in.
+
+use super::detect::Detection;
+use super::*;
+use crate::camera::Camera;
+use crate::catalog::table::{self, PairTable, TableOrigin};
+use crate::catalog::{Catalog, RefCatalog, Selection};
+use crate::error::Result;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+/// Widest ratio of focal lengths one band of a scale search covers. A band's reference stars
+/// are those for its middle field (about [`AUTO_STARS_IN_VIEW`] in view there, from 27 to 60
+/// across a band of 1.5): one selection for a search over 5° to 40° would leave 8 in view of a
+/// 10° frame, too few to vote with. cedar-solve's 13 frames with `--fov-deg 5..40`: 9 solved
+/// with one band, 13 with bands.
+pub const BAND_RATIO: f64 = 1.5;
+
+/// The focal-length factors a scale search covers, in bands of at most [`BAND_RATIO`]
+/// (equal on a log scale), from the shortest; just (1, 1) for a known scale.
+pub fn scale_bands(range: Option<(f64, f64)>) -> Vec<(f64, f64)> {
+    let Some((lo, hi)) = range else {
+        return vec![(1.0, 1.0)];
+    };
+    let (lo, hi) = (lo.min(hi), lo.max(hi));
+    let n = ((hi / lo).ln() / BAND_RATIO.ln()).ceil().max(1.0) as i32;
+    let edge = |k: i32| lo * (hi / lo).powf(k as f64 / n as f64);
+    (0..n).map(|k| (edge(k), edge(k + 1))).collect()
+}
+
+/// The reference stars and distance table of the focal lengths `lo`..`hi` (relative to the
+/// solver's camera).
+pub struct Band {
+    pub lo: f64,
+    pub hi: f64,
+    pub refs: Arc<RefCatalog>,
+    pub table: PairTable,
+    pub table_origin: TableOrigin,
+    /// The reference stars' radial features (`--method radial`), from `table`.
+    pub radial: Option<crate::solve::radial::RadialTable>,
+    /// `refs` moved to the epochs of frames that carry their own date, by day.
+    pub(crate) epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
+}
+
+impl Band {
+    /// The stars for the field of focal-length factor `middle` (unless the settings fix the
+    /// magnitude limit), and their pairs out to the diagonal of the widest field, `lo`.
+    pub(crate) fn new(
+        catalog: &Catalog,
+        camera: &Camera,
+        settings: &Settings,
+        (lo, hi): (f64, f64),
+        middle: f64,
+        mag_limit: Option<f64>,
+    ) -> Result<Band> {
+        let middle = scaled(camera, middle);
+        let selection = Selection {
+            epoch: settings.epoch,
+            mag_limit: mag_limit
+                .or(settings.mag_limit)
+                .unwrap_or_else(|| auto_mag_limit(catalog, &middle)),
+            double_stars: settings.double_stars,
+            double_sep_rad: settings.double_star_px * middle.ifov_rad(),
+        };
+        let refs = RefCatalog::select(catalog, selection)?;
+        let (table, table_origin) = table::load_or_build(
+            &refs,
+            catalog.content_hash,
+            scaled(camera, lo).diagonal_rad(),
+            settings.table_cache,
+        );
+        let radial = (settings.method == crate::solve::radial::Method::Radial).then(|| {
+            let s = &settings.identify;
+            crate::solve::radial::RadialTable::load_or_build(
+                &refs,
+                &table,
+                table::cache_key(&refs, catalog.content_hash, table.max_sep_rad),
+                s.pair_tol_px * middle.ifov_rad(),
+                s.scale_tol,
+                settings.table_cache,
+            )
+            .0
+        });
+        Ok(Band {
+            lo,
+            hi,
+            refs: Arc::new(refs),
+            table,
+            table_origin,
+            radial,
+            epochs: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// The reference stars at a frame's own epoch (`refs` when it has none, or the same).
+    pub fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
+        let Some(e) = epoch.filter(|e| (e - self.refs.selection.epoch).abs() > SAME_EPOCH_YEARS)
+        else {
+            return self.refs.clone();
+        };
+        let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
+        let day = epoch_day(e);
+        // At the day's own epoch, not the first frame's of that day: the positions (and the
+        // records' epoch) must not depend on which frame of the day a thread reached first.
+        map.entry(day)
+            .or_insert_with(|| Arc::new(self.refs.at_epoch(day_epoch(day))))
+            .clone()
+    }
+}
+
+/// The catalog, and the selections made from it for solutions' fields.
+pub(crate) struct Deeper {
+    pub(crate) catalog: Catalog,
+    pub(crate) selections: Mutex<HashMap<SelectionKey, Option<Arc<RefCatalog>>>>,
+}
+
+/// (magnitude limit in tenths, epoch in days) of a selection; its value None = the selection
+/// failed (too many stars for 16-bit ids).
+pub(crate) type SelectionKey = (i64, i64);
+
+/// Frames dated within this many years of the run's epoch use the run's star positions
+/// (about a day: proper motions move no star by a milliarcsecond in that time).
+pub(crate) const SAME_EPOCH_YEARS: f64 = 0.003;
+
+/// The day of an epoch (Julian year): what star positions are cached by.
+pub(crate) fn epoch_day(epoch: f64) -> i64 {
+    (epoch * 365.25).round() as i64
+}
+
+/// The epoch star positions are computed at for a day (within half a day of any frame of it:
+/// proper motions move no star by a microarcsecond in that time).
+pub(crate) fn day_epoch(day: i64) -> f64 {
+    day as f64 / 365.25
+}
+
+/// Relative spacing of the focal-length factors of a scale search: each covers ±0.05 %, which
+/// the pair tolerance absorbs.
+pub const SCALE_STEP: f64 = 0.001;
+
+/// The wide retry's scale step: its pair tolerance is ten times the default's, and so is its
+/// step, which then takes the same share of a pair's range (finer, neighbouring scales would
+/// test nearly the same hypotheses again). When it came in, a frame that cannot solve took 0.57
+/// of the time: 26 s instead of 45 s with `--fov-deg 10..30`, 6.5 s instead of 11.5 s with `16..20`.
+pub const WIDE_SCALE_STEP: f64 = 0.01;
+
+/// The focal-length factors covering [lo, hi] at most `step` apart (relative), from the one
+/// nearest 1 outward.
+pub fn scale_hypotheses(lo: f64, hi: f64, step: f64) -> Vec<f64> {
+    let (lo, hi) = (lo.min(hi), lo.max(hi));
+    let n = ((hi / lo).ln() / (1.0 + step).ln()).ceil().max(0.0) as i64;
+    let mut v: Vec<f64> = (0..=n)
+        .map(|k| lo * (hi / lo).powf(if n == 0 { 0.5 } else { k as f64 / n as f64 }))
+        .collect();
+    v.sort_by(|a, b| a.ln().abs().total_cmp(&b.ln().abs()));
+    v
+}
+
+/// One way of trying a frame: a focal-length factor, the band it falls in, and what the vote
+/// is given.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pass {
+    pub scale: f64,
+    pub band: usize,
+    pub kind: PassKind,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PassKind {
+    /// The settings as given.
+    First,
+    /// Up to [`RETRY_VOTE_STARS`] stars vote (only for frames with more than `vote_stars`).
+    MoreStars,
+    /// The voters are the brightest of each cell of a grid over the frame, then the second
+    /// brightest, and so on (only for frames with more than `vote_stars`).
+    Spread,
+    /// Wide pair tolerance and match radius.
+    Wide,
+    /// The vote against a shallow selection ([`SHALLOW_STARS_IN_VIEW`] stars in view), for
+    /// frames that show few stars; the solution is then refined against the automatic one.
+    Shallow,
+}
+
+impl PassKind {
+    /// Relative spacing of this kind's focal lengths in a scale search.
+    pub(crate) fn scale_step(self) -> f64 {
+        match self {
+            PassKind::Wide => WIDE_SCALE_STEP,
+            _ => SCALE_STEP,
+        }
+    }
+}
+
+/// Voting stars of the first retry. Many false stars (satellites, debris, glints) can outshine
+/// most real ones, so that the brightest `vote_stars` hold too few stars to outvote chance:
+/// voting with more of the faint stars brings the real ones back. Not the default because the
+/// vote's cost grows with the square of its stars. From the study (`scripts/study.py`): at 40
+/// false stars per 18° frame, 50 % of frames solve with 40 voting stars, 99 % with this retry.
+pub const RETRY_VOTE_STARS: usize = 60;
+
+/// The wide retry's pair tolerance and match radius (pixels): for frames whose centroids are
+/// off by a pixel or more (blur, defocus, coarse centroiding), which the settings' tolerances
+/// (tuned for sub-pixel centroids) reject. A frame gets them only after failing with those;
+/// the false-match test counts the extra hypotheses. From the study's centroid-noise sweep:
+/// at 1.5 px noise 34 % of frames solve without the retries, 99.5 % with them (97 % with a
+/// 3 px pair tolerance).
+pub const WIDE_PAIR_TOL_PX: f64 = 4.0;
+pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
+
+/// The stages that can accept a frame, the vote and the triangle fallback, share the
+/// false-match budget (`max_false_prob`) evenly: each judges its own hypotheses against half
+/// of it, so the chance that either accepts a wrong attitude stays within the whole. A
+/// triangle is then weighed against the thousands of triangles that matched, not against the
+/// millions of pairs the vote scanned too. openstartracker's img7.png, 6 of its stars above
+/// the noise: its triangle's false-match probability is 6.8e-5 so judged, 0.052 before
+/// (3.4e-7 and 2.6e-4 with `refine::brightest_first`). The vote's path pays a factor of 2.
+pub const STAGES: u64 = 2;
+
+/// About how many cells the spread retry divides a frame into (square cells, as many as fit
+/// the frame's shape). A bright cluster of false stars (lit foliage, a roof edge, a nebula, a
+/// hot corner) can fill the brightest `vote_stars` by itself and leave too few real stars in
+/// the vote; taking the stars round the cells in turn, as astrometry.net's `uniformize` does,
+/// lets each part of the sky put its own brightest forward. cedar-solve's `tree.jpg` (tree
+/// branches lit in a third of the frame) holds 4 of its stars among its 40 brightest
+/// detections and 9 among 40 taken this way, 7 among the first 12.
+pub const SPREAD_CELLS: u32 = 16;
+
+/// The spread retry's triangle fallback forms triangles among this many of its first stars
+/// (220 triangles; [`triangle::TRIANGLE_STARS`] otherwise): the brightest star of each cell
+/// is more often a real one, and in a dense part of the sky (the Milky Way) triangles confirmed
+/// by a fourth star find what the vote's counts cannot single out.
+pub const SPREAD_TRIANGLE_STARS: usize = 12;
+
+/// The detections (brightest first) in the spread retry's order: the brightest of each of
+/// about [`SPREAD_CELLS`] square cells over a `width`×`height` frame, in brightness order,
+/// then the second brightest of each, and so on.
+pub fn spread_order(detections: &[Detection], width: u32, height: u32) -> Vec<usize> {
+    let (w, h) = (width.max(1) as f64, height.max(1) as f64);
+    let side = (w * h / SPREAD_CELLS as f64).sqrt();
+    let (nx, ny) = ((w / side).round().max(1.0), (h / side).round().max(1.0));
+    let cell = |d: &Detection| {
+        let cx = ((d.x + 0.5) / w * nx).floor().clamp(0.0, nx - 1.0);
+        let cy = ((d.y + 0.5) / h * ny).floor().clamp(0.0, ny - 1.0);
+        (cy * nx + cx) as usize
+    };
+    let mut seen = vec![0usize; (nx * ny) as usize];
+    let mut round: Vec<(usize, usize)> = detections
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let c = cell(d);
+            seen[c] += 1;
+            (seen[c] - 1, i)
+        })
+        .collect();
+    round.sort_unstable();
+    round.into_iter().map(|(_, i)| i).collect()
+}
