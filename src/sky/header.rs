@@ -2,7 +2,6 @@
 
 use super::*;
 
-
 /// Exposure start and end in UTC (shutter open and close: where a streak's ends are).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Exposure {
@@ -37,7 +36,6 @@ pub(crate) fn value(get: &dyn Fn(&str) -> Option<String>, key: &str) -> Option<S
 pub(crate) const TIME_KEYS: [&str; 4] = ["TIME-OBS", "UTSTART", "UT", "UTC"];
 /// Keywords for the exposure length, seconds, in order of preference.
 pub(crate) const LENGTH_KEYS: [&str; 3] = ["EXPTIME", "XPOSURE", "TELAPSE"];
-
 
 /// The longest exposure taken as such (EXPTIME and the like): a day.
 pub(crate) const MAX_EXPOSURE_S: f64 = 86_400.0;

@@ -15,7 +15,11 @@ pub struct Station {
 }
 
 /// A station with ranges checked and longitude brought into (-180, 180].
-pub(crate) fn checked_station(lat_deg: f64, lon_deg: f64, height_m: f64) -> Result<Station, String> {
+pub(crate) fn checked_station(
+    lat_deg: f64,
+    lon_deg: f64,
+    height_m: f64,
+) -> Result<Station, String> {
     if !(lat_deg.is_finite() && (-90.0..=90.0).contains(&lat_deg)) {
         return Err(format!("latitude {lat_deg} deg is outside -90..90"));
     }
@@ -105,8 +109,6 @@ pub(crate) fn parse_angle(s: &str, pos: char, neg: char) -> Option<f64> {
     Some(sign * value)
 }
 
-
-
 /// The station from OBSGEO-B/L/H (degrees, metres), else OBSGEO-X/Y/Z (ITRS metres, WGS-84),
 /// else SITELAT/SITELONG (degrees: numbers or sexagesimal strings) and SITEELEV (metres).
 /// Longitudes are east-positive as FITS defines them (some observatories write SITELONG
@@ -169,13 +171,15 @@ pub fn station_from_header(get: &dyn Fn(&str) -> Option<String>) -> (Option<Stat
         let xyz: Vec<Option<f64>> = keys.iter().map(|k| number(k, &mut warn)).collect();
         if let [Some(x), Some(y), Some(z)] = xyz[..] {
             match gc2gd(1, [x, y, z]) {
-                Ok((elong, phi, h)) => match checked_station(phi.to_degrees(), elong.to_degrees(), h) {
-                    Ok(s) => return (Some(s), warn),
-                    Err(e) => warn.push(format!(
-                        "OBSGEO-X/Y/Z = {x}, {y}, {z} m: {e} (kilometres instead of metres?); \
+                Ok((elong, phi, h)) => {
+                    match checked_station(phi.to_degrees(), elong.to_degrees(), h) {
+                        Ok(s) => return (Some(s), warn),
+                        Err(e) => warn.push(format!(
+                            "OBSGEO-X/Y/Z = {x}, {y}, {z} m: {e} (kilometres instead of metres?); \
                          station not used"
-                    )),
-                },
+                        )),
+                    }
+                }
                 Err(_) => warn.push(format!(
                     "OBSGEO-X/Y/Z = {x}, {y}, {z} m: no geodetic position"
                 )),

@@ -1,3 +1,6 @@
+//! Unit tests of sky/: header times in every form and scale, stations, the EOP table and
+//! Az/El against astropy. Size: about 750 lines, most of them header cases written out.
+
 use super::*;
 use std::collections::HashMap;
 

@@ -2,6 +2,9 @@
 //! (issue 22), each run through the real binary: outputs that are not gpustar's, a second
 //! writer, error records on resume, merge's checks, a stop request while a frame is stuck,
 //! implausible times, SIP orders, float sentinels. Every run here is bounded in time.
+//!
+//! Size: about 800 lines, one test per reproduction of the issue, each with the inputs it
+//! makes; they share the kill-on-growth and full-disk helpers here.
 
 use crate::common;
 
