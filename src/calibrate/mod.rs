@@ -7,6 +7,10 @@
 //! what is left to the camera is the shape of the projection: the scale (fx, fy), the
 //! distortion (k1, k2), and — through the perspective of a wide field — the principal point.
 
+mod session;
+
+pub use session::{CENTRE_SD_PX, Calibration, Step, calibrate, camera_file};
+
 use crate::camera::Camera;
 use crate::error::{Result, fail};
 use crate::solve::attitude::wahba;

@@ -1,0 +1,164 @@
+//! `gpustar calibrate`'s loop on a set of frames: solve them with the camera given, fit the
+//! camera to every solved frame's identified stars, solve again with the fitted camera (edge
+//! stars a rough camera missed come in) and fit again.
+
+use super::{Fit, FitOptions, FrameStars, Star, fit};
+use crate::camera::Camera;
+use crate::catalog::{Catalog, radec_to_vector};
+use crate::error::{Result, fail};
+use crate::pipeline::{Backend, CameraSource, Pipeline};
+use crate::record::Record;
+use crate::solve::Settings;
+use std::path::PathBuf;
+
+/// The largest 1σ (pixels) of a fitted principal point that calibration keeps.
+pub const CENTRE_SD_PX: f64 = 1.0;
+
+/// What a calibration found, and the records it was made from.
+pub struct Calibration {
+    /// The frames solved with the camera given.
+    pub before: Vec<Record>,
+    /// The first fit, to the stars of `before`: its `rms_before_px` is the camera given's.
+    pub first: Fit,
+    /// The principal point's 1σ (px) when it was too loose to fit (over [`CENTRE_SD_PX`]) and
+    /// was kept where the camera given puts it.
+    pub centre_kept_sd_px: Option<f64>,
+    /// The final fit, to the stars identified with the first fit's camera.
+    pub fit: Fit,
+    /// The frames solved with the final camera.
+    pub after: Vec<Record>,
+}
+
+/// What [`calibrate`] tells its caller as it goes (a failing fit still leaves these said).
+pub enum Step<'a> {
+    /// The frames solved with the camera given (`fitted` false) or with the final camera.
+    Solved { fitted: bool, records: &'a [Record] },
+    /// The principal point was too loose to fit (1σ in px) and is kept as given.
+    CentreKept { sd_px: f64 },
+}
+
+/// Calibrate `start` on `inputs` (path, record name): solve, fit, solve, fit, solve. With
+/// `fov_tolerance` the first solve searches focal lengths within ±that fraction.
+pub fn calibrate(
+    start: &Camera,
+    catalog: &Catalog,
+    settings: Settings,
+    inputs: &[(PathBuf, String)],
+    fov_tolerance: Option<f64>,
+    opts: FitOptions,
+    on_step: &mut dyn FnMut(Step),
+) -> Result<Calibration> {
+    if let Some(t) = fov_tolerance
+        && !(t > 0.0 && t < 0.5)
+    {
+        fail!(Config, "--fov-tolerance must be between 0 and 0.5");
+    }
+    let solve = |camera: &Camera, search: bool| -> Vec<Record> {
+        let mut s = settings;
+        if search && let Some(t) = fov_tolerance {
+            s.scale_range = Some((1.0 - t, 1.0 + t));
+        }
+        let mut p = Pipeline::new(
+            catalog.clone(),
+            s,
+            CameraSource::Fixed(camera.clone()),
+            Backend::Cpu,
+        );
+        p.process_batch(inputs)
+    };
+    let before = solve(start, true);
+    on_step(Step::Solved {
+        fitted: false,
+        records: &before,
+    });
+    // k2 only where the field is wide enough to tell it from k1 (r⁴ at the corner ≥ 1 % of
+    // r²'s reach: a half-diagonal of about 18°); the principal point only where the frames
+    // fix it to a pixel (a narrow field trades it for the attitudes).
+    let corner = (start.diagonal_rad() / 2.0).tan().powi(2);
+    let mut opts = FitOptions {
+        fit_k2: opts.fit_k2 && corner >= 0.1,
+        ..opts
+    };
+    let mut first = fit(start, &stars_of(&before), &opts)?;
+    let centre_sd = first
+        .fitted
+        .iter()
+        .zip(&first.sigmas)
+        .filter(|(n, _)| **n == "cx" || **n == "cy")
+        .map(|(_, sd)| *sd)
+        .fold(0.0, f64::max);
+    let mut centre_kept_sd_px = None;
+    if centre_sd > CENTRE_SD_PX {
+        centre_kept_sd_px = Some(centre_sd);
+        on_step(Step::CentreKept { sd_px: centre_sd });
+        opts.fit_principal_point = false;
+        first = fit(start, &stars_of(&before), &opts)?;
+    }
+    let again = solve(&first.camera, false);
+    let fitted = fit(&first.camera, &stars_of(&again), &opts)?;
+    let after = solve(&fitted.camera, false);
+    on_step(Step::Solved {
+        fitted: true,
+        records: &after,
+    });
+    Ok(Calibration {
+        before,
+        first,
+        centre_kept_sd_px,
+        fit: fitted,
+        after,
+    })
+}
+
+/// Each solved frame's identified stars, with its attitude.
+fn stars_of(records: &[Record]) -> Vec<FrameStars> {
+    records
+        .iter()
+        .filter_map(|r| {
+            let m = r.rotation_matrix?;
+            let stars = r
+                .matches
+                .as_ref()?
+                .iter()
+                .map(|m| Star {
+                    x: m.x,
+                    y: m.y,
+                    v: radec_to_vector(m.ra_deg, m.dec_deg),
+                })
+                .collect();
+            Some(FrameStars {
+                name: r.file.clone(),
+                r: nalgebra::Matrix3::from_fn(|i, j| m[i][j]),
+                stars,
+            })
+        })
+        .collect()
+}
+
+/// The camera file of a fit (the TOML `Camera::from_toml_file` reads), with a comment line
+/// saying where it came from.
+pub fn camera_file(fit: &Fit, source: &str, mag_limit: Option<f64>) -> String {
+    let k = &fit.camera;
+    let mut text = format!(
+        "# written by gpustar calibrate from {} solved frames of {} ({} stars; rms {:.3} px)\n\
+         width = {}\nheight = {}\nfx_px = {}\nfy_px = {}\ncx_px = {}\ncy_px = {}\nk1 = {}\n\
+         k2 = {}\nmirrored = {}\n",
+        fit.rotations.len(),
+        source,
+        fit.stars_used,
+        fit.rms_after_px,
+        k.width,
+        k.height,
+        k.fx,
+        k.fy,
+        k.cx,
+        k.cy,
+        k.k1,
+        k.k2,
+        k.mirrored
+    );
+    if let Some(m) = mag_limit {
+        text.push_str(&format!("mag_limit = {m}\n"));
+    }
+    text
+}
