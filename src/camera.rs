@@ -2,7 +2,7 @@
 //! (conventions of spec/INTERFACE.md: x = column, y = row, (0,0) = centre of the top-left
 //! pixel; camera +X = increasing column, +Y = increasing row, +Z = boresight).
 
-use crate::error::{AsKind, Context, Error, Result, fail};
+use crate::error::{Context, Error, IntoKind, Result, fail};
 use nalgebra::Vector3;
 use serde::Deserialize;
 use std::path::Path;
@@ -82,7 +82,7 @@ impl Camera {
     }
 
     pub fn from_toml(text: &str) -> Result<(Camera, Option<f64>)> {
-        let f: CameraFile = toml::from_str(text).as_kind(Error::Config)?;
+        let f: CameraFile = toml::from_str(text).into_kind(Error::Config)?;
         let mut cam = match (f.fov_x_deg, f.fx_px) {
             (Some(fov), None) => Camera::from_fov(f.width, f.height, fov)?,
             (None, Some(fx)) if fx > 0.0 => {

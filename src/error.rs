@@ -121,13 +121,13 @@ impl<T> Context<T> for Result<T> {
     }
 }
 
-/// A foreign error (a parser's, a decoder's) as one of ours: `toml::from_str(t).as_kind(Error::Config)`.
-pub(crate) trait AsKind<T> {
-    fn as_kind(self, kind: fn(String) -> Error) -> Result<T>;
+/// A foreign error (a parser's, a decoder's) as one of ours: `toml::from_str(t).into_kind(Error::Config)`.
+pub(crate) trait IntoKind<T> {
+    fn into_kind(self, kind: fn(String) -> Error) -> Result<T>;
 }
 
-impl<T, E: std::error::Error> AsKind<T> for std::result::Result<T, E> {
-    fn as_kind(self, kind: fn(String) -> Error) -> Result<T> {
+impl<T, E: std::error::Error> IntoKind<T> for std::result::Result<T, E> {
+    fn into_kind(self, kind: fn(String) -> Error) -> Result<T> {
         self.map_err(|e| kind(chain(&e)))
     }
 }

@@ -1,7 +1,7 @@
 //! The result record: one JSON object per input file (spec/INTERFACE.md). Scripts parse these;
 //! fields are only ever added.
 
-use crate::error::{AsKind, Context, Error, Result, fail};
+use crate::error::{Context, Error, IntoKind, Result, fail};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -238,7 +238,7 @@ pub fn read_jsonl<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Re
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(n, l)| {
             serde_json::from_str(l)
-                .as_kind(Error::Input)
+                .into_kind(Error::Input)
                 .with_context(|| format!("{}: line {}: not a {what}", path.display(), n + 1))
         })
         .collect()

@@ -1,6 +1,6 @@
 //! `gpustar catalog import`: make the shipped catalog from Hipparcos-2 (`hip2.dat`, CDS I/311).
 
-use crate::error::{AsKind, Context, Error, Result, fail};
+use crate::error::{Context, Error, IntoKind, Result, fail};
 use std::fmt::Write as _;
 
 /// Convert the whitespace-separated `hip2.dat` of I/311 into gpustar's catalog CSV, keeping
@@ -24,14 +24,14 @@ pub fn import_hip2(text: &str, max_mag: f64) -> Result<String> {
         }
         let mag: f64 = f[19]
             .parse()
-            .as_kind(Error::Catalog)
+            .into_kind(Error::Catalog)
             .with_context(|| format!("hip2.dat line {}: bad Hpmag {:?}", n + 1, f[19]))?;
         if mag > max_mag {
             continue;
         }
         for i in [0, 4, 5, 7, 8] {
             f[i].parse::<f64>()
-                .as_kind(Error::Catalog)
+                .into_kind(Error::Catalog)
                 .with_context(|| format!("hip2.dat line {}: bad number {:?}", n + 1, f[i]))?;
         }
         rows.push([f[0], f[4], f[5], f[7], f[8], f[19]].join(","));

@@ -9,7 +9,7 @@ pub mod table;
 
 pub use import::import_hip2;
 
-use crate::error::{AsKind, Context, Error, Result, fail};
+use crate::error::{Context, Error, IntoKind, Result, fail};
 use nalgebra::Vector3;
 use std::path::Path;
 
@@ -120,13 +120,13 @@ impl Catalog {
             }
             let num = |i: usize| -> Result<f64> {
                 f[i].parse::<f64>()
-                    .as_kind(Error::Catalog)
+                    .into_kind(Error::Catalog)
                     .with_context(|| format!("{source}: line {}: bad number {:?}", n + 1, f[i]))
             };
             stars.push(Star {
                 hip: f[0]
                     .parse::<u32>()
-                    .as_kind(Error::Catalog)
+                    .into_kind(Error::Catalog)
                     .with_context(|| format!("{source}: line {}: bad HIP {:?}", n + 1, f[0]))?,
                 ra_rad: num(1)?,
                 dec_rad: num(2)?,

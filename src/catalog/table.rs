@@ -7,7 +7,7 @@
 //! compares keys, never angles (see STYLE.md: f32 trig is off by arcseconds).
 
 use crate::catalog::RefCatalog;
-use crate::error::{AsKind, Context, Error, Result, fail};
+use crate::error::{Context, Error, IntoKind, Result, fail};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -362,9 +362,9 @@ fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<P
         keys: words[..rows].to_vec(),
         pairs: words[rows..2 * rows].to_vec(),
         kvector: words[2 * rows..].to_vec(),
-        shift: u32::try_from(head[2]).as_kind(Error::Catalog)?,
+        shift: u32::try_from(head[2]).into_kind(Error::Catalog)?,
         max_sep_rad,
-        max_key: u32::try_from(head[3]).as_kind(Error::Catalog)?,
+        max_key: u32::try_from(head[3]).into_kind(Error::Catalog)?,
     };
     if t.max_key != chord_key(chord_of_angle(max_sep_rad))
         || t.shift != kvector_shift(t.max_key, rows)

@@ -14,8 +14,8 @@ pub(crate) fn evaluate_cmd(
     id_tolerance_px: f64,
     per_frame: bool,
 ) -> Result<ExitCode> {
-    let truth = gpustar::simulate::read_truth(&truth)?;
-    let records = output::read_records(&results)?;
+    let truth = gpustar::simulate::read_truth(truth)?;
+    let records = output::read_records(results)?;
     let (s, frames) =
         gpustar::simulate::evaluate::evaluate(&truth, &records, tolerance_deg, id_tolerance_px);
     let mut text = String::new();

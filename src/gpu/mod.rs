@@ -11,7 +11,7 @@ pub mod psf_fit;
 pub mod radial;
 pub mod vote;
 
-use crate::error::{AsKind, Context, Error, Result, error, fail};
+use crate::error::{Context, Error, IntoKind, Result, error, fail};
 use std::cell::Cell;
 use std::sync::Arc;
 
@@ -243,7 +243,7 @@ impl Gpu {
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
         }))
-        .as_kind(Error::Gpu)
+        .into_kind(Error::Gpu)
         .with_context(|| format!("cannot open the GPU device {}", info.name))?;
         // Errors outside an error scope are logged, not raised as panics.
         device.on_uncaptured_error(Arc::new(|e| eprintln!("gpustar: GPU error: {e}")));

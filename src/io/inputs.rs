@@ -1,7 +1,7 @@
 //! The inputs of a run: the image files of a directory in a sorted, stable order, and the
 //! shard of them a process takes.
 
-use crate::error::{AsKind, Context, Error, Result, fail};
+use crate::error::{Context, Error, IntoKind, Result, fail};
 use crate::io::frame::is_image_path;
 use std::path::{Path, PathBuf};
 
@@ -82,7 +82,7 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
             let rel = entry
                 .path()
                 .strip_prefix(dir)
-                .as_kind(Error::Input)
+                .into_kind(Error::Input)
                 .context("walked outside the directory")?;
             out.push(Input {
                 path: entry.path().to_path_buf(),

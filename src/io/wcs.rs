@@ -152,9 +152,9 @@ pub fn write_wcs_file(path: &Path, camera: &Camera, r: &Matrix3<f64>) -> Result<
     let cards = wcs_header(camera, r);
     // A distortion that folds over within the image has no inverse to fit (the fit error
     // comment then says NaN).
-    if !(!cards
+    if cards
         .iter()
-        .any(|c| c.contains("NaN") || (&c[8..10] == "= " && c[10..30].contains("inf"))))
+        .any(|c| c.contains("NaN") || (&c[8..10] == "= " && c[10..30].contains("inf")))
     {
         fail!(
             Config,

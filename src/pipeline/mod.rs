@@ -398,7 +398,7 @@ impl Backend {
 }
 
 /// A single-threaded pipeline: decode the files in turn, then solve them as one batch on the
-/// backend given. [`crate::batch::run`] streams large runs over threads (the `batch` and
+/// backend given. `batch::run` streams large runs over threads (the `batch` and
 /// `solve` commands go through it); this serves `calibrate`, tests and library users:
 ///
 /// ```no_run

@@ -19,7 +19,7 @@
 
 use std::path::Path;
 
-use crate::error::{AsKind, Context, Error, fail};
+use crate::error::{Context, Error, IntoKind, fail};
 use image::{Rgb, RgbImage};
 
 /// A position on the frame: `(x, y)` = (column, row), `(0, 0)` = centre of the
@@ -175,7 +175,7 @@ pub fn write_png(path: &Path, a: &Annotation) -> crate::error::Result<()> {
     }
     render(a)
         .save_with_format(path, image::ImageFormat::Png)
-        .as_kind(Error::Output)
+        .into_kind(Error::Output)
         .with_context(|| format!("writing annotated PNG {}", path.display()))
 }
 

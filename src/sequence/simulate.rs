@@ -8,7 +8,7 @@
 //! the frame is replaced by a new one at a random place. Smear during the exposure is not drawn.
 
 use crate::catalog::Catalog;
-use crate::error::{AsKind, Context, Error, Result, error};
+use crate::error::{Context, Error, IntoKind, Result, error};
 use crate::simulate::{SimSettings, Spot, Truth, random_rotation, render_with};
 use crate::sky::Utc;
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -286,7 +286,7 @@ pub fn write_set(
         writeln!(
             truth_file,
             "{}",
-            serde_json::to_string(&truth).as_kind(Error::Output)?
+            serde_json::to_string(&truth).into_kind(Error::Output)?
         )?;
     }
     truth_file.flush()?;

@@ -8,7 +8,7 @@ pub mod evaluate;
 
 use crate::camera::Camera;
 use crate::catalog::Catalog;
-use crate::error::{AsKind, Context, Error, Result, fail};
+use crate::error::{Context, Error, IntoKind, Result, fail};
 use crate::solve::attitude::{pointing, quaternion};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -204,7 +204,7 @@ pub fn render_with(
     let noise = (s.centroid_noise_px > 0.0)
         .then(|| Normal::new(0.0, s.centroid_noise_px))
         .transpose()
-        .as_kind(Error::Config)
+        .into_kind(Error::Config)
         .context("centroid noise")?;
     let mut signal = vec![0f64; (w * h) as usize];
     let mut stars = Vec::new();
@@ -261,7 +261,7 @@ pub fn render_with(
     }
     let full = if s.bits == 8 { 255.0 } else { 65535.0 };
     let read = Normal::new(0.0, s.read_noise_e)
-        .as_kind(Error::Config)
+        .into_kind(Error::Config)
         .context("read noise")?;
     let mut pixels = vec![0u16; (w * h) as usize];
     for y in 0..h {
@@ -362,7 +362,7 @@ pub fn write_set(
         writeln!(
             truth_file,
             "{}",
-            serde_json::to_string(truth).as_kind(Error::Output)?
+            serde_json::to_string(truth).into_kind(Error::Output)?
         )?;
     }
     truth_file.flush()?;
@@ -395,12 +395,12 @@ fn write_png(path: &Path, width: u32, height: u32, pixels: &[u16], bits: u8) -> 
         let buf: Vec<u8> = pixels.iter().map(|&p| p as u8).collect();
         encoder
             .write_image(&buf, width, height, image::ExtendedColorType::L8)
-            .as_kind(Error::Output)?;
+            .into_kind(Error::Output)?;
     } else {
         let buf: Vec<u8> = pixels.iter().flat_map(|p| p.to_ne_bytes()).collect();
         encoder
             .write_image(&buf, width, height, image::ExtendedColorType::L16)
-            .as_kind(Error::Output)?;
+            .into_kind(Error::Output)?;
     }
     Ok(())
 }

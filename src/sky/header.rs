@@ -21,16 +21,12 @@ impl Exposure {
     }
 }
 
-/// An observing station: geodetic WGS-84 latitude and east-positive longitude (degrees) and
-
 /// A header keyword's value, None when absent or blank.
 pub(crate) fn value(get: &dyn Fn(&str) -> Option<String>, key: &str) -> Option<String> {
     get(key)
         .map(|v| v.trim().to_string())
         .filter(|v| !v.is_empty())
 }
-
-/// A time scale the header's times may be in (`TIMESYS`).
 
 /// Keywords that may hold the time of day when DATE-OBS is a date alone.
 pub(crate) const TIME_KEYS: [&str; 4] = ["TIME-OBS", "UTSTART", "UT", "UTC"];

@@ -6,6 +6,7 @@ use sofars::coords::gc2gd;
 /// Station heights accepted, metres: below the Dead Sea shore to airborne.
 pub(crate) const HEIGHT_RANGE_M: (f64, f64) = (-1_000.0, 20_000.0);
 
+/// An observing station: geodetic WGS-84 latitude and east-positive longitude (degrees) and
 /// height above the ellipsoid (metres).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Station {

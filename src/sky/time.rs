@@ -50,6 +50,13 @@ impl Utc {
         }
     }
 
+    /// The calendar fields of [`Utc::iso`]: (year, month, day, [hour, minute, second,
+    /// millisecond]), rounded to the millisecond by the same SOFA d2dtf call (second 60 in a
+    /// leap second); `None` where SOFA cannot convert the date.
+    pub fn calendar_ms(&self) -> Option<(i32, i32, i32, [i32; 4])> {
+        ts::d2dtf("UTC", 3, self.jd1, self.jd2).ok()
+    }
+
     /// The instant `s` SI seconds later (or earlier, when negative), counted through TAI so
     /// that a leap second in between is one second like any other.
     pub fn add_seconds(&self, s: f64) -> Utc {
@@ -149,6 +156,7 @@ pub fn now_utc_iso() -> String {
     .iso()
 }
 
+/// A time scale the header's times may be in (`TIMESYS`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Scale {
     Utc,
@@ -277,7 +285,6 @@ pub(crate) fn parse_hms(s: &str) -> Result<Hms, String> {
     };
     Ok((h, m, sec))
 }
-
 
 /// Plausible observation dates, MJD: 1960-01-01 (UTC begins) to 2100-01-01.
 const MJD_PLAUSIBLE: (f64, f64) = (36_934.0, 88_069.0);

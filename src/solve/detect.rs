@@ -155,7 +155,7 @@ pub fn stars_with(
         }
     }
     let fits = fit(&windows)?;
-    if !(fits.len() == windows.len()) {
+    if fits.len() != windows.len() {
         fail!(Gpu, "one PSF fit per window");
     }
     for ((f, k), fit) in at.into_iter().zip(fits) {

@@ -9,7 +9,7 @@
 //! star frame's noise is already in its pixels; the sum of Poisson counts is Poisson).
 
 use crate::catalog::Catalog;
-use crate::error::{AsKind, Context, Error, Result, fail};
+use crate::error::{Context, Error, IntoKind, Result, fail};
 use crate::simulate::{SimSettings, Truth, render};
 use crate::sky::{Station, Utc};
 use rand::{Rng, SeedableRng};
@@ -223,7 +223,7 @@ pub fn write_set(catalog: &Catalog, s: &SimSettings, st: &StreakSim, out: &Path)
         writeln!(
             truth_file,
             "{}",
-            serde_json::to_string(&truth).as_kind(Error::Output)?
+            serde_json::to_string(&truth).into_kind(Error::Output)?
         )?;
     }
     truth_file.flush()?;

@@ -19,6 +19,7 @@ mod dark;
 mod end_to_end;
 mod faults;
 mod fits;
+mod formats;
 mod gpu_pipeline;
 mod layout;
 mod noise;

@@ -4,10 +4,10 @@
 
 use crate::common;
 
+use common::formats::{parse_iod_line, parse_tdm};
 use common::{gpustar, run_records};
 use gpustar::camera::Camera;
 use gpustar::io::frame::Frame;
-use gpustar::streaks::formats::{parse_iod_line, parse_tdm};
 use nalgebra::Matrix3;
 use serde_json::Value;
 use std::path::{Path, PathBuf};

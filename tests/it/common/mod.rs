@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod formats;
+
 use std::path::PathBuf;
 
 /// `../shared` beside the project (real frames, Hipparcos-2), if present. A user's clone has
