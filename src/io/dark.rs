@@ -50,7 +50,13 @@ impl Darks {
 
     /// The frame of `path` with the dark subtracted, or why that cannot be done (a person can
     /// act on the message: wrong dark size, too few frames for a median).
-    pub fn apply(&self, path: &Path, frame: Frame) -> Result<Frame, String> {
+    pub fn apply(&self, path: &Path, frame: Frame) -> crate::Result<Frame> {
+        self.subtract(path, frame).map_err(crate::Error::Input)
+    }
+
+    /// [`Darks::apply`], its message as text (a directory's failed median is shared by its
+    /// frames).
+    fn subtract(&self, path: &Path, frame: Frame) -> Result<Frame, String> {
         match self {
             Darks::None => Ok(frame),
             Darks::File { path: dp, frame: d } => {

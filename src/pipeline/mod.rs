@@ -53,7 +53,8 @@ pub const MIN_SIDE: u32 = 16;
 /// The `backend` field of records made on the CPU.
 pub const BACKEND_CPU: &str = "cpu";
 
-/// A frame size's solver, or why it could not be built.
+/// A frame size's solver, or why it could not be built: the message every record of that size
+/// carries (shared between threads, so text rather than an [`crate::Error`]).
 pub type SharedSolver = Arc<std::result::Result<Solver, String>>;
 
 /// Frames of one size and bit depth (they share the detection parameters), with their
@@ -99,6 +100,7 @@ pub struct Decoded {
     pub keywords: std::collections::BTreeMap<String, String>,
     /// Warnings from reading the file, for its record.
     pub warnings: Vec<String>,
+    /// The decoded frame, or the message its error record carries.
     pub frame: std::result::Result<Frame, String>,
     pub decode_ms: f64,
 }
@@ -131,7 +133,7 @@ impl Solvers {
             _ => None,
         };
         let (frame, info) = match Frame::read_info_sized(path, expect) {
-            Ok((f, info)) => (self.darks.apply(path, f), info),
+            Ok((f, info)) => (self.darks.apply(path, f).map_err(|e| e.to_string()), info),
             Err(e) => (Err(format!("{e:#}")), Default::default()),
         };
         Decoded {

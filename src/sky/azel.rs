@@ -16,20 +16,23 @@ pub fn az_el(
     dut1_s: f64,
     xp_rad: f64,
     yp_rad: f64,
-) -> Result<(f64, f64), String> {
+) -> crate::Result<(f64, f64)> {
     if !(ra_deg.is_finite() && dec_deg.is_finite() && (-90.0..=90.0).contains(&dec_deg)) {
-        return Err(format!(
+        return Err(crate::Error::Input(format!(
             "no such direction: RA {ra_deg} deg, Dec {dec_deg} deg"
-        ));
+        )));
     }
     let Station {
         lat_deg,
         lon_deg,
         height_m,
     } = *station;
-    checked_station(lat_deg, lon_deg, height_m).map_err(|e| format!("station: {e}"))?;
+    checked_station(lat_deg, lon_deg, height_m)
+        .map_err(|e| crate::Error::Input(format!("station: {e}")))?;
     if dut1_s.is_nan() || dut1_s.abs() >= 1.0 {
-        return Err(format!("UT1-UTC {dut1_s} s is not within +-1 s"));
+        return Err(crate::Error::Input(format!(
+            "UT1-UTC {dut1_s} s is not within +-1 s"
+        )));
     }
     // Polar motion stays below 1 arcsec; larger values are arcsec passed as radians.
     let pm_limit = 1e-4;
@@ -37,9 +40,9 @@ pub fn az_el(
         .iter()
         .any(|p| p.is_nan() || p.abs() >= pm_limit)
     {
-        return Err(format!(
+        return Err(crate::Error::Input(format!(
             "polar motion ({xp_rad}, {yp_rad}) rad is not below {pm_limit} rad"
-        ));
+        )));
     }
     let (aob, zob, ..) = atco13(
         ra_deg.to_radians(),
@@ -61,7 +64,12 @@ pub fn az_el(
         0.0,
         0.55,
     )
-    .map_err(|code| format!("SOFA atco13 failed (status {code}) for {}", t.iso()))?;
+    .map_err(|code| {
+        crate::Error::Input(format!(
+            "SOFA atco13 failed (status {code}) for {}",
+            t.iso()
+        ))
+    })?;
     let az = aob.to_degrees().rem_euclid(360.0);
     let az = if az >= 360.0 { 0.0 } else { az };
     Ok((az, 90.0 - zob.to_degrees()))

@@ -83,7 +83,7 @@ impl Reader<'_> {
             let Some(v) = value(self.get, key) else {
                 continue;
             };
-            match parse_hms(v.strip_suffix('Z').unwrap_or(&v)) {
+            match parse_hms(v.strip_suffix('Z').unwrap_or(&v), false) {
                 Ok(hms) => return Some((hms, format!("DATE-OBS = '{date}' + {key} = '{v}'"))),
                 Err(e) => self.warn.push(format!("{key} = '{v}': {e}; not used")),
             }
@@ -100,7 +100,7 @@ impl Reader<'_> {
         let Some(v) = value(self.get, "TIME-OBS") else {
             return;
         };
-        let Ok((h, m, s)) = parse_hms(v.strip_suffix('Z').unwrap_or(&v)) else {
+        let Ok((h, m, s)) = parse_hms(v.strip_suffix('Z').unwrap_or(&v), false) else {
             return;
         };
         let secs = |h: i32, m: i32, s: f64| f64::from(h * 3600 + m * 60) + s;

@@ -47,20 +47,20 @@ pub(crate) fn checked_station(
 
 /// `--station LAT,LON,HEIGHT_M`: geodetic degrees (decimal, or sexagesimal such as 35:42:00),
 /// east longitude positive, metres above the WGS-84 ellipsoid; checks ranges.
-pub fn parse_station(s: &str) -> Result<Station, String> {
+pub fn parse_station(s: &str) -> crate::Result<Station> {
     let usage = || format!("--station expects LAT,LON,HEIGHT_M (degrees east, metres), got '{s}'");
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     let [lat, lon, h] = parts[..] else {
-        return Err(usage());
+        return Err(crate::Error::Config(usage()));
     };
     let (Some(lat), Some(lon), Some(h)) = (
         parse_angle(lat, 'N', 'S'),
         parse_angle(lon, 'E', 'W'),
         parse_number(h),
     ) else {
-        return Err(usage());
+        return Err(crate::Error::Config(usage()));
     };
-    checked_station(lat, lon, h).map_err(|e| format!("--station '{s}': {e}"))
+    checked_station(lat, lon, h).map_err(|e| crate::Error::Config(format!("--station '{s}': {e}")))
 }
 
 /// A FITS number ("30", "3.0E1", Fortran "3.0D1"); None unless finite.

@@ -21,21 +21,14 @@ pub struct Utc {
 
 impl Utc {
     /// A UTC calendar instant; `sec` may reach 60.999... only in a leap second. Via SOFA dtf2d.
-    pub fn from_calendar(
-        y: i32,
-        mo: i32,
-        d: i32,
-        h: i32,
-        mi: i32,
-        sec: f64,
-    ) -> Result<Utc, String> {
-        let (jd1, jd2) = calendar_jd("UTC", y, mo, d, h, mi, sec)?;
+    pub fn from_calendar(y: i32, mo: i32, d: i32, h: i32, mi: i32, sec: f64) -> crate::Result<Utc> {
+        let (jd1, jd2) = calendar_jd("UTC", y, mo, d, h, mi, sec).map_err(crate::Error::Input)?;
         Ok(Utc { jd1, jd2 })
     }
 
     /// An ISO 8601 UTC time, "YYYY-MM-DDThh:mm:ss[.fff]" (a date alone is 0h).
-    pub fn parse(s: &str) -> Result<Utc, String> {
-        let ((y, mo, d), hms) = parse_iso(s.trim())?;
+    pub fn parse(s: &str) -> crate::Result<Utc> {
+        let ((y, mo, d), hms) = parse_iso(s.trim()).map_err(crate::Error::Input)?;
         let (h, mi, sec) = hms.unwrap_or((0, 0, 0.0));
         Utc::from_calendar(y, mo, d, h, mi, sec)
     }
@@ -218,8 +211,16 @@ pub(crate) type Ymd = (i32, i32, i32);
 /// A time of day: hour, minute, seconds.
 pub(crate) type Hms = (i32, i32, f64);
 
-/// "YYYY-MM-DD" with an optional "Thh:mm:ss[.fff]" (or a space for the T) and trailing 'Z'.
+/// "YYYY-MM-DD" with an optional "Thh:mm:ss[.fff]" (or a space for the T) and trailing 'Z': the
+/// one ISO 8601 parser. Seconds are required: FITS writes them, and an exposure time to the
+/// minute would put a streak's ends 30 s out.
 pub(crate) fn parse_iso(s: &str) -> Result<(Ymd, Option<Hms>), String> {
+    parse_iso_as(s, false)
+}
+
+/// [`parse_iso`], with `minute_ok` also taking "Thh:mm" as the start of that minute (for the
+/// epoch of proper motion, which a minute does not move).
+fn parse_iso_as(s: &str, minute_ok: bool) -> Result<(Ymd, Option<Hms>), String> {
     let (date, time) = match s.find(['T', ' ']) {
         Some(i) => (&s[..i], Some(s[i + 1..].trim())),
         None => (s, None),
@@ -250,13 +251,16 @@ pub(crate) fn parse_iso(s: &str) -> Result<(Ymd, Option<Hms>), String> {
     let ymd = (num(&date[..4]), num(&date[5..7]), num(&date[8..]));
     match time {
         None => Ok((ymd, None)),
-        Some(t) => Ok((ymd, Some(parse_hms(t.strip_suffix('Z').unwrap_or(t))?))),
+        Some(t) => Ok((
+            ymd,
+            Some(parse_hms(t.strip_suffix('Z').unwrap_or(t), minute_ok)?),
+        )),
     }
 }
 
-/// "hh:mm:ss[.fff]" or "hh:mm" (two digits each).
-pub(crate) fn parse_hms(s: &str) -> Result<Hms, String> {
-    let bad = || format!("'{s}' is not a hh:mm[:ss[.fff]] time");
+/// "hh:mm:ss[.fff]" (two digits each), or with `minute_ok` also "hh:mm".
+pub(crate) fn parse_hms(s: &str, minute_ok: bool) -> Result<Hms, String> {
+    let bad = || format!("'{s}' is not a hh:mm:ss[.fff] time");
     let b = s.as_bytes();
     let two = |i: usize| {
         b.get(i..i + 2)
@@ -264,7 +268,8 @@ pub(crate) fn parse_hms(s: &str) -> Result<Hms, String> {
             .map(|p| i32::from(p[0] - b'0') * 10 + i32::from(p[1] - b'0'))
     };
     // "hh:mm" alone: the start of that minute.
-    if let (5, Some(h), Some(b':'), Some(m)) = (b.len(), two(0), b.get(2), two(3)) {
+    if let (true, 5, Some(h), Some(b':'), Some(m)) = (minute_ok, b.len(), two(0), b.get(2), two(3))
+    {
         return Ok((h, m, 0.0));
     }
     let (Some(h), Some(m), Some(_)) = (two(0), two(3), two(6)) else {
@@ -302,7 +307,7 @@ pub fn plausible_mjd(mjd: f64) -> bool {
 /// precision).
 pub fn julian_year(date_obs: &str) -> Option<f64> {
     let s = date_obs.trim();
-    let ((year, month, day), time) = parse_iso(s.strip_suffix('Z').unwrap_or(s)).ok()?;
+    let ((year, month, day), time) = parse_iso_as(s.strip_suffix('Z').unwrap_or(s), true).ok()?;
     // SOFA checks the calendar date; its MJD at 0h gives the Julian day number.
     let (djm0, djm) = cal2jd(year, month, day).ok()?;
     let jdn = (djm0 + djm + 0.5) as i64;

@@ -122,7 +122,6 @@ impl Exports {
         let mut said = Vec::new();
         if let Some(p) = &self.tdm {
             let text = formats::tdm_text(created_utc, "GPUSTAR", &self.tracks)
-                .map_err(crate::error::Error::Output)
                 .with_context(|| format!("cannot write {}", p.display()))?;
             crate::io::output::write_atomically(p, text.as_bytes())?;
             said.push(format!(

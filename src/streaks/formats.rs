@@ -176,6 +176,15 @@ pub fn tdm_text(
     creation_date_utc: &str,
     originator: &str,
     tracks: &[Track],
+) -> crate::Result<String> {
+    tdm_checked(creation_date_utc, originator, tracks).map_err(crate::Error::Output)
+}
+
+/// [`tdm_text`], its message as text.
+fn tdm_checked(
+    creation_date_utc: &str,
+    originator: &str,
+    tracks: &[Track],
 ) -> Result<String, String> {
     let (created, _) = utc_ms(creation_date_utc).map_err(|e| format!("CREATION_DATE: {e}"))?;
     let originator = kvn_value(originator, "ORIGINATOR")?;
@@ -283,10 +292,9 @@ pub fn write_tdm(
     creation_date_utc: &str,
     originator: &str,
     tracks: &[Track],
-) -> io::Result<()> {
-    let text = tdm_text(creation_date_utc, originator, tracks)
-        .map_err(|e| io::Error::new(io::ErrorKind::InvalidInput, e))?;
-    out.write_all(text.as_bytes())
+) -> crate::Result<()> {
+    let text = tdm_text(creation_date_utc, originator, tracks)?;
+    Ok(out.write_all(text.as_bytes())?)
 }
 
 // ------------------------------------------------------------------------------------
@@ -390,15 +398,18 @@ pub fn iod_like(text: &str) -> bool {
 /// NORAD > 99999, station > 9999, a designation over 9 characters or not ASCII, a bad
 /// time, Dec outside [-90, 90], an uncertainty that is negative or above the format's
 /// largest code (90 s; 90′).
-pub fn iod_line(o: &IodObs) -> Result<String, String> {
+pub fn iod_line(o: &IodObs) -> crate::Result<String> {
     if o.norad > 99_999 {
-        return Err(format!(
+        return Err(crate::Error::Output(format!(
             "NORAD number {} does not fit IOD's 5 digits",
             o.norad
-        ));
+        )));
     }
     if o.station > 9999 {
-        return Err(format!("station {} does not fit IOD's 4 digits", o.station));
+        return Err(crate::Error::Output(format!(
+            "station {} does not fit IOD's 4 digits",
+            o.station
+        )));
     }
     if o.intl_des.len() > 9
         || !o
@@ -406,38 +417,46 @@ pub fn iod_line(o: &IodObs) -> Result<String, String> {
             .bytes()
             .all(|c| c == b' ' || c.is_ascii_graphic())
     {
-        return Err(format!(
+        return Err(crate::Error::Output(format!(
             "international designation '{}' must be at most 9 ASCII characters (YY NNNPPP)",
             o.intl_des.escape_default()
-        ));
+        )));
     }
-    let status = check_code(o.status, "station status")?;
-    let behaviour = check_code(o.behaviour, "optical behaviour code")?;
-    let (_, (year, month, day, [hour, minute, second, milli])) = utc_ms(&o.time_utc)?;
+    let status = check_code(o.status, "station status").map_err(crate::Error::Output)?;
+    let behaviour =
+        check_code(o.behaviour, "optical behaviour code").map_err(crate::Error::Output)?;
+    let (_, (year, month, day, [hour, minute, second, milli])) =
+        utc_ms(&o.time_utc).map_err(crate::Error::Output)?;
     if !o.ra_deg.is_finite() {
-        return Err(format!("RA {} is not a number", o.ra_deg));
+        return Err(crate::Error::Output(format!(
+            "RA {} is not a number",
+            o.ra_deg
+        )));
     }
     if !(-90.0..=90.0).contains(&o.dec_deg) {
-        return Err(format!("Dec {} is not in [-90, 90]", o.dec_deg));
+        return Err(crate::Error::Output(format!(
+            "Dec {} is not in [-90, 90]",
+            o.dec_deg
+        )));
     }
     let time_mx = if o.time_unc_s.is_nan() {
         "  ".to_string()
     } else {
         mx_encode(o.time_unc_s).ok_or_else(|| {
-            format!(
+            crate::Error::Output(format!(
                 "time uncertainty {} s is not in [0, 90], the range of IOD's MX code",
                 o.time_unc_s
-            )
+            ))
         })?
     };
     let pos_mx = if o.pos_unc_deg.is_nan() {
         "  ".to_string()
     } else {
         mx_encode(o.pos_unc_deg * 60.0).ok_or_else(|| {
-            format!(
+            crate::Error::Output(format!(
                 "position uncertainty {}° is not in [0, 1.5°] (90′, IOD's largest MX code in format 2)",
                 o.pos_unc_deg
-            )
+            ))
         })?
     };
     let line = format!(
