@@ -435,6 +435,11 @@ fn powers(x: f64, order: usize) -> Vec<f64> {
 /// A FITS header's celestial WCS, read for frames gpustar does not solve (streak frames of
 /// fields too narrow for the shipped catalog): TAN, with SIP distortion (`-TAN-SIP`) when the
 /// header has it. Linear terms from CD, else PC × CDELT, else CDELT with CROTA2.
+///
+/// Why not the `wcs` crate (0.4.2, in the lock file through fitsrs), which reads every
+/// projection: it refuses SIP above order 6 (`SIPMaxOrderLimitReached`), and gpustar writes and
+/// reads orders up to 9 as astrometry.net does; its README lists SIP as untested. The TAN-SIP
+/// reader here is checked against astropy (`scripts/check_wcs_astropy.py`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct HeaderWcs {
     /// FITS reference pixel (1-based).
