@@ -28,7 +28,7 @@ impl Utc {
 
     /// An ISO 8601 UTC time, "YYYY-MM-DDThh:mm:ss[.fff]" (a date alone is 0h).
     pub fn parse(s: &str) -> crate::Result<Utc> {
-        let ((y, mo, d), hms) = parse_iso(s.trim()).map_err(crate::Error::Input)?;
+        let ((y, mo, d), hms) = parse_iso(s.trim())?;
         let (h, mi, sec) = hms.unwrap_or((0, 0, 0.0));
         Utc::from_calendar(y, mo, d, h, mi, sec)
     }
@@ -207,15 +207,15 @@ impl Scale {
 }
 
 /// A calendar date: year, month, day.
-pub(crate) type Ymd = (i32, i32, i32);
+pub type Ymd = (i32, i32, i32);
 /// A time of day: hour, minute, seconds.
-pub(crate) type Hms = (i32, i32, f64);
+pub type Hms = (i32, i32, f64);
 
 /// "YYYY-MM-DD" with an optional "Thh:mm:ss[.fff]" (or a space for the T) and trailing 'Z': the
 /// one ISO 8601 parser. Seconds are required: FITS writes them, and an exposure time to the
 /// minute would put a streak's ends 30 s out.
-pub(crate) fn parse_iso(s: &str) -> Result<(Ymd, Option<Hms>), String> {
-    parse_iso_as(s, false)
+pub fn parse_iso(s: &str) -> crate::Result<(Ymd, Option<Hms>)> {
+    parse_iso_as(s, false).map_err(crate::Error::Input)
 }
 
 /// [`parse_iso`], with `minute_ok` also taking "Thh:mm" as the start of that minute (for the

@@ -3,7 +3,7 @@
 //!
 //! The pipeline: `streak_filter` (the pixel stage, GPU kernels with their CPU twins in
 //! `cpu::streak_filter`: the frame binned 2×2, less its background, smoothed by a 5×5 binomial
-//! kernel, thresholded at k noise sigmas) → [`segments`] (components of that mask, lines by a
+//! kernel, thresholded at k noise sigmas) → [`mod@segments`] (components of that mask, lines by a
 //! coarse Hough vote per component, collinear pieces joined) → [`fit`] (least squares of a
 //! PSF-blurred segment on the full-resolution pixels for the ends, width, flux) → the tests
 //! below that keep stars, chains of stars, hot or bleeding columns, correlated noise and noise
