@@ -45,7 +45,6 @@ pub struct RunArgs {
     pub frame_interval: Option<f64>,
 }
 
-/// A number greater than zero.
 /// A value parser for a number within `lo..=hi` (NaN and infinities refused): absurd values
 /// are told at once (exit 2), not found out by a run that takes hours.
 pub(crate) fn within(
@@ -79,6 +78,7 @@ pub(crate) fn count_within(
     }
 }
 
+/// A number of seconds greater than zero (no upper bound: an interval is the user's to know).
 pub(crate) fn parse_positive(s: &str) -> std::result::Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
