@@ -30,9 +30,7 @@ use crate::error::{Result, error, fail};
 use fitsrs::card::Value;
 use fitsrs::hdu::header::Header;
 use fitsrs::hdu::header::extension::image::Image;
-use fitsrs::{Fits, HDU};
 use std::collections::BTreeMap;
-use std::io::Cursor;
 
 mod cards;
 mod pixels;

@@ -1,6 +1,9 @@
 //! The GPU side of a batch: frames grouped by size, detected, voted and fitted in few submissions; a failure moves the rest of the run to the CPU.
 
-use super::*;
+use super::{
+    BACKEND_CPU, CameraSource, Decoded, DetectKey, Detected, SizeGroup, Solvers, decoded_frame,
+    solve_with,
+};
 use crate::cpu::centroid::Blob;
 use crate::error::{Result, error, fail};
 use crate::gpu::Gpu;

@@ -1,6 +1,6 @@
 //! Topocentric Az/El of an ICRS direction: the IAU 2006/2000A chain through sofars.
 
-use super::*;
+use super::{Station, Utc, checked_station};
 use sofars::astro::atco13;
 
 /// Topocentric azimuth (from north through east, [0,360)) and elevation (degrees) of an ICRS

@@ -1,6 +1,6 @@
 //! Earth orientation (UT1-UTC, polar motion) from the bundled IERS table.
 
-use super::*;
+use super::{DAYSEC, DJM0, Utc, parse_number};
 use sofars::cal::jd2cal;
 use sofars::ts;
 use std::sync::OnceLock;

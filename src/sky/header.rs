@@ -1,6 +1,6 @@
 //! Exposure start and end from FITS header keywords, in any time scale TIMESYS names.
 
-use super::*;
+use super::{Hms, Scale, Utc, parse_hms, parse_iso, parse_number, plausible_mjd};
 
 /// Exposure start and end in UTC (shutter open and close: where a streak's ends are).
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,6 +1,6 @@
 //! The observing station: from `--station` or from FITS header keywords.
 
-use super::*;
+use super::value;
 use sofars::coords::gc2gd;
 
 /// Station heights accepted, metres: below the Dead Sea shore to airborne.

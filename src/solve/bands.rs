@@ -2,7 +2,7 @@
 //! of identification, and the order detections are tried in.
 
 use super::detect::Detection;
-use super::*;
+use super::{Settings, auto_mag_limit};
 use crate::camera::Camera;
 use crate::catalog::table::{self, PairTable, TableOrigin};
 use crate::catalog::{Catalog, RefCatalog, Selection};
@@ -255,4 +255,21 @@ pub fn spread_order(detections: &[Detection], width: u32, height: u32) -> Vec<us
         .collect();
     round.sort_unstable();
     round.into_iter().map(|(_, i)| i).collect()
+}
+
+/// The band of `bands` (in increasing focal length) that focal-length factor `scale` falls in:
+/// the first whose upper end reaches it, else the last.
+pub(crate) fn band_for(bands: &[Band], scale: f64) -> usize {
+    bands
+        .iter()
+        .position(|b| scale <= b.hi * (1.0 + 1e-12))
+        .unwrap_or(bands.len() - 1)
+}
+
+/// The camera with its focal lengths multiplied by `factor`.
+pub fn scaled(camera: &Camera, factor: f64) -> Camera {
+    let mut c = camera.clone();
+    c.fx *= factor;
+    c.fy *= factor;
+    c
 }

@@ -1,9 +1,8 @@
 //! A solution as a result record, with the attitude's 1σ and quality checks.
 
 use super::attitude::pointing;
-use super::refine::{self};
-use super::*;
-use crate::camera::Camera;
+use super::refine;
+use super::{Outcome, Solution, Solver};
 use crate::catalog::{RefCatalog, vector_to_radec};
 use crate::record::{MatchRecord, Record, Status, Timing};
 
@@ -116,21 +115,4 @@ pub fn attitude_quality(
         roll: arcsec(p[(2, 2)]),
     };
     (Some(s), ortho, det)
-}
-
-/// The band of `bands` (in increasing focal length) that focal-length factor `scale` falls in:
-/// the first whose upper end reaches it, else the last.
-pub(crate) fn band_for(bands: &[Band], scale: f64) -> usize {
-    bands
-        .iter()
-        .position(|b| scale <= b.hi * (1.0 + 1e-12))
-        .unwrap_or(bands.len() - 1)
-}
-
-/// The camera with its focal lengths multiplied by `factor`.
-pub fn scaled(camera: &Camera, factor: f64) -> Camera {
-    let mut c = camera.clone();
-    c.fx *= factor;
-    c.fy *= factor;
-    c
 }

@@ -3,16 +3,20 @@
 //!
 //! Scale bands and passes are in `bands.rs`, the record of a solution in `report.rs`.
 
-use super::*;
+use super::attitude::wahba;
+use super::bands::{
+    Band, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SAME_EPOCH_YEARS, SCALE_STEP,
+    SPREAD_TRIANGLE_STARS, STAGES, WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, day_epoch,
+    epoch_day, scale_bands, scale_hypotheses, scaled, spread_order,
+};
+use super::detect::{self, DetectSettings, Detection};
+use super::identify::{self, IdentifySettings};
+use super::refine::{self, RefineSettings, Refined};
+use super::triangle;
 use crate::camera::Camera;
 use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
 use crate::error::Result;
 use crate::io::frame::Frame;
-use crate::solve::attitude::wahba;
-use crate::solve::detect::{self, DetectSettings, Detection};
-use crate::solve::identify::{self, IdentifySettings};
-use crate::solve::refine::{self, RefineSettings, Refined};
-use crate::solve::triangle;
 use nalgebra::Vector3;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};

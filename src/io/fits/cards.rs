@@ -1,6 +1,6 @@
 //! The one FITS card writer, and 16-bit FITS files written with it.
 
-use super::*;
+use super::BLOCK;
 
 /// A FITS header card `KEYWORD = value` (value as FITS text: a string quoted, e.g.
 /// `'2024-03-15T20:00:00.000'`, or a number), 80 columns.

@@ -1,6 +1,7 @@
 //! Stored FITS values to u16 pixels: scaling, blanks and sentinels.
 
-use super::*;
+use super::{FloatSample, IntSample};
+use crate::error::{Result, fail};
 
 /// BZERO and BSCALE. `int` holds them as integers when both are integral and small enough
 /// for exact arithmetic in i128: unsigned 64-bit data have BZERO = 2^63, which f64

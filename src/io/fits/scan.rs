@@ -1,6 +1,12 @@
 //! The safety scan of FITS headers, and the headers fitsrs then parses.
 
-use super::*;
+use super::{BLOCK, CARD};
+use crate::error::{Result, error, fail};
+use fitsrs::hdu::header::Header;
+use fitsrs::hdu::header::extension::image::Image;
+use fitsrs::{Fits, HDU};
+use std::collections::BTreeMap;
+use std::io::Cursor;
 
 /// What the safety scan reads from one header, before fitsrs sees it.
 #[derive(Debug)]
