@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Make catalog/eop.csv, the Earth orientation table that src/streaks/sky.rs embeds, and the
+"""Make catalog/eop.csv, the Earth orientation table that src/sky/earth.rs embeds, and the
 astropy reference Az/El that its tests hold.
 
     pip install astropy astropy-iers-data
@@ -16,7 +16,7 @@ downloaded, here or when gpustar builds or runs.
 The table keeps one row every STEP days from 1973-01-01 to the C04 series' last day (always
 included), then every STEP days from there to the last IERS-A prediction (always included):
 mjd (UTC, 0h), UT1-UTC (s), polar motion x and y (arcsec). A comment line says from which MJD
-the rows are IERS-A and from which they are predictions. sky.rs interpolates linearly in UT1-TAI,
+the rows are IERS-A and from which they are predictions. src/sky/earth.rs interpolates linearly in UT1-TAI,
 which has no leap-second steps, over TAI; this script prints the error of doing so against the
 full daily series, in UT1 (ms) and in Earth rotation (arcsec, 15.04"/s), and compares the table's
 UT1-UTC at a few instants with astropy's own (Time.delta_ut1_utc, bundled IERS-A, no download).
@@ -47,7 +47,7 @@ CASES = [
 ]
 
 # The seed-004 paper's streak ends (RA h:m:s, Dec d:m:s, UTC); the paper gives no station, so
-# Tehran (35.7 N, 51.4 E, 1200 m) stands in. sky.rs's seed_004_example holds these.
+# Tehran (35.7 N, 51.4 E, 1200 m) stands in. src/sky/tests.rs's seed_004_example holds these.
 SEED = [
     ("15:25:48.613", "+63:23:44.43", "2015-09-24T12:05:47.660"),
     ("15:26:24.533", "+63:13:29.72", "2015-09-24T12:06:17.260"),
@@ -143,6 +143,8 @@ def make_table(out, step):
     e10, p10, _ = a_err_after(10)
     e_end, p_end, d_end = a_err_after(10**9)
     lines = [
+        # The path below is the module's name when catalog/eop.csv was made (now src/sky/earth.rs);
+        # kept so that the script still reproduces the committed file byte for byte.
         "# Earth orientation for gpustar (src/streaks/sky.rs), made by scripts/make_eop.py",
         f"# source: IERS 20 C04 (daily, 0h UTC) file {os.path.basename(path)} bundled in "
         f"PyPI astropy-iers-data {version}",
@@ -174,7 +176,7 @@ def make_table(out, step):
 
 
 def table_dut1(rows, utc_mjd):
-    """UT1-UTC (s) at a UTC MJD from (mjd, dut1) rows, as sky.rs's earth_orientation does."""
+    """UT1-UTC (s) at a UTC MJD from (mjd, dut1) rows, as src/sky/earth.rs's earth_orientation does."""
     day = math.floor(utc_mjd)
     dat = tai_minus_utc(day)
     t = day + (utc_mjd - day) + dat / 86400.0  # no leap second inside the checked instants
@@ -210,7 +212,7 @@ def check_astropy(out, dates=("2026-10-01", "2026-11-01", "2026-12-01", "2027-03
 
 
 def check(mjd, dut1, xp, yp, keep, full=True):
-    """Linear interpolation between kept rows (in UT1-TAI over TAI, as sky.rs does) against
+    """Linear interpolation between kept rows (in UT1-TAI over TAI, as src/sky/earth.rs does) against
     every daily row from the first kept one on. full: also the since-2000 and linear-in-UT1-UTC
     figures (for the C04 part, which spans the leap seconds)."""
     dat = {m: tai_minus_utc(m) for m in mjd[keep[0]:]}
