@@ -81,7 +81,7 @@ pub(crate) fn give_the_driver_a_runtime_dir() {
         use std::os::unix::fs::PermissionsExt;
         let _ = std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700));
     }
-    // SAFETY: called first thing in `run`, before any thread of gpustar's exists, so no other
+    // SAFETY: called first thing in `execute`, before any thread of gpustar's exists, so no other
     // thread can read the environment while it changes.
     unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
 }

@@ -1,9 +1,7 @@
 //! Solving many frames: the solvers per frame size (shared by worker threads), the CPU path
 //! (one frame at a time, on any thread) and the GPU path (batches of frames on the thread
-//! that owns the GPU context). `run` streams a directory through them.
-//!
-//! Size: about 830 lines: the CPU and GPU paths are kept side by side so that they build the
-//! same records; issue 23's layout step separates the GPU batch runner.
+//! that owns the GPU context, `gpu_runner.rs`). `batch::run` streams a directory through them.
+//! Both paths end in the same `solve_with`/`Solvers::record`, so they build the same records.
 
 mod gpu_runner;
 
