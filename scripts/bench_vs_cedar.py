@@ -39,6 +39,8 @@ import sys
 import time
 from pathlib import Path
 
+from benchlib import cpu_seconds, read_jsonl, roll_diff_deg, sep_deg, tail
+
 TOL_DEG = 0.1  # the same tolerance `gpustar evaluate` uses for "correct"
 STAGES = ("decode", "detect", "identify", "total")
 
@@ -46,25 +48,6 @@ STAGES = ("decode", "detect", "identify", "total")
 # ---------------------------------------------------------------------------------------------
 # Geometry and scoring (standard library only)
 # ---------------------------------------------------------------------------------------------
-
-def unit(ra_deg, dec_deg):
-    ra, dec = math.radians(ra_deg), math.radians(dec_deg)
-    return (math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec))
-
-
-def sep_deg(ra1, dec1, ra2, dec2):
-    """Angle between two sky directions in degrees. Uses atan2, which stays accurate at
-    small angles."""
-    a, b = unit(ra1, dec1), unit(ra2, dec2)
-    cross = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-    dot = sum(x * y for x, y in zip(a, b))
-    return math.degrees(math.atan2(math.sqrt(sum(c * c for c in cross)), dot))
-
-
-def roll_diff_deg(r1, r2):
-    """|r1 - r2| wrapped into [0, 180]."""
-    d = (r1 - r2) % 360.0
-    return min(d, 360.0 - d)
 
 
 def score_centre_roll(records, truth):
@@ -88,11 +71,6 @@ def score_centre_roll(records, truth):
         else:
             wrong += 1
     return {"solved": solved, "correct": correct, "wrong": wrong, "worst_correct_deg": worst_correct}
-
-
-def read_jsonl(path):
-    with open(path) as f:
-        return [json.loads(line) for line in f if line.strip()]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -176,24 +154,6 @@ def run(cmd, **kw):
     t0 = time.perf_counter()
     p = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, **kw)
     return p.returncode, p.stdout, p.stderr, time.perf_counter() - t0
-
-
-def cpu_seconds():
-    """(CPU-seconds busy on the whole machine, CPU-seconds of this process and its waited-for
-    children), or None where /proc/stat is missing. The difference between two readings is
-    what other processes took during the run."""
-    try:
-        with open("/proc/stat") as f:
-            fields = [int(v) for v in f.readline().split()[1:]]
-    except OSError:
-        return None
-    busy = sum(fields) - fields[3] - (fields[4] if len(fields) > 4 else 0)  # minus idle, iowait
-    t = os.times()
-    return busy / os.sysconf("SC_CLK_TCK"), t.user + t.system + t.children_user + t.children_system
-
-
-def tail(text, n=15):
-    return "\n".join(text.strip().splitlines()[-n:])
 
 
 def ensure_frames(args, frames):

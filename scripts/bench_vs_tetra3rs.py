@@ -37,7 +37,8 @@ What runs, per set and per thread count (1, and --threads-all, default os.cpu_co
 
 Scoring against DIR/truth.jsonl (the same for both): a frame is solved when gpustar's
 `status` is "solved" or t3bench's `solved` is true; a solution is wrong when its boresight
-(ra_deg, dec_deg) is more than 0.1 deg from the true one. Availability = solved / frames
+(ra_deg, dec_deg) or its roll (roll_deg, tetra3's convention, as the truth's roll_tetra3_deg)
+is more than 0.1 deg from the true one. Availability = solved / frames
 (wrong ones included; the wrong column says how many). The median boresight error (arcsec)
 is over the solutions that are not wrong.
 
@@ -62,6 +63,8 @@ import sys
 import time
 from pathlib import Path
 
+from benchlib import cpu_seconds, read_jsonl, roll_diff_deg, sep_deg, tail
+
 TOL_DEG = 0.1  # the same tolerance `gpustar evaluate` and bench_vs_cedar.py use for "correct"
 REPO = Path(__file__).resolve().parent.parent
 
@@ -69,19 +72,6 @@ REPO = Path(__file__).resolve().parent.parent
 # ---------------------------------------------------------------------------------------------
 # Geometry and scoring (standard library only)
 # ---------------------------------------------------------------------------------------------
-
-def unit(ra_deg, dec_deg):
-    ra, dec = math.radians(ra_deg), math.radians(dec_deg)
-    return (math.cos(dec) * math.cos(ra), math.cos(dec) * math.sin(ra), math.sin(dec))
-
-
-def sep_deg(ra1, dec1, ra2, dec2):
-    """Angle between two sky directions in degrees. Uses atan2, which stays accurate at
-    small angles."""
-    a, b = unit(ra1, dec1), unit(ra2, dec2)
-    cross = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-    dot = sum(x * y for x, y in zip(a, b))
-    return math.degrees(math.atan2(math.sqrt(sum(c * c for c in cross)), dot))
 
 
 def score(records, truth, is_solved):
@@ -98,7 +88,9 @@ def score(records, truth, is_solved):
             wrong += 1
             continue
         d = sep_deg(ra, dec, t["ra_deg"], t["dec_deg"])
-        if d > TOL_DEG:
+        roll = r.get("roll_deg")
+        rolled = roll is None or roll_diff_deg(roll, t["roll_tetra3_deg"]) > TOL_DEG
+        if d > TOL_DEG or rolled:
             wrong += 1
         else:
             errors.append(d * 3600.0)
@@ -112,11 +104,6 @@ def gpustar_solved(r):
 
 def t3_solved(r):
     return r.get("solved") is True
-
-
-def read_jsonl(path):
-    with open(path) as f:
-        return [json.loads(line) for line in f if line.strip()]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -144,24 +131,6 @@ def run_timed(cmd, stdout_path=None):
         if stdout_path:
             out.close()
     return p.returncode, p.stderr, wall, cpu
-
-
-def cpu_seconds():
-    """(CPU-seconds busy on the whole machine, CPU-seconds of this process and its waited-for
-    children), or None where /proc/stat is missing. The difference between two readings is
-    what other processes took during the run."""
-    try:
-        with open("/proc/stat") as f:
-            fields = [int(v) for v in f.readline().split()[1:]]
-    except OSError:
-        return None
-    busy = sum(fields) - fields[3] - (fields[4] if len(fields) > 4 else 0)  # minus idle, iowait
-    t = os.times()
-    return busy / os.sysconf("SC_CLK_TCK"), t.user + t.system + t.children_user + t.children_system
-
-
-def tail(text, n=15):
-    return "\n".join((text or "").strip().splitlines()[-n:])
 
 
 class RunFailed(Exception):
@@ -329,8 +298,8 @@ def report(args, rows, notes):
             f"| {g['wrong']} | {t['wrong']} | {fmt_err(g['median_err_arcsec'])} "
             f"| {fmt_err(t['median_err_arcsec'])} |")
     lines += ["", "ratio = gpustar images/s ÷ tetra3rs images/s (above 1: gpustar faster). "
-              f"avail = solved / frames; wrong = solved with the boresight more than {TOL_DEG}° "
-              "from truth; median err = median boresight error of the solutions that are not "
+              f"avail = solved / frames; wrong = solved with the boresight or the roll more than "
+              f"{TOL_DEG}° from truth; median err = median boresight error of the solutions that are not "
               "wrong.", "", "Notes:"]
     lines += [f"- {n}" for n in notes]
     return "\n".join(lines)
