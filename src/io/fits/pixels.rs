@@ -32,12 +32,20 @@ pub(crate) fn convert_int<T: IntSample>(
 ) -> Result<(Vec<u16>, u16)> {
     let stored = || data.chunks_exact(T::BYTES).map(T::read);
     let (mut lo, mut hi, mut blanks) = (i64::MAX, i64::MIN, 0u64);
-    for v in stored() {
-        if Some(v) == blank {
-            blanks += 1;
-        } else {
-            lo = lo.min(v);
-            hi = hi.max(v);
+    match blank {
+        // Without BLANK the range is a plain fold, which the compiler vectorises.
+        None => {
+            (lo, hi) = stored().fold((lo, hi), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        }
+        Some(b) => {
+            for v in stored() {
+                if v == b {
+                    blanks += 1;
+                } else {
+                    lo = lo.min(v);
+                    hi = hi.max(v);
+                }
+            }
         }
     }
     let mut pixels = new_pixels(count, blanks)?;
@@ -73,8 +81,6 @@ pub(crate) fn convert_int<T: IntSample>(
     Ok((pixels, saturation))
 }
 
-/// Floating-point data to u16 pixels: always the linear map, on stored values as above.
-/// NaN and ±inf are blanks.
 /// Float data to u16 pixels over the range of the valid values (see [`float_range`]): values
 /// outside it (sentinels) and non-finite ones are bad pixels, given the median. Returns a
 /// warning when sentinels were found.
