@@ -39,7 +39,7 @@ import sys
 import time
 from pathlib import Path
 
-from benchlib import cpu_seconds, read_jsonl, roll_diff_deg, sep_deg, tail
+from benchlib import cpu_seconds, other_load_note, read_jsonl, roll_diff_deg, sep_deg, tail
 
 TOL_DEG = 0.1  # the same tolerance `gpustar evaluate` uses for "correct"
 STAGES = ("decode", "detect", "identify", "total")
@@ -350,13 +350,9 @@ def main():
     results.append(run_cedar(args, frames, args.out, truth))
 
     # Context for reading the numbers.
-    cpu_after, wall = cpu_seconds(), time.perf_counter() - wall_before
-    if cpu_before and cpu_after:
-        other = max(0.0, (cpu_after[0] - cpu_before[0]) - (cpu_after[1] - cpu_before[1]))
-        busy = other > 0.05 * wall
-        notes.append(f"{'**Warning**: ' if busy else ''}other processes used {other:.1f} CPU-seconds "
-                     f"during the {wall:.0f} s of the run ({100 * other / wall:.0f}% of one core)"
-                     + ("; the rates are not clean, rerun when the machine is idle." if busy else "."))
+    load = other_load_note(cpu_before, cpu_seconds(), time.perf_counter() - wall_before)
+    if load:
+        notes.append(load)
     notes.append(f"gpustar binary: copy of {args.gpustar_source} (built {built}).")
     notes.append(f"Machine: {os.cpu_count()} logical CPUs, {platform.platform()}. Seconds are wall-clock: "
                  "for gpustar the whole `gpustar batch` command (process start, catalog, cached "

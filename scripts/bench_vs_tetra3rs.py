@@ -63,7 +63,7 @@ import sys
 import time
 from pathlib import Path
 
-from benchlib import cpu_seconds, read_jsonl, roll_diff_deg, sep_deg, tail
+from benchlib import cpu_seconds, other_load_note, read_jsonl, roll_diff_deg, sep_deg, tail
 
 TOL_DEG = 0.1  # the same tolerance `gpustar evaluate` and bench_vs_cedar.py use for "correct"
 REPO = Path(__file__).resolve().parent.parent
@@ -375,13 +375,9 @@ def main():
             failed.append(f"{frames}{'' if field is None else f':{field[0]:g}..{field[1]:g}'}: {e}")
 
     notes = []
-    cpu_after, wall = cpu_seconds(), time.perf_counter() - wall_before
-    if cpu_before and cpu_after:
-        other = max(0.0, (cpu_after[0] - cpu_before[0]) - (cpu_after[1] - cpu_before[1]))
-        busy = other > 0.05 * wall
-        notes.append(f"{'**Warning**: ' if busy else ''}other processes used {other:.1f} CPU-seconds "
-                     f"during the {wall:.0f} s of the run ({100 * other / wall:.0f}% of one core)"
-                     + ("; the rates are not clean, rerun when the machine is idle." if busy else "."))
+    load = other_load_note(cpu_before, cpu_seconds(), time.perf_counter() - wall_before)
+    if load:
+        notes.append(load)
     notes.append(f"Machine: {os.cpu_count()} logical CPUs, {platform.platform()}; threads: 1 and "
                  f"{args.threads_all} (gpustar -j, t3bench --threads: frames spread over threads).")
     for attr in ("gpustar", "t3bench"):

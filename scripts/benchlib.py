@@ -46,3 +46,16 @@ def cpu_seconds():
 
 def tail(text, n=15):
     return "\n".join((text or "").strip().splitlines()[-n:])
+
+
+def other_load_note(cpu_before, cpu_after, wall):
+    """A note on what other processes took of the machine during a run (from two
+    cpu_seconds() readings), with a warning when it was more than 5 % of one core; None
+    where /proc/stat is missing."""
+    if not (cpu_before and cpu_after):
+        return None
+    other = max(0.0, (cpu_after[0] - cpu_before[0]) - (cpu_after[1] - cpu_before[1]))
+    busy = other > 0.05 * wall
+    return (f"{'**Warning**: ' if busy else ''}other processes used {other:.1f} CPU-seconds "
+            f"during the {wall:.0f} s of the run ({100 * other / wall:.0f}% of one core)"
+            + ("; the rates are not clean, rerun when the machine is idle." if busy else "."))
