@@ -7,7 +7,7 @@ use sofars::astro::atco13;
 /// direction, airless (no refraction): the IAU 2006/2000A chain with annual aberration and
 /// Earth rotation from UT1, as astropy's ICRS->AltAz with pressure = 0. Via sofars atco13 with
 /// phpa = 0. `dut1_s` is UT1-UTC (|dut1| < 1 s) and `xp_rad`, `yp_rad` polar motion in radians,
-/// e.g. from [`earth_orientation`].
+/// e.g. from [`earth_orientation`](super::earth_orientation).
 pub fn az_el(
     ra_deg: f64,
     dec_deg: f64,

@@ -11,7 +11,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 /// Widest ratio of focal lengths one band of a scale search covers. A band's reference stars
-/// are those for its middle field (about [`AUTO_STARS_IN_VIEW`] in view there, from 27 to 60
+/// are those for its middle field (about [`AUTO_STARS_IN_VIEW`](super::AUTO_STARS_IN_VIEW) in view there, from 27 to 60
 /// across a band of 1.5): one selection for a search over 5° to 40° would leave 8 in view of a
 /// 10° frame, too few to vote with. cedar-solve's 13 frames with `--fov-deg 5..40`: 9 solved
 /// with one band, 13 with bands.
@@ -176,7 +176,7 @@ pub enum PassKind {
     Spread,
     /// Wide pair tolerance and match radius.
     Wide,
-    /// The vote against a shallow selection ([`SHALLOW_STARS_IN_VIEW`] stars in view), for
+    /// The vote against a shallow selection ([`SHALLOW_STARS_IN_VIEW`](super::SHALLOW_STARS_IN_VIEW) stars in view), for
     /// frames that show few stars; the solution is then refined against the automatic one.
     Shallow,
 }
@@ -226,7 +226,7 @@ pub const STAGES: u64 = 2;
 pub const SPREAD_CELLS: u32 = 16;
 
 /// The spread retry's triangle fallback forms triangles among this many of its first stars
-/// (220 triangles; [`triangle::TRIANGLE_STARS`] otherwise): the brightest star of each cell
+/// (220 triangles; [`triangle::TRIANGLE_STARS`](super::triangle::TRIANGLE_STARS) otherwise): the brightest star of each cell
 /// is more often a real one, and in a dense part of the sky (the Milky Way) triangles confirmed
 /// by a fourth star find what the vote's counts cannot single out.
 pub const SPREAD_TRIANGLE_STARS: usize = 12;

@@ -41,7 +41,7 @@ pub struct Settings {
     /// camera's, (lower, upper). The solver tries scales across it.
     pub scale_range: Option<(f64, f64)>,
     /// Frames that do not solve are tried again: with more voting stars
-    /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`]), then
+    /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`](super::SPREAD_CELLS)), then
     /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
     pub retry: bool,
     /// Frames that do not solve are detected again with the matched filter (fainter stars)
@@ -102,7 +102,7 @@ pub const SHALLOW_STARS_IN_VIEW: f64 = 12.0;
 pub struct Solver {
     pub camera: Camera,
     pub settings: Settings,
-    /// One, unless a scale search spans more than [`BAND_RATIO`].
+    /// One, unless a scale search spans more than [`BAND_RATIO`](super::BAND_RATIO).
     pub bands: Vec<Band>,
     /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
     pub scales: Vec<f64>,
