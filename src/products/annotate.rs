@@ -16,6 +16,9 @@
 //! skipped, everything is clipped at the borders, radii are capped, and a frame
 //! with no pixels (zero width/height or a too-short pixel buffer) renders as a
 //! 1×1 black image while [`write_png`] returns an error for it.
+//!
+//! Size: about 700 lines, 60 of them the font table; label placement, marks and legend share
+//! the canvas type and the clipping they need.
 
 use std::path::Path;
 

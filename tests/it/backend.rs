@@ -38,12 +38,7 @@ fn the_driver_says_nothing_on_stderr_without_v() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sim");
-    let d = dir.to_str().unwrap();
-    let out = common::gpustar()
-        .args(["simulate", "--out", d, "-n", "1", "--size", "256x256"])
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    common::simulate(&dir, &["-n", "1", "--size", "256x256"]);
     let frame = dir.join(gpustar::simulate::frame_name(0));
     for backend in ["auto", "gpu"] {
         let out = common::gpustar()

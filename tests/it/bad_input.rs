@@ -133,17 +133,8 @@ fn encode(img: &image::DynamicImage, format: image::ImageFormat) -> Vec<u8> {
 
 fn simulate(out: &Path, extra: &[&str]) {
     let size = format!("{W}x{H}");
-    let o = common::gpustar()
-        .args(["simulate", "--out", out.to_str().unwrap(), "-n", "1"])
-        .args(["--fov-deg", "18", "--size", &size, "--seed", "5"])
-        .args(extra)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "simulate failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let args = ["-n", "1", "--fov-deg", "18", "--size", &size, "--seed", "5"];
+    common::simulate(out, &[&args[..], extra].concat());
 }
 
 /// Build the corpus: every bad case of the issue, good frames in several formats, files that

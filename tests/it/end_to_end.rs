@@ -2,19 +2,9 @@
 
 use crate::common;
 
-use common::gpustar;
+use common::{gpustar, run_ok};
 use serde_json::Value;
 use std::path::Path;
-
-fn run_ok(args: &[&str]) -> std::process::Output {
-    let out = gpustar().args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "gpustar {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
 
 fn evaluate(dir: &Path, results: &Path) -> Value {
     let out = run_ok(&[

@@ -14,18 +14,19 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+/// `batch DIR` on the CPU into `out`, with `args`.
+fn cpu_batch(dir: &Path, out: &Path, args: &[&str]) -> Command {
+    let mut c = gpustar();
+    c.args(["batch", dir.to_str().unwrap(), "--backend", "cpu"])
+        .args(["-o", out.to_str().unwrap()])
+        .args(args);
+    c
+}
+
+/// [`common::batch18_args`] with `more`.
 fn batch(dir: &Path, out: &Path, more: &[&str]) -> Command {
     let mut c = gpustar();
-    c.args([
-        "batch",
-        dir.to_str().unwrap(),
-        "--fov-deg",
-        "18",
-        "--mag-limit",
-        "6",
-    ])
-    .args(["--backend", "cpu", "-o", out.to_str().unwrap()])
-    .args(more);
+    c.args(common::batch18_args(dir, out)).args(more);
     c
 }
 
@@ -345,22 +346,12 @@ fn a_stop_request_ends_the_run_in_seconds_whatever_a_frame_is_doing() {
 /// `batch DIR -r --sequence` on the CPU with DIR's camera file, into `out`.
 fn sequence_batch(dir: &Path, out: &Path, more: &[&str]) -> Command {
     let camera = dir.join("camera.toml");
-    let mut c = gpustar();
-    c.args([
-        "batch",
-        dir.to_str().unwrap(),
-        "-r",
-        "--sequence",
-        "--backend",
-        "cpu",
-    ])
-    .args([
-        "--camera",
-        camera.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ])
-    .args(more);
+    let mut c = cpu_batch(
+        dir,
+        out,
+        &["-r", "--sequence", "--camera", camera.to_str().unwrap()],
+    );
+    c.args(more);
     c
 }
 
@@ -382,7 +373,7 @@ fn fits_f32(w: u32, h: u32, pixels: &[f32], cards: &[String]) -> Vec<u8> {
         card("NAXIS2", &h.to_string()),
     ];
     head.extend(cards.iter().cloned());
-    head.push(format!("{:<80}", "END"));
+    head.push(gpustar::io::fits::card_end());
     let mut b: Vec<u8> = head.concat().into_bytes();
     b.resize(b.len().div_ceil(2880) * 2880, b' ');
     for v in pixels {
@@ -488,21 +479,19 @@ fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
     let camera = dir.join("camera.toml");
     for astrometry in ["solve", "header"] {
         let out = tmp.path().join(format!("{astrometry}.jsonl"));
-        let mut c = gpustar();
-        c.args([
-            "batch",
-            dir.to_str().unwrap(),
-            "--backend",
-            "cpu",
-            "--streaks",
-        ])
-        .args(["--astrometry", astrometry, "-o", out.to_str().unwrap()])
-        .args([
-            "--tdm",
-            tdm.to_str().unwrap(),
-            "--iod",
-            iod.to_str().unwrap(),
-        ]);
+        let mut c = cpu_batch(
+            &dir,
+            &out,
+            &[
+                "--streaks",
+                "--astrometry",
+                astrometry,
+                "--tdm",
+                tdm.to_str().unwrap(),
+                "--iod",
+                iod.to_str().unwrap(),
+            ],
+        );
         if astrometry == "solve" {
             c.args(["--camera", camera.to_str().unwrap()]);
         }
@@ -680,16 +669,7 @@ fn frames_of_another_size_are_refused_before_decoding() {
     }
     let out = s.root.join("r.jsonl");
     let camera = s.dir.join("camera.toml");
-    let mut c = gpustar();
-    c.args([
-        "batch",
-        big.to_str().unwrap(),
-        "--backend",
-        "cpu",
-        "-o",
-        out.to_str().unwrap(),
-    ])
-    .args(["--camera", camera.to_str().unwrap()]);
+    let c = cpu_batch(&big, &out, &["--camera", camera.to_str().unwrap()]);
     let o = run(c, 60);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     let r = records(&out);
@@ -724,27 +704,20 @@ fn a_resumed_run_exports_the_whole_file_s_streaks() {
         (p("out"), p("tdm"), p("iod"))
     };
     let streaks = |out: &Path, tdm: &Path, iod: &Path, more: &[&str]| {
-        let mut c = gpustar();
-        c.args([
-            "batch",
-            dir.to_str().unwrap(),
-            "--backend",
-            "cpu",
-            "--streaks",
-        ])
-        .args([
-            "--camera",
-            camera.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ])
-        .args([
-            "--tdm",
-            tdm.to_str().unwrap(),
-            "--iod",
-            iod.to_str().unwrap(),
-        ])
-        .args(more);
+        let mut c = cpu_batch(
+            &dir,
+            out,
+            &[
+                "--streaks",
+                "--camera",
+                camera.to_str().unwrap(),
+                "--tdm",
+                tdm.to_str().unwrap(),
+                "--iod",
+                iod.to_str().unwrap(),
+            ],
+        );
+        c.args(more);
         let o = run(c, 120);
         assert!(o.status.success(), "{}", stderr(&o));
     };

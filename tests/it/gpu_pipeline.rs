@@ -26,23 +26,9 @@ fn assert_same(gpu: Record, cpu: Record) {
 }
 
 fn simulate(dir: &Path, n: usize, fov: &str, size: &str) {
-    let out = gpustar()
-        .args([
-            "simulate",
-            "--out",
-            dir.to_str().unwrap(),
-            "-n",
-            &n.to_string(),
-            "--fov-deg",
-            fov,
-        ])
-        .args(["--size", size])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::simulate(
+        dir,
+        &["-n", &n.to_string(), "--fov-deg", fov, "--size", size],
     );
 }
 

@@ -9,23 +9,11 @@ use serde_json::Value;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+/// [`common::batch18_args`], quiet.
 fn batch_args(dir: &Path, out: &Path) -> Vec<String> {
-    [
-        "batch",
-        dir.to_str().unwrap(),
-        "--fov-deg",
-        "18",
-        "--mag-limit",
-        "6",
-        "--backend",
-        "cpu",
-        "-q",
-        "-o",
-        out.to_str().unwrap(),
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect()
+    let mut args = common::batch18_args(dir, out);
+    args.push("-q".into());
+    args
 }
 
 /// The records of a file, without timings, keyed by file name (panics on duplicates).

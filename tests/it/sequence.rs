@@ -5,7 +5,7 @@
 
 use crate::common;
 
-use common::{gpustar, run_records};
+use common::{gpustar, run_records, truths};
 use gpustar::solve::attitude::attitude_error;
 use nalgebra::Matrix3;
 use serde_json::Value;
@@ -14,25 +14,11 @@ use std::path::{Path, PathBuf};
 /// Two sequences of 12 frames, 1 s apart, in `tmp/sim`.
 fn simulated(tmp: &Path) -> PathBuf {
     let dir = tmp.join("sim");
-    let out = gpustar()
-        .args(["simulate", "--sequence", "--sequences", "2", "-n", "12"])
-        .args(["--seed", "5", "--out", dir.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::simulate(
+        &dir,
+        &["--sequence", "--sequences", "2", "-n", "12", "--seed", "5"],
     );
     dir
-}
-
-fn truths(dir: &Path) -> Vec<Value> {
-    std::fs::read_to_string(dir.join("truth.jsonl"))
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
 }
 
 fn batch(dir: &Path, camera: &Path, extra: &[&str]) -> Vec<Value> {

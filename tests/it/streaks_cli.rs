@@ -5,21 +5,12 @@
 use crate::common;
 
 use common::formats::{parse_iod_line, parse_tdm};
-use common::{gpustar, run_records};
+use common::{gpustar, run_ok, run_records, truths};
 use gpustar::camera::Camera;
 use gpustar::io::frame::Frame;
 use nalgebra::Matrix3;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-
-fn run_ok(args: &[&str]) {
-    let out = gpustar().args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "gpustar {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 /// Eight 512² frames of 12° with streaks, in `tmp/sim`.
 fn simulated(tmp: &Path) -> PathBuf {
@@ -40,14 +31,6 @@ fn simulated(tmp: &Path) -> PathBuf {
         "7.5",
     ]);
     dir
-}
-
-fn truths(dir: &Path) -> Vec<Value> {
-    std::fs::read_to_string(dir.join("truth.jsonl"))
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect()
 }
 
 fn batch(dir: &Path, extra: &[&str]) -> Vec<Value> {

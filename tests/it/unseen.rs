@@ -4,7 +4,7 @@
 
 use crate::common;
 
-use common::gpustar;
+use common::run_ok;
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::simulate::{SimSettings, render};
@@ -100,16 +100,6 @@ fn star_positions_are_the_days_whatever_the_order() {
     assert!((a.selection.epoch - morning).abs() < 1.0 / 365.25);
 }
 
-fn run(args: &[&str]) -> std::process::Output {
-    let out = gpustar().args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "gpustar {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
 /// A 50° lens with 5 % barrel distortion at the corners, known to its user by its focal length
 /// alone: `calibrate` recovers k1, k2 and the principal point, and with its camera file every
 /// frame solves with the roll within 0.05°.
@@ -127,7 +117,7 @@ fn calibrate_recovers_a_wide_distorted_lens() {
     std::fs::write(&focal, "width = 1280\nheight = 960\nfx_px = 1372.5\n").unwrap();
     let sim = tmp.path().join("sim");
     let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
-    run(&[
+    run_ok(&[
         "simulate",
         "--camera",
         &p(&lens),
@@ -143,7 +133,7 @@ fn calibrate_recovers_a_wide_distorted_lens() {
         "3",
     ]);
     let cal = tmp.path().join("cal.toml");
-    run(&[
+    run_ok(&[
         "calibrate",
         &p(&sim),
         "--camera",
@@ -160,7 +150,7 @@ fn calibrate_recovers_a_wide_distorted_lens() {
     );
     assert!((fitted.fx / 1372.5 - 1.0).abs() < 1e-3, "{fitted:?}");
     let records = tmp.path().join("cal.jsonl");
-    run(&[
+    run_ok(&[
         "batch",
         &p(&sim),
         "--camera",
@@ -171,7 +161,7 @@ fn calibrate_recovers_a_wide_distorted_lens() {
         "-o",
         &p(&records),
     ]);
-    let eval = run(&[
+    let eval = run_ok(&[
         "evaluate",
         "--truth",
         &p(&sim.join("truth.jsonl")),

@@ -36,8 +36,8 @@ fn tiny() -> (Catalog, Vec<(f64, f64)>) {
     (Catalog::parse(&csv, "tiny").unwrap(), field.to_vec())
 }
 
-#[test]
-fn every_field_star_is_voted_to_its_catalog_star() {
+/// The tiny catalog selected, a 12° camera and its pair table.
+fn tiny_setup() -> (Vec<(f64, f64)>, RefCatalog, Camera, PairTable) {
     let (cat, field) = tiny();
     let refs = RefCatalog::select(
         &cat,
@@ -51,6 +51,12 @@ fn every_field_star_is_voted_to_its_catalog_star() {
     .unwrap();
     let camera = Camera::from_fov(1024, 1024, 12.0).unwrap();
     let table = PairTable::build(&refs, camera.diagonal_rad());
+    (field, refs, camera, table)
+}
+
+#[test]
+fn every_field_star_is_voted_to_its_catalog_star() {
+    let (field, refs, camera, table) = tiny_setup();
     // Look at the field with some roll; the image stars are the field stars in another order.
     let centre = gpustar::catalog::radec_to_vector(30.0, 20.0);
     let r = Rotation3::face_towards(&centre, &Vector3::z())
@@ -95,19 +101,7 @@ fn every_field_star_is_voted_to_its_catalog_star() {
 
 #[test]
 fn a_star_off_the_catalog_is_left_unidentified() {
-    let (cat, field) = tiny();
-    let refs = RefCatalog::select(
-        &cat,
-        Selection {
-            epoch: 1991.25,
-            mag_limit: 9.0,
-            double_stars: DoubleStars::Keep,
-            double_sep_rad: 0.0,
-        },
-    )
-    .unwrap();
-    let camera = Camera::from_fov(1024, 1024, 12.0).unwrap();
-    let table = PairTable::build(&refs, camera.diagonal_rad());
+    let (field, refs, camera, table) = tiny_setup();
     let centre = gpustar::catalog::radec_to_vector(30.0, 20.0);
     let r = Rotation3::face_towards(&centre, &Vector3::z())
         .inverse()

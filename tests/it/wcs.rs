@@ -81,14 +81,10 @@ fn wcs_headers_map_catalog_stars_to_their_centroids_and_frames_are_annotated() {
         "width = 800\nheight = 600\nfx_px = 2500.0\nfy_px = 2540.0\nk1 = -0.2\n",
     )
     .unwrap();
-    let ok = common::gpustar()
-        .args(["simulate", "-n", "4", "--seed", "3", "--camera"])
-        .arg(&cam)
-        .arg("--out")
-        .arg(&sim)
-        .status()
-        .unwrap();
-    assert!(ok.success());
+    common::simulate(
+        &sim,
+        &["-n", "4", "--seed", "3", "--camera", cam.to_str().unwrap()],
+    );
     // The user's camera lacks k1: refinement fits it.
     let given = dir.path().join("given.toml");
     std::fs::write(

@@ -328,18 +328,48 @@ pub fn assert_records_match(a: &serde_json::Value, b: &serde_json::Value) {
     walk("record", "", a, b);
 }
 
-/// `gpustar simulate --out DIR ARGS…`, which must succeed.
-pub fn simulate(dir: &std::path::Path, args: &[&str]) {
-    let out = gpustar()
-        .args(["simulate", "--out", dir.to_str().unwrap()])
-        .args(args)
-        .output()
-        .unwrap();
+/// `batch DIR` of 18° frames (catalog to magnitude 6) on the CPU into `out`: the arguments.
+pub fn batch18_args(dir: &std::path::Path, out: &std::path::Path) -> Vec<String> {
+    let (dir, out) = (dir.to_str().unwrap(), out.to_str().unwrap());
+    [
+        "batch",
+        dir,
+        "--fov-deg",
+        "18",
+        "--mag-limit",
+        "6",
+        "--backend",
+        "cpu",
+        "-o",
+        out,
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+/// `gpustar ARGS…`, which must succeed; its output.
+pub fn run_ok(args: &[&str]) -> std::process::Output {
+    let out = gpustar().args(args).output().unwrap();
     assert!(
         out.status.success(),
-        "simulate {args:?}: {}",
+        "gpustar {args:?} failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    out
+}
+
+/// `gpustar simulate --out DIR ARGS…`, which must succeed.
+pub fn simulate(dir: &std::path::Path, args: &[&str]) {
+    run_ok(&[&["simulate", "--out", dir.to_str().unwrap()], args].concat());
+}
+
+/// The truth records a simulation wrote in `dir`.
+pub fn truths(dir: &std::path::Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(dir.join("truth.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
 }
 
 /// `n` simulated 256² frames of 18° (fast to solve) in `dir`.
