@@ -123,7 +123,7 @@ fn main() {
                         })
                         .collect();
                     median_ms(3, || {
-                        g.vote(&table, &jobs).unwrap();
+                        g.vote(&band.table, &table, &jobs).unwrap();
                     })
                 }
             });

@@ -192,7 +192,7 @@ fn main() {
                 stages: cpu_stages,
                 counters: None,
             });
-            let (Some(g), Some(table)) = (&gpu, &gpu_table) else {
+            let (Some(g), Some(gpu_table)) = (&gpu, &gpu_table) else {
                 continue;
             };
             eprintln!("{size}x{size}, batch {batch}: GPU kernels...");
@@ -214,7 +214,11 @@ fn main() {
                 })),
             ));
             let v: Vec<f64> = (0..=2)
-                .map(|k| per(median_ms(runs, || g.vote_prefix(table, &jobs, k).unwrap())))
+                .map(|k| {
+                    per(median_ms(runs, || {
+                        g.vote_prefix(table, gpu_table, &jobs, k).unwrap()
+                    }))
+                })
                 .collect();
             stages.push(("io (vote)", v[0]));
             stages.push(("vote", (v[1] - v[0]).max(0.0)));
@@ -222,7 +226,7 @@ fn main() {
             let before = g.counters();
             g.detect(&frames, &p).unwrap();
             g.psf_fit(&windows).unwrap();
-            g.vote(table, &jobs).unwrap();
+            g.vote(table, gpu_table, &jobs).unwrap();
             let after = g.counters();
             rows.push(Row {
                 size,

@@ -1,5 +1,6 @@
 // Stage select (CPU twin: src/cpu/select.rs): the k best candidates of each image star, as
-// packed keys (min(votes, 0xFFFF) << 16) | (0xFFFF − id), best first; ties go to the lowest id.
+// 64-bit keys (min(votes, 0xFFFF) << 32) | (0xFFFFFFFF − id) stored as vec2 (low word, high
+// word), best first; ties go to the lowest id.
 // One workgroup per (star, image):
 //  1. radix select (high byte, low byte of the saturated votes) finds T, the votes of the
 //     m-th best candidate (m = min(k, nonzero counts));
@@ -9,7 +10,7 @@
 
 @group(0) @binding(0) var<uniform> u: VoteUniform;
 @group(0) @binding(1) var<storage, read> votes: array<u32>;
-@group(0) @binding(2) var<storage, read_write> candidates: array<u32>;
+@group(0) @binding(2) var<storage, read_write> candidates: array<vec2<u32>>;
 
 const MAX_K: u32 = 64u;
 
@@ -18,11 +19,21 @@ var<workgroup> hist: array<atomic<u32>, 256>;
 var<workgroup> pick: vec2<u32>;
 var<workgroup> total: atomic<u32>;
 var<workgroup> above: atomic<u32>;
-var<workgroup> chosen: array<u32, MAX_K>;
+var<workgroup> chosen: array<vec2<u32>, MAX_K>;
 var<workgroup> tie_prefix: array<u32, 256>;
 
 fn saturated(v: u32) -> u32 {
     return min(v, 0xFFFFu);
+}
+
+// The candidate key of (votes, id): the 64-bit (votes << 32) | (0xFFFFFFFF − id) as (low, high).
+fn key_of(v: u32, id: u32) -> vec2<u32> {
+    return vec2<u32>(0xFFFFFFFFu - id, v);
+}
+
+// Whether key a orders before key b (more votes, then the lower id).
+fn before(a: vec2<u32>, b: vec2<u32>) -> bool {
+    return a.y > b.y || (a.y == b.y && a.x > b.x);
 }
 
 // Thread 0: the bin holding rank `rank` counted from the top, into `pick`.
@@ -84,7 +95,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     for (var id = lid; id < u.refs; id += 256u) {
         let v = saturated(votes[base + id]);
         if (m > 0u && v > threshold) {
-            chosen[atomicAdd(&above, 1u)] = (v << 16u) | (0xFFFFu - id);
+            chosen[atomicAdd(&above, 1u)] = key_of(v, id);
         }
     }
     // Ties at the threshold, in id order: this thread's contiguous chunk of ids.
@@ -114,7 +125,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     for (var id = start; id < end; id++) {
         let v = saturated(votes[base + id]);
         if (m > 0u && v == threshold && slot < m) {
-            chosen[slot] = (v << 16u) | (0xFFFFu - id);
+            chosen[slot] = key_of(v, id);
             slot++;
         }
     }
@@ -124,7 +135,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         for (var a = 1u; a < m; a++) {
             let key = chosen[a];
             var b = a;
-            while (b > 0u && chosen[b - 1u] < key) {
+            while (b > 0u && before(key, chosen[b - 1u])) {
                 chosen[b] = chosen[b - 1u];
                 b--;
             }
@@ -132,7 +143,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         }
         let out = (img * u.stars + star) * u.k;
         for (var r = 0u; r < u.k; r++) {
-            candidates[out + r] = select(0u, chosen[r], r < m);
+            candidates[out + r] = select(vec2<u32>(0u), chosen[r], r < m);
         }
     }
 }

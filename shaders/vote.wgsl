@@ -1,61 +1,42 @@
-// Stage vote (CPU twin: src/cpu/vote.rs): each image-star pair finds its key range in the
-// sorted table (k-vector bin start, then a short scan) and every row in it adds a vote for both
-// catalog stars to both image stars. u32 atomicAdd counts are exact in any order.
-// Dispatch (blocks, 1); threads stride over all pairs of all images. Padding pairs have lo > hi.
+// Stage vote (CPU twin: src/cpu/vote.rs): every table row in an image-star pair's key range
+// adds a vote for both catalog stars to both image stars. u32 atomicAdd counts are exact in any
+// order. The rows of each range are found on the CPU (PairTable::range, as the twin does); the
+// table's pairs come in slices of at most one binding, one dispatch per slice, and a catalog
+// too deep for all stars' counters is counted a window of voting stars at a time.
+// Dispatch (blocks, 1); threads stride over all pairs of all images. Padding spans are empty.
 
 @group(0) @binding(0) var<uniform> u: VoteUniform;
-@group(0) @binding(1) var<storage, read> keys: array<u32>;
-@group(0) @binding(2) var<storage, read> pairs: array<u32>;
-@group(0) @binding(3) var<storage, read> kvector: array<u32>;
-@group(0) @binding(4) var<storage, read> ranges: array<PairRange>;
-@group(0) @binding(5) var<storage, read_write> votes: array<atomic<u32>>;
-// Rows scanned per image, as (lo, hi) of a 64-bit count.
-@group(0) @binding(6) var<storage, read_write> hypotheses: array<atomic<u32>>;
-
-// First row with key >= `key` (src/table.rs lower_bound).
-fn lower_bound(key: u32) -> u32 {
-    let bin = key >> u.shift;
-    if (bin >= u.kvector_len - 1u) {
-        return u.rows;
-    }
-    var i = kvector[bin];
-    let end = kvector[bin + 1u];
-    while (i < end && keys[i] < key) {
-        i++;
-    }
-    return i;
-}
+// Rows row_lo .. row_hi of the table: the two reference-star ids of each.
+@group(0) @binding(1) var<storage, read> pairs: array<vec2<u32>>;
+@group(0) @binding(2) var<storage, read> spans: array<RowSpan>;
+@group(0) @binding(3) var<storage, read_write> votes: array<atomic<u32>>;
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let total = u.images * u.pairs_per_image;
     for (var t = gid.x; t < total; t += nwg.x * 256u) {
-        let r = ranges[t];
-        if (r.lo > r.hi) {
+        let s = spans[t];
+        let start = max(s.start, u.row_lo);
+        let end = min(s.end, u.row_hi);
+        // Unsigned wrap: a star below star_lo is counted as out of the window too.
+        let count_i = s.i - u.star_lo < u.stars;
+        let count_j = s.j - u.star_lo < u.stars;
+        if (start >= end || !(count_i || count_j)) {
             continue;
         }
         let img = t / u.pairs_per_image;
-        let start = lower_bound(r.lo);
-        var end = u.rows;
-        if (r.hi != 0xFFFFFFFFu) {
-            end = lower_bound(r.hi + 1u);
-        }
-        end = max(end, start);
-        let n = end - start;
-        let old = atomicAdd(&hypotheses[2u * img], n);
-        if (old > 0xFFFFFFFFu - n) {
-            atomicAdd(&hypotheses[2u * img + 1u], 1u);
-        }
-        let vi = (img * u.stars + r.i) * u.refs;
-        let vj = (img * u.stars + r.j) * u.refs;
+        let vi = (img * u.stars + (s.i - u.star_lo)) * u.refs;
+        let vj = (img * u.stars + (s.j - u.star_lo)) * u.refs;
         for (var row = start; row < end; row++) {
-            let p = pairs[row];
-            let a = p & 0xFFFFu;
-            let b = p >> 16u;
-            atomicAdd(&votes[vi + a], 1u);
-            atomicAdd(&votes[vi + b], 1u);
-            atomicAdd(&votes[vj + a], 1u);
-            atomicAdd(&votes[vj + b], 1u);
+            let p = pairs[row - u.row_lo];
+            if (count_i) {
+                atomicAdd(&votes[vi + p.x], 1u);
+                atomicAdd(&votes[vi + p.y], 1u);
+            }
+            if (count_j) {
+                atomicAdd(&votes[vj + p.x], 1u);
+                atomicAdd(&votes[vj + p.y], 1u);
+            }
         }
     }
 }

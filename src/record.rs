@@ -31,6 +31,18 @@ pub struct MatchRecord {
     pub sigma_px: Option<f64>,
 }
 
+/// The pointing hint a frame was solved with (`--hint`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HintRecord {
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+    pub radius_deg: f64,
+    /// `--hint`, or the header keywords it was read from (e.g. `OBJCTRA/OBJCTDEC`).
+    pub source: String,
+    /// Angle between the hint and the solved boresight; null when unsolved.
+    pub offset_deg: Option<f64>,
+}
+
 /// One end (or the midpoint) of a streak (spec/INTERFACE.md, "Streaks").
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StreakEnd {
@@ -124,6 +136,9 @@ pub struct Record {
     /// otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub streaks: Option<Vec<StreakRecord>>,
+    /// With `--hint`: the frame's pointing hint (absent when it had none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hint: Option<HintRecord>,
     /// Solved records: the attitude's 1σ (arcsec) from its matches (Shuster's covariance
     /// [Σ(I − bbᵀ)/σ_i²]⁻¹, σ_i each match's 1σ: the residuals' rms per axis, or with
     /// `--centroid ml` the PSF fit's with `sigma_floor_px` in quadrature): `boresight` about the
@@ -196,6 +211,7 @@ impl Record {
             epoch: None,
             warnings: Vec::new(),
             streaks: None,
+            hint: None,
             attitude_sigma_arcsec: None,
             orthogonality_error: None,
             sigma_floor_px: None,

@@ -191,7 +191,8 @@ pub struct RefStar {
     pub members: u32,
 }
 
-/// The stars a run matches against, brightest first (ids fit in u16 for the GPU's packing).
+/// The stars a run matches against, brightest first; a star's index is its 32-bit id in the
+/// distance table.
 #[derive(Clone, Debug)]
 pub struct RefCatalog {
     pub stars: Vec<RefStar>,
@@ -200,8 +201,8 @@ pub struct RefCatalog {
     pub doubles_removed: usize,
 }
 
-/// The largest number of stars a reference catalog may hold: ids are packed into 16 bits.
-pub const MAX_REF_STARS: usize = 0xFFFF;
+/// The largest number of stars a reference catalog may hold: ids are 32-bit.
+pub const MAX_REF_STARS: usize = u32::MAX as usize;
 
 impl RefCatalog {
     /// Select stars at or brighter than the magnitude limit, propagate them, and apply the
@@ -230,7 +231,7 @@ impl RefCatalog {
             fail!(
                 Catalog,
                 "{} catalog stars are brighter than magnitude {}: at most {} fit the distance \
-                 table's 16-bit ids; lower --mag-limit",
+                 table's 32-bit ids; lower --mag-limit",
                 stars.len(),
                 selection.mag_limit,
                 MAX_REF_STARS

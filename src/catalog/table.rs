@@ -34,8 +34,9 @@ pub fn angle_of_chord(chord: f64) -> f64 {
 pub struct PairTable {
     /// Chord keys, ascending.
     pub keys: Vec<u32>,
-    /// The two reference-star ids of each row, packed `a | b << 16` (a < b).
-    pub pairs: Vec<u32>,
+    /// The two reference-star ids of each row, `[a, b]` with a < b: 32-bit ids, so a
+    /// catalog selection of any size fits (the GPU reads them as `vec2<u32>`).
+    pub pairs: Vec<[u32; 2]>,
     /// `kvector[b]` = first row whose `key >> shift >= b`; one extra entry = number of rows.
     pub kvector: Vec<u32>,
     /// Bin width of the k-vector as a shift of the key.
@@ -57,7 +58,7 @@ impl PairTable {
         // Sweep in z: a pair whose chord is below max_chord has |Δz| below it too.
         let mut order: Vec<u32> = (0..stars.len() as u32).collect();
         order.sort_by(|&a, &b| stars[a as usize].v.z.total_cmp(&stars[b as usize].v.z));
-        let mut rows: Vec<(u32, u32)> = Vec::new();
+        let mut rows: Vec<(u32, u32, u32)> = Vec::new();
         for (k, &a) in order.iter().enumerate() {
             let va = stars[a as usize].v;
             for &b in &order[k + 1..] {
@@ -68,14 +69,15 @@ impl PairTable {
                 let chord = (va - vb).norm();
                 if chord < max_chord {
                     let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-                    rows.push((chord_key(chord), lo | hi << 16));
+                    rows.push((chord_key(chord), hi, lo));
                 }
             }
         }
-        // Sorting by (key, pair) makes the table independent of the sweep order.
+        // Sorting by (key, b, a) makes the table independent of the sweep order (and keeps the
+        // row order of the 16-bit packing `a | b << 16`, which sorted the same way).
         rows.sort_unstable();
         let keys: Vec<u32> = rows.iter().map(|r| r.0).collect();
-        let pairs: Vec<u32> = rows.iter().map(|r| r.1).collect();
+        let pairs: Vec<[u32; 2]> = rows.iter().map(|&(_, b, a)| [a, b]).collect();
         let shift = kvector_shift(max_key, keys.len());
         let kvector = build_kvector(&keys, shift, max_key);
         PairTable {
@@ -98,7 +100,7 @@ impl PairTable {
 
     /// Bytes held by keys, pairs and the k-vector.
     pub fn bytes(&self) -> usize {
-        4 * (self.keys.len() + self.pairs.len() + self.kvector.len())
+        4 * (self.keys.len() + 2 * self.pairs.len() + self.kvector.len())
     }
 
     /// Rows with `lo <= key <= hi`: the k-vector gives the bin start, a short forward scan the
@@ -128,8 +130,8 @@ impl PairTable {
 
     /// The two reference-star ids of row `r`.
     pub fn pair(&self, r: usize) -> (u32, u32) {
-        let p = self.pairs[r];
-        (p & 0xFFFF, p >> 16)
+        let [a, b] = self.pairs[r];
+        (a, b)
     }
 }
 
@@ -172,9 +174,9 @@ pub fn cache_key(cat: &RefCatalog, catalog_hash: u64, max_sep_rad: f64) -> u64 {
     crate::catalog::fnv1a(text.as_bytes())
 }
 
-const FORMAT_VERSION: u32 = 1;
-/// Version 2 adds the checksum.
-const MAGIC: &[u8; 8] = b"GPSTBL02";
+const FORMAT_VERSION: u32 = 2;
+/// Version 2 adds the checksum; version 3 has 32-bit star ids (two words a pair).
+const MAGIC: &[u8; 8] = b"GPSTBL03";
 
 /// Where cached tables live: `$GPUSTAR_CACHE_DIR`, else `$XDG_CACHE_HOME/gpustar`, else
 /// `~/.cache/gpustar`.
@@ -273,9 +275,9 @@ fn write_table(path: &Path, key: u64, t: &PairTable) -> Result<()> {
         t.max_key as u64,
     ];
     let mut body = Vec::with_capacity(t.bytes() / 4);
-    for arr in [&t.keys, &t.pairs, &t.kvector] {
-        body.extend_from_slice(arr);
-    }
+    body.extend_from_slice(&t.keys);
+    body.extend_from_slice(bytemuck::cast_slice(&t.pairs));
+    body.extend_from_slice(&t.kvector);
     write_cache(path, MAGIC, key, &head, &body)
 }
 
@@ -350,18 +352,18 @@ pub(crate) fn read_cache(
 fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<PairTable> {
     let (head, words) = read_cache(path, MAGIC, key, 4)?;
     let (rows, kvlen) = (head[0] as usize, head[1] as usize);
-    if words.len() != 2 * rows + kvlen {
+    if words.len() != 3 * rows + kvlen {
         fail!(
             Catalog,
             "{} words where {rows} rows and a k-vector of {kvlen} need {}",
             words.len(),
-            2 * rows + kvlen
+            3 * rows + kvlen
         );
     }
     let t = PairTable {
         keys: words[..rows].to_vec(),
-        pairs: words[rows..2 * rows].to_vec(),
-        kvector: words[2 * rows..].to_vec(),
+        pairs: bytemuck::cast_slice(&words[rows..3 * rows]).to_vec(),
+        kvector: words[3 * rows..].to_vec(),
         shift: u32::try_from(head[2]).into_kind(Error::Catalog)?,
         max_sep_rad,
         max_key: u32::try_from(head[3]).into_kind(Error::Catalog)?,
@@ -374,10 +376,7 @@ fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<P
     if !t.keys.windows(2).all(|w| w[0] <= w[1]) || t.keys.last().is_some_and(|&k| k > t.max_key) {
         fail!(Catalog, "keys not sorted or beyond the largest separation");
     }
-    if !t.pairs.iter().all(|&p| {
-        let (a, b) = (p & 0xFFFF, p >> 16);
-        a < b && (b as usize) < stars
-    }) {
+    if !t.pairs.iter().all(|&[a, b]| a < b && (b as usize) < stars) {
         fail!(Catalog, "a pair names a star the catalog does not have");
     }
     if t.kvector != build_kvector(&t.keys, t.shift, t.max_key) {

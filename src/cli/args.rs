@@ -135,6 +135,10 @@ pub enum FovArg {
     Range(f64, f64),
 }
 
+fn parse_hint_arg(s: &str) -> std::result::Result<gpustar::sky::hint::HintSource, String> {
+    gpustar::sky::hint::parse_hint(s).map_err(|e| e.to_string())
+}
+
 pub(crate) fn parse_fov(s: &str) -> std::result::Result<FovArg, String> {
     let num = |v: &str| -> std::result::Result<f64, String> {
         let x: f64 = v
@@ -192,6 +196,13 @@ pub struct SolveOpts {
     pub camera: CameraOpts,
     #[command(flatten)]
     pub catalog: CatalogOpts,
+    /// Where the frames point: RA,DEC[,RADIUS_DEG] (degrees, or RA as HH:MM:SS and Dec as
+    /// ±DD:MM:SS; radius default 1), or `header[,RADIUS_DEG]` for each frame's own header
+    /// (OBJCTRA/OBJCTDEC, RA/DEC, TELRA/TELDEC, or a rough WCS's CRVAL1/2 when CRPIX is near the
+    /// centre). A frame with a hint is solved from the catalog stars of that region first,
+    /// then lost-in-space; both searches share the false-match budget.
+    #[arg(long, value_parser = parse_hint_arg)]
+    pub hint: Option<gpustar::sky::hint::HintSource>,
     /// Write the records here instead of stdout.
     #[arg(short, long)]
     pub output: Option<PathBuf>,

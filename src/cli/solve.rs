@@ -163,6 +163,9 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
         None => {}
     }
     let mut solvers = Solvers::new(catalog, s, camera);
+    if let Some(h) = o.hint {
+        solvers = solvers.with_hints(h);
+    }
     solvers.darks = match (&o.dark, o.dark_median) {
         (Some(path), _) => Darks::from_file(path).context("--dark")?,
         (None, true) => Darks::directory_median(),

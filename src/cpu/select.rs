@@ -1,19 +1,20 @@
 //! Stage `select`: each image star keeps its `k` catalog stars with the most votes, best first;
-//! ties go to the lowest id. A candidate is packed as `(votes << 16) | (0xFFFF − id)`, so that
-//! the order is total and the GPU finds the same list with `atomicMax` in any scheduling
-//! (round r takes the largest key below round r − 1's).
+//! ties go to the lowest id. A candidate is packed as `(votes << 32) | (0xFFFFFFFF − id)`, so
+//! that the order is total and any scheduling of the GPU finds the same list (the GPU stores
+//! it as two words, low first, which is this u64 in little-endian memory).
 
-/// Pack votes and id into the tie-free argmax key (votes saturate at 0xFFFF).
+/// Pack votes and id into the tie-free key (votes saturate at 0xFFFF, the radix select's
+/// two bytes; ids take 32 bits).
 #[inline]
-pub fn pack_candidate(votes: u32, id: u32) -> u32 {
-    (votes.min(0xFFFF) << 16) | (0xFFFF - id)
+pub fn pack_candidate(votes: u32, id: u32) -> u64 {
+    (u64::from(votes.min(0xFFFF)) << 32) | u64::from(u32::MAX - id)
 }
 
 /// (votes, id) of a packed candidate, or None for an empty slot.
 #[inline]
-pub fn unpack_candidate(packed: u32) -> Option<(u32, u32)> {
-    let votes = packed >> 16;
-    (votes > 0).then_some((votes, 0xFFFF - (packed & 0xFFFF)))
+pub fn unpack_candidate(packed: u64) -> Option<(u32, u32)> {
+    let votes = (packed >> 32) as u32;
+    (votes > 0).then_some((votes, u32::MAX - packed as u32))
 }
 
 /// The `k` best candidates of each image star, `out[star · k + rank]` (0 = empty slot).
@@ -21,10 +22,10 @@ pub fn unpack_candidate(packed: u32) -> Option<(u32, u32)> {
 /// As the GPU does it: find T, the (saturated) votes of the m-th best candidate
 /// (m = min(k, candidates with votes)), by counting votes; keep every candidate above T and the
 /// lowest ids among those at T; sort the m keys.
-pub fn select(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u32> {
-    let mut out = vec![0u32; n_stars * k];
+pub fn select(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64> {
+    let mut out = vec![0u64; n_stars * k];
     let mut counts: Vec<u32> = Vec::new();
-    let mut keys: Vec<u32> = Vec::with_capacity(k);
+    let mut keys: Vec<u64> = Vec::with_capacity(k);
     for s in 0..n_stars {
         let row = &votes[s * n_ref..(s + 1) * n_ref];
         let top = row.iter().map(|&v| v.min(0xFFFF)).max().unwrap_or(0) as usize;

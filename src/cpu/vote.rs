@@ -5,8 +5,8 @@
 use crate::catalog::table::PairTable;
 use bytemuck::{Pod, Zeroable};
 
-/// One image-star pair and its key range (inclusive), made on the CPU in f64.
-/// Keep in sync with `shaders/shared/vote.wgsl`.
+/// One image-star pair and its key range (inclusive), made on the CPU in f64. (The GPU gets
+/// the table rows of the range, `gpu::vote::RowSpan`.)
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct PairRange {
@@ -36,9 +36,9 @@ pub fn vote(
             if r.i as usize != s && r.j as usize != s {
                 continue;
             }
-            for &p in &table.pairs[rows.clone()] {
-                counters[(p & 0xFFFF) as usize] += 1;
-                counters[(p >> 16) as usize] += 1;
+            for &[a, b] in &table.pairs[rows.clone()] {
+                counters[a as usize] += 1;
+                counters[b as usize] += 1;
             }
         }
     }

@@ -353,6 +353,18 @@ impl Gpu {
         buf
     }
 
+    /// A uniform buffer of its own: for dispatches of one submission that each need their
+    /// own values (a reused one holds only the last value written before the submission).
+    fn uniform_owned<T: bytemuck::Pod>(&self, label: &'static str, value: &T) -> wgpu::Buffer {
+        use wgpu::util::DeviceExt;
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::bytes_of(value),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+    }
+
     /// A buffer to copy results into and map (reused between batches).
     fn staging(&self, label: &'static str, size: u64) -> wgpu::Buffer {
         let usage = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;

@@ -115,7 +115,7 @@ impl Gpu {
         let image_buf = self.storage_init("radial image features", bytemuck::cast_slice(&image));
         let score_bytes = 4 * (n * stars) as u64 * table.refs as u64;
         let scores = self.storage("votes", score_bytes);
-        let cand_bytes = 4 * (n * stars * k) as u64;
+        let cand_bytes = 8 * (n * stars * k) as u64;
         let cands = self.storage("candidates", cand_bytes);
         let pl = &self.kernels;
         let bg_radial = self.bind_group(
@@ -144,7 +144,7 @@ impl Gpu {
         enc.copy_buffer_to_buffer(&cands, 0, &stage, 0, cand_bytes);
         self.submit(enc)?;
         let bytes = self.read_all(&[(&stage, cand_bytes)])?;
-        let cands: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[0]);
+        let cands: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[0]);
         Ok(jobs
             .iter()
             .enumerate()

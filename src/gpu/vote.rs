@@ -13,27 +13,43 @@ use bytemuck::{Pod, Zeroable};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct VoteUniform {
     pub images: u32,
+    /// Voting stars counted in this dispatch (the stride of the vote counters).
     pub stars: u32,
     pub refs: u32,
     pub pairs_per_image: u32,
     pub k: u32,
-    pub shift: u32,
-    pub rows: u32,
-    pub kvector_len: u32,
+    /// First voting star counted: stars `star_lo .. star_lo + stars`.
+    pub star_lo: u32,
+    /// The table rows bound to this dispatch: `row_lo .. row_hi`.
+    pub row_lo: u32,
+    pub row_hi: u32,
+}
+
+/// One image-star pair and the table rows `start .. end` of its key range (found on the CPU
+/// with [`PairTable::range`], as the CPU twin does). Keep in sync with `shaders/shared/vote.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct RowSpan {
+    pub i: u32,
+    pub j: u32,
+    pub start: u32,
+    pub end: u32,
 }
 
 /// The most candidates per star the select kernel keeps (its workgroup array).
 pub const MAX_K: usize = 64;
 
-/// A distance table in GPU memory.
+/// A distance table in GPU memory: its pairs, in slices that each fit one binding.
 pub struct GpuTable {
-    keys: wgpu::Buffer,
-    pairs: wgpu::Buffer,
-    kvector: wgpu::Buffer,
-    rows: u32,
-    shift: u32,
-    kvector_len: u32,
+    slices: Vec<(std::ops::Range<u32>, wgpu::Buffer)>,
     refs: u32,
+}
+
+impl GpuTable {
+    /// How many bindings the table's pairs take.
+    pub fn slices(&self) -> usize {
+        self.slices.len()
+    }
 }
 
 /// One frame's part of a vote batch.
@@ -48,181 +64,222 @@ pub struct VoteJob {
 }
 
 impl Gpu {
-    /// Upload a table for `refs` reference stars.
+    /// Upload a table for `refs` reference stars, its pairs split into slices of at most one
+    /// binding each (a deep catalog's table is larger than `Limits::default()` allows one).
     pub fn upload_table(&self, t: &PairTable, refs: usize) -> Result<GpuTable> {
-        let bytes = 4 * t.len() as u64;
-        if bytes > self.max_binding() {
+        if t.len() > u32::MAX as usize || refs > u32::MAX as usize {
             fail!(
                 Gpu,
-                "the distance table ({} rows, {} MB) exceeds the GPU's largest buffer ({} MB): \
-                 lower --mag-limit or use --backend cpu",
-                t.len(),
-                bytes >> 20,
-                self.max_binding() >> 20
+                "the distance table has more rows or stars than 32-bit ids hold"
             );
         }
+        let per_slice = (self.max_binding() / 8).clamp(1, u32::MAX as u64) as usize;
+        let slices = (0..t.len().max(1))
+            .step_by(per_slice)
+            .map(|lo| {
+                let hi = (lo + per_slice).min(t.len());
+                let bytes: &[u8] = bytemuck::cast_slice(&t.pairs[lo..hi]);
+                (
+                    lo as u32..hi as u32,
+                    self.storage_owned("table pairs", bytes),
+                )
+            })
+            .collect();
         Ok(GpuTable {
-            keys: self.storage_owned("table keys", bytemuck::cast_slice(&t.keys)),
-            pairs: self.storage_owned("table pairs", bytemuck::cast_slice(&t.pairs)),
-            kvector: self.storage_owned("table k-vector", bytemuck::cast_slice(&t.kvector)),
-            rows: t.len() as u32,
-            shift: t.shift,
-            kvector_len: t.kvector.len() as u32,
+            slices,
             refs: refs as u32,
         })
     }
 
     /// Vote and select for each job, as `identify::vote_cpu` does.
-    pub fn vote(&self, table: &GpuTable, jobs: &[VoteJob]) -> Result<Vec<VoteResult>> {
-        Ok(self.vote_with(table, jobs, false, 2)?.0)
+    pub fn vote(
+        &self,
+        table: &PairTable,
+        gpu: &GpuTable,
+        jobs: &[VoteJob],
+    ) -> Result<Vec<VoteResult>> {
+        Ok(self.vote_with(table, gpu, jobs, false, 2)?.0)
     }
 
     /// For benchmarks: run the vote kernel only (`kernels` = 1) or vote and select (2).
-    pub fn vote_prefix(&self, table: &GpuTable, jobs: &[VoteJob], kernels: usize) -> Result<()> {
-        self.vote_with(table, jobs, false, kernels).map(|_| ())
+    pub fn vote_prefix(
+        &self,
+        table: &PairTable,
+        gpu: &GpuTable,
+        jobs: &[VoteJob],
+        kernels: usize,
+    ) -> Result<()> {
+        self.vote_with(table, gpu, jobs, false, kernels).map(|_| ())
     }
 
     /// As [`Gpu::vote`], with the vote counters read back (`votes[star · refs + id]` per job).
     pub fn vote_inspect(
         &self,
-        table: &GpuTable,
+        table: &PairTable,
+        gpu: &GpuTable,
         jobs: &[VoteJob],
     ) -> Result<(Vec<VoteResult>, Vec<Vec<u32>>)> {
-        self.vote_with(table, jobs, true, 2)
+        self.vote_with(table, gpu, jobs, true, 2)
     }
 
     fn vote_with(
         &self,
-        table: &GpuTable,
+        table: &PairTable,
+        gpu: &GpuTable,
         jobs: &[VoteJob],
         inspect: bool,
         kernels: usize,
     ) -> Result<(Vec<VoteResult>, Vec<Vec<u32>>)> {
         let stars = jobs.iter().map(|j| j.stars).max().unwrap_or(0).max(1);
-        // Frames per submission so that the vote counters fit a binding.
-        let per_image = 4 * stars as u64 * table.refs as u64;
-        let chunk = ((self.max_binding() / per_image.max(1)) as usize).clamp(1, u16::MAX as usize);
+        let k = jobs.iter().map(|j| j.k).max().unwrap_or(1).clamp(1, MAX_K);
+        let refs = gpu.refs as usize;
+        let pairs_per_image = (stars * stars.saturating_sub(1) / 2).max(1);
+        // The vote counters of one star of one frame take `4 · refs` bytes: frames per
+        // submission, or for a catalog too deep for one frame's counters, stars per dispatch.
+        let fit = (self.max_binding() / (4 * refs.max(1) as u64)).max(1) as usize;
+        let window = stars.min(fit);
+        let frames = (fit / stars).clamp(1, u16::MAX as usize);
         let mut results = Vec::with_capacity(jobs.len());
         let mut votes = Vec::new();
-        for part in jobs.chunks(chunk) {
-            let (r, v) = self.vote_chunk(table, part, stars, inspect, kernels)?;
-            results.extend(r);
-            votes.extend(v);
+        for part in jobs.chunks(frames) {
+            let n = part.len();
+            // Row spans found on the CPU, as `cpu::vote` finds them; padding spans are empty.
+            let mut spans = vec![RowSpan::default(); n * pairs_per_image];
+            for (f, job) in part.iter().enumerate() {
+                if job.ranges.len() > pairs_per_image || job.stars > stars || job.k > MAX_K {
+                    fail!(Gpu, "a vote job has more pairs than its stars allow");
+                }
+                for (slot, r) in spans[f * pairs_per_image..].iter_mut().zip(&job.ranges) {
+                    let rows = table.range(r.lo, r.hi);
+                    *slot = RowSpan {
+                        i: r.i,
+                        j: r.j,
+                        start: rows.start as u32,
+                        end: rows.end as u32,
+                    };
+                }
+            }
+            let mut cands = vec![0u64; n * stars * k];
+            let mut counters = vec![Vec::new(); if inspect { n } else { 0 }];
+            for lo in (0..stars).step_by(window) {
+                let count = window.min(stars - lo);
+                let (c, v) = self.vote_window(
+                    gpu,
+                    &spans,
+                    n,
+                    pairs_per_image,
+                    (lo, count),
+                    k,
+                    inspect,
+                    kernels,
+                )?;
+                for f in 0..n {
+                    let at = (f * stars + lo) * k;
+                    cands[at..at + count * k].copy_from_slice(&c[f * count * k..][..count * k]);
+                    if inspect {
+                        counters[f].extend_from_slice(&v[f * count * refs..][..count * refs]);
+                    }
+                }
+            }
+            for (f, job) in part.iter().enumerate() {
+                let hypotheses = spans[f * pairs_per_image..][..job.ranges.len()]
+                    .iter()
+                    .map(|s| u64::from(s.end - s.start))
+                    .sum();
+                results.push(VoteResult {
+                    candidates: frame_candidates(&cands, f, stars, k, job.stars, job.k),
+                    k: job.k,
+                    hypotheses,
+                });
+            }
+            for (f, job) in part.iter().enumerate().filter(|_| inspect) {
+                counters[f].truncate(job.stars * refs);
+                votes.push(std::mem::take(&mut counters[f]));
+            }
         }
         Ok((results, votes))
     }
 
-    fn vote_chunk(
+    /// Vote and select for the voting stars `lo .. lo + count` of `n` frames: one vote
+    /// dispatch per table slice into the same counters, then select. Returns the candidates
+    /// (`count · k` per frame) and, with `inspect`, the counters (`count · refs` per frame).
+    #[allow(clippy::too_many_arguments)]
+    fn vote_window(
         &self,
-        table: &GpuTable,
-        jobs: &[VoteJob],
-        stars: usize,
+        gpu: &GpuTable,
+        spans: &[RowSpan],
+        n: usize,
+        pairs_per_image: usize,
+        (lo, count): (usize, usize),
+        k: usize,
         inspect: bool,
         kernels: usize,
-    ) -> Result<(Vec<VoteResult>, Vec<Vec<u32>>)> {
-        let n = jobs.len();
-        let k = jobs.iter().map(|j| j.k).max().unwrap_or(1).clamp(1, MAX_K);
-        let pairs_per_image = (stars * stars.saturating_sub(1) / 2).max(1);
-        let mut ranges = vec![
-            PairRange {
-                i: 0,
-                j: 0,
-                lo: 1,
-                hi: 0
-            };
-            n * pairs_per_image
-        ];
-        for (f, job) in jobs.iter().enumerate() {
-            if job.ranges.len() > pairs_per_image || job.stars > stars {
-                fail!(Gpu, "a vote job has more pairs than its stars allow");
-            }
-            ranges[f * pairs_per_image..][..job.ranges.len()].copy_from_slice(&job.ranges);
-        }
-        let u = VoteUniform {
+    ) -> Result<(Vec<u64>, Vec<u32>)> {
+        let uniform_of = |rows: &std::ops::Range<u32>| VoteUniform {
             images: n as u32,
-            stars: stars as u32,
-            refs: table.refs,
+            stars: count as u32,
+            refs: gpu.refs,
             pairs_per_image: pairs_per_image as u32,
             k: k as u32,
-            shift: table.shift,
-            rows: table.rows,
-            kvector_len: table.kvector_len,
+            star_lo: lo as u32,
+            row_lo: rows.start,
+            row_hi: rows.end,
         };
-        let uniform = self.uniform("vote params", &u);
-        let range_buf = self.storage_init("pair ranges", bytemuck::cast_slice(&ranges));
-        let vote_bytes = 4 * (n * stars) as u64 * table.refs as u64;
+        let span_buf = self.storage_init("row spans", bytemuck::cast_slice(spans));
+        let vote_bytes = 4 * (n * count) as u64 * gpu.refs as u64;
         let votes = self.storage("votes", vote_bytes);
-        let hyp = self.storage("hypotheses", 8 * n as u64);
-        let cand_bytes = 4 * (n * stars * k) as u64;
+        let cand_bytes = 8 * (n * count * k) as u64;
         let cands = self.storage("candidates", cand_bytes);
         let pl = &self.kernels;
-        let bg_vote = self.bind_group(
-            &pl.vote,
-            &[
-                &uniform,
-                &table.keys,
-                &table.pairs,
-                &table.kvector,
-                &range_buf,
-                &votes,
-                &hyp,
-            ],
-        );
-        let bg_select = self.bind_group(&pl.select, &[&uniform, &votes, &cands]);
+        // A uniform of its own per slice: they are all written before the one submission.
+        let uniforms: Vec<wgpu::Buffer> = gpu
+            .slices
+            .iter()
+            .map(|(rows, _)| self.uniform_owned("vote params", &uniform_of(rows)))
+            .collect();
+        let bg_votes: Vec<wgpu::BindGroup> = gpu
+            .slices
+            .iter()
+            .zip(&uniforms)
+            .map(|((_, pairs), u)| self.bind_group(&pl.vote, &[u, pairs, &span_buf, &votes]))
+            .collect();
+        let bg_select = self.bind_group(&pl.select, &[&uniforms[0], &votes, &cands]);
         let stage_votes = inspect.then(|| self.staging("votes out", vote_bytes));
-        let stage_hyp = self.staging("hypotheses out", 8 * n as u64);
         let stage_cands = self.staging("candidates out", cand_bytes);
 
         let mut enc = self.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&votes, 0, Some(vote_bytes));
-        enc.clear_buffer(&hyp, 0, Some(8 * n as u64));
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
             let total = (n * pairs_per_image) as u32;
             if kernels >= 1 {
-                super::dispatch_strided(&mut pass, &pl.vote, &bg_vote, total, 1);
+                for bg in &bg_votes {
+                    super::dispatch_strided(&mut pass, &pl.vote, bg, total, 1);
+                }
             }
             if kernels >= 2 {
                 pass.set_pipeline(&pl.select);
                 pass.set_bind_group(0, &bg_select, &[]);
-                pass.dispatch_workgroups(stars as u32, n as u32, 1);
+                pass.dispatch_workgroups(count as u32, n as u32, 1);
             }
         }
         if let Some(sv) = &stage_votes {
             enc.copy_buffer_to_buffer(&votes, 0, sv, 0, vote_bytes);
         }
-        enc.copy_buffer_to_buffer(&hyp, 0, &stage_hyp, 0, 8 * n as u64);
         enc.copy_buffer_to_buffer(&cands, 0, &stage_cands, 0, cand_bytes);
         self.submit(enc)?;
 
-        let mut staged = vec![(&stage_hyp, 8 * n as u64), (&stage_cands, cand_bytes)];
+        let mut staged = vec![(&stage_cands, cand_bytes)];
         if let Some(v) = &stage_votes {
             staged.push((v, vote_bytes));
         }
         let bytes = self.read_all(&staged)?;
-        let hyp: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[0]);
-        let cands: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[1]);
-        let results = jobs
-            .iter()
-            .enumerate()
-            .map(|(f, job)| VoteResult {
-                candidates: frame_candidates(&cands, f, stars, k, job.stars, job.k),
-                k: job.k,
-                hypotheses: hyp[2 * f] as u64 | (hyp[2 * f + 1] as u64) << 32,
-            })
-            .collect();
-        let votes_out = match bytes.get(2) {
-            Some(b) => {
-                let v: Vec<u32> = bytemuck::pod_collect_to_vec(b);
-                let per = stars * table.refs as usize;
-                jobs.iter()
-                    .enumerate()
-                    .map(|(f, job)| v[f * per..][..job.stars * table.refs as usize].to_vec())
-                    .collect()
-            }
-            None => Vec::new(),
-        };
-        Ok((results, votes_out))
+        let cands: Vec<u64> = bytemuck::pod_collect_to_vec(&bytes[0]);
+        let votes = bytes
+            .get(1)
+            .map(|b| bytemuck::pod_collect_to_vec(b))
+            .unwrap_or_default();
+        Ok((cands, votes))
     }
 }
 
@@ -230,13 +287,13 @@ impl Gpu {
 /// frame), for its own `own` stars, `want` per star: the k best of a best-first list of
 /// K ≥ k are its first k (empty slots beyond K).
 pub(super) fn frame_candidates(
-    cands: &[u32],
+    cands: &[u64],
     f: usize,
     stars: usize,
     k: usize,
     own: usize,
     want: usize,
-) -> Vec<u32> {
+) -> Vec<u64> {
     let mut out = Vec::with_capacity(own * want);
     for s in 0..own {
         let row = &cands[(f * stars + s) * k..][..k];

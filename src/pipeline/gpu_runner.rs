@@ -2,7 +2,7 @@
 
 use super::{
     BACKEND_CPU, CameraSource, Decoded, DetectKey, Detected, SizeGroup, Solvers, decoded_frame,
-    solve_with,
+    identify_hinted, solve_with,
 };
 use crate::cpu::centroid::Blob;
 use crate::error::{Result, error, fail};
@@ -68,13 +68,24 @@ impl GpuRunner {
             let indices: Vec<usize> = group.iter().map(|(i, _)| *i).collect();
             let solver = solvers.get(w, h);
             let recs: Vec<Record> = match solver.as_ref() {
+                // No lost-in-space solver (e.g. a catalog too deep for one): frames with a
+                // hint are solved within its region, on the CPU.
                 Err(e) => group
                     .iter()
-                    .map(|(_, d)| Record::error(&d.name, e.clone(), &self.name()))
+                    .map(|(_, d)| {
+                        let f = decoded_frame(d);
+                        match solvers.regional(d, f) {
+                            Some(r) => solve_with(solvers, &r, None, d, f),
+                            None => Record::error(&d.name, e.clone(), &self.name()),
+                        }
+                    })
                     .collect(),
                 Ok(s) if self.failed => group
                     .iter()
-                    .map(|(_, d)| solve_with(solvers, s, d, decoded_frame(d)))
+                    .map(|(_, d)| {
+                        let f = decoded_frame(d);
+                        solve_with(solvers, s, solvers.regional(d, f).as_ref(), d, f)
+                    })
                     .collect(),
                 Ok(s) => self.solve_group(solvers, s, &group),
             };
@@ -171,7 +182,18 @@ impl GpuRunner {
     ) -> Vec<Record> {
         let frames: Vec<&Frame> = group.iter().map(|(_, d)| decoded_frame(d)).collect();
         let epochs: Vec<Option<f64>> = group.iter().map(|(_, d)| d.epoch).collect();
-        match self.gpu_group(solver, &frames, &epochs, solvers.streaks.as_ref()) {
+        let regional: Vec<Option<Solver>> = group
+            .iter()
+            .zip(&frames)
+            .map(|((_, d), f)| solvers.regional(d, f))
+            .collect();
+        match self.gpu_group(
+            solver,
+            &regional,
+            &frames,
+            &epochs,
+            solvers.streaks.as_ref(),
+        ) {
             Ok((solutions, found, detect_ms, identify_ms)) => {
                 let backend = self.gpu.backend_name();
                 let n = group.len() as f64;
@@ -197,20 +219,24 @@ impl GpuRunner {
                 self.failed = true;
                 group
                     .iter()
-                    .map(|(_, d)| solve_with(solvers, solver, d, decoded_frame(d)))
+                    .zip(&regional)
+                    .map(|((_, d), r)| solve_with(solvers, solver, r.as_ref(), d, decoded_frame(d)))
                     .collect()
             }
         }
     }
 
     /// One batch on the GPU: detection (with the streak mask, when asked) in one submission,
-    /// then for each scale tried (one, unless the scale is searched) a vote of the frames not
-    /// solved yet in one submission; streak fits, verification and refinement on the CPU.
+    /// then the frames with a pointing hint within its region (`regional`; the CPU twin votes:
+    /// a region's table is a few thousand rows, less work than its upload), then for each
+    /// scale tried (one, unless the scale is searched) a vote of the frames not solved yet in
+    /// one submission; streak fits, verification and refinement on the CPU.
     /// Returns the solutions, the streaks, and the batch's detection and identification times
     /// (ms).
     pub(crate) fn gpu_group(
         &mut self,
         solver: &Solver,
+        regional: &[Option<Solver>],
         frames: &[&Frame],
         epochs: &[Option<f64>],
         streak_opts: Option<&StreakOptions>,
@@ -237,6 +263,14 @@ impl GpuRunner {
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
         let mut outcomes: Vec<Outcome> = vec![Outcome::Unsolved("too_few_stars"); frames.len()];
+        for (i, r) in regional.iter().enumerate() {
+            if let Some(r) = r {
+                let sol = r.identify(detections[i].clone(), epochs[i]);
+                if matches!(sol.outcome, Outcome::Solved(..)) {
+                    outcomes[i] = sol.outcome;
+                }
+            }
+        }
         for h in 0..solver.passes.len() {
             let prepared: Vec<(usize, Prepared)> = detections
                 .iter()
@@ -302,7 +336,7 @@ impl GpuRunner {
                     k: p.k,
                 })
                 .collect();
-            let voted = self.gpu.vote(table, &jobs)?;
+            let voted = self.gpu.vote(&solver.bands[key.2].table, table, &jobs)?;
             for ((i, p), v) in prepared.iter().zip(voted) {
                 outcomes[*i] = solver.finish(&detections[*i], p, &v, epochs[*i]);
             }
@@ -331,7 +365,7 @@ impl GpuRunner {
                     .detect(&subset, &detect::params(frames[0], &filtered))?;
                 let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
                 for (&i, d) in unsolved.iter().zip(stars) {
-                    let again = solver.identify(d, epochs[i]);
+                    let again = identify_hinted(regional[i].as_ref(), solver, d, epochs[i]);
                     if matches!(again.outcome, Outcome::Solved(..)) {
                         solutions[i] = again;
                     }

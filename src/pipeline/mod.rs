@@ -13,13 +13,16 @@ use crate::io::dark::Darks;
 use crate::io::frame::Frame;
 use crate::products::Products;
 use crate::record::{Record, Timing};
+use crate::sky::hint::{Hint, HintSource, hint_from_header};
+use crate::solve::detect::Detection;
 use crate::solve::detect::{self, DetectSettings};
+use crate::solve::hinted::{RegionIndex, regional_solver};
 use crate::solve::{Outcome, Settings, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 pub use gpu_runner::*;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 /// Where the camera model comes from.
@@ -75,7 +78,11 @@ pub struct Solvers {
     pub products: Products,
     /// `--streaks`: find satellite streaks, keep them out of star detection, reduce them.
     pub streaks: Option<StreakOptions>,
+    /// `--hint`: solve each frame within its pointing hint's region first.
+    pub hint: Option<HintSource>,
     map: Mutex<HashMap<(u32, u32), SharedSolver>>,
+    /// The catalog's directions for hints' cone searches, made on first use.
+    regions: OnceLock<RegionIndex>,
 }
 
 /// A frame after its pixel stages (the sequence stage's input): its detections, or the
@@ -112,7 +119,50 @@ impl Solvers {
             darks: Darks::None,
             products: Products::default(),
             streaks: None,
+            hint: None,
             map: Mutex::new(HashMap::new()),
+            regions: OnceLock::new(),
+        }
+    }
+
+    /// Use pointing hints: a frame with one is solved within its region first, and
+    /// lost-in-space after; both searches then share the false-match budget.
+    pub fn with_hints(mut self, hint: HintSource) -> Solvers {
+        self.hint = Some(hint);
+        self.settings.searches = 2;
+        self
+    }
+
+    /// The pointing hint of a frame, if the run uses hints and the frame has one.
+    pub fn hint_of(&self, d: &Decoded, frame: &Frame) -> Option<Hint> {
+        match self.hint? {
+            HintSource::Fixed(h) => Some(h),
+            HintSource::Header { radius_deg } => hint_from_header(
+                &|k| d.keywords.get(k).cloned(),
+                (frame.width, frame.height),
+                radius_deg,
+            ),
+        }
+    }
+
+    /// The solver of a frame's hinted region, if it has a hint (None also when the region
+    /// holds too few catalog stars: the frame is then solved lost-in-space alone).
+    pub fn regional(&self, d: &Decoded, frame: &Frame) -> Option<Solver> {
+        let hint = self.hint_of(d, frame)?;
+        let camera = self.camera_for(frame.width, frame.height).ok()?;
+        let index = self
+            .regions
+            .get_or_init(|| RegionIndex::new(&self.catalog, self.settings.epoch));
+        match regional_solver(&self.catalog, index, &camera, &self.settings, &hint) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                tracing::debug!(
+                    "{}: no search within the hint ({}): {e:#}",
+                    d.name,
+                    hint.source
+                );
+                None
+            }
         }
     }
 
@@ -172,6 +222,7 @@ impl Solvers {
             },
         };
         r.warnings.extend(d.warnings.iter().cloned());
+        r.hint = self.hint_of(d, frame).map(|h| hint_record(&h, &r));
         self.add_streaks(&mut r, d, sol, found);
         let drawn = found.unwrap_or_default();
         if let Err(e) = self.products.write(&d.path, &d.name, frame, sol, drawn) {
@@ -209,7 +260,13 @@ impl Solvers {
     }
 
     fn build(&self, width: u32, height: u32) -> std::result::Result<Solver, String> {
-        let camera = match &self.camera {
+        let camera = self.camera_for(width, height)?;
+        Solver::new(&self.catalog, camera, self.settings).map_err(|e| format!("{e:#}"))
+    }
+
+    /// The camera of frames of this size, or why there is none.
+    fn camera_for(&self, width: u32, height: u32) -> std::result::Result<Camera, String> {
+        Ok(match &self.camera {
             CameraSource::Fixed(c) => {
                 if (c.width, c.height) != (width, height) {
                     return Err(crate::io::frame::wrong_size(
@@ -230,8 +287,7 @@ impl Solvers {
                 }
                 Camera::from_fov(width, height, *fov).map_err(|e| format!("{e:#}"))?
             }
-        };
-        Solver::new(&self.catalog, camera, self.settings).map_err(|e| format!("{e:#}"))
+        })
     }
 
     /// The pixel stages alone on the CPU (`--sequence`), keeping the brightest `max_stars`.
@@ -262,12 +318,14 @@ impl Solvers {
         if matches!(self.camera, CameraSource::None) {
             return self.streaks_only(&d, frame);
         }
+        let regional = self.regional(&d, frame);
         let solver = self.get(frame.width, frame.height);
-        let solver = match solver.as_ref() {
-            Ok(s) => s,
-            Err(e) => return Record::error(&d.name, e.clone(), BACKEND_CPU),
-        };
-        solve_with(self, solver, &d, frame)
+        match (solver.as_ref(), &regional) {
+            (Ok(s), _) => solve_with(self, s, regional.as_ref(), &d, frame),
+            // No lost-in-space solver (e.g. a catalog too deep for one): the region alone.
+            (Err(_), Some(r)) => solve_with(self, r, None, &d, frame),
+            (Err(e), None) => Record::error(&d.name, e.clone(), BACKEND_CPU),
+        }
     }
 
     /// A frame without a camera: its streaks through the header's WCS, its stars detected
@@ -296,11 +354,36 @@ impl Solvers {
     }
 }
 
-/// Solve a decoded frame with a known solver on the CPU.
-fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) -> Record {
+/// Identify within a frame's hinted region first (when it has one), then lost-in-space.
+pub(crate) fn identify_hinted(
+    regional: Option<&Solver>,
+    solver: &Solver,
+    detections: Vec<Detection>,
+    epoch: Option<f64>,
+) -> Solution {
+    if let Some(r) = regional {
+        let sol = r.identify(detections.clone(), epoch);
+        if matches!(sol.outcome, Outcome::Solved(..)) {
+            return sol;
+        }
+    }
+    solver.identify(detections, epoch)
+}
+
+/// Solve a decoded frame with a known solver on the CPU (within its hinted region first,
+/// when `regional` is given).
+fn solve_with(
+    solvers: &Solvers,
+    solver: &Solver,
+    regional: Option<&Solver>,
+    d: &Decoded,
+    frame: &Frame,
+) -> Record {
     let (sol, found, detect_ms, identify_ms) = match &solvers.streaks {
         None => {
-            let (sol, detect_ms, identify_ms) = solver.solve_frame_at(frame, d.epoch);
+            let (sol, detect_ms, identify_ms) = solver.solve_frame_with(frame, |dets| {
+                identify_hinted(regional, solver, dets, d.epoch)
+            });
             (sol, None, detect_ms, identify_ms)
         }
         Some(o) => {
@@ -310,7 +393,7 @@ fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) ->
             let (blobs, found) = streaks::detect_cpu(frame, &p, &o.settings, s.k_sigma);
             let dets = detect::stars(frame, &blobs, s);
             let t1 = Instant::now();
-            let sol = solver.identify(dets, d.epoch);
+            let sol = identify_hinted(regional, solver, dets, d.epoch);
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
             (sol, Some(found), ms(t0, t1), ms(t1, Instant::now()))
         }
@@ -330,6 +413,23 @@ fn solve_with(solvers: &Solvers, solver: &Solver, d: &Decoded, frame: &Frame) ->
         timing,
         BACKEND_CPU,
     )
+}
+
+/// A record's account of the hint its frame had: where, from which keywords, and how far the
+/// solution lies from it.
+fn hint_record(h: &Hint, r: &Record) -> crate::record::HintRecord {
+    let offset_deg = r.ra_deg.zip(r.dec_deg).map(|(ra, dec)| {
+        let a = crate::catalog::radec_to_vector(ra, dec);
+        let b = crate::catalog::radec_to_vector(h.ra_deg, h.dec_deg);
+        crate::camera::angle(&a, &b).to_degrees()
+    });
+    crate::record::HintRecord {
+        ra_deg: h.ra_deg,
+        dec_deg: h.dec_deg,
+        radius_deg: h.radius_deg,
+        source: h.source.to_string(),
+        offset_deg,
+    }
 }
 
 /// The frame of a decoded input that was grouped for solving (only decoded ones are).

@@ -12,6 +12,7 @@
 pub mod azel;
 pub mod earth;
 pub mod header;
+pub mod hint;
 pub mod station;
 pub mod time;
 

@@ -2,7 +2,7 @@
 //! of identification, and the order detections are tried in.
 
 use super::detect::Detection;
-use super::{Settings, auto_mag_limit};
+use super::{Settings, auto_mag_limit_in};
 use crate::camera::Camera;
 use crate::catalog::table::{self, PairTable, TableOrigin};
 use crate::catalog::{Catalog, RefCatalog, Selection};
@@ -59,7 +59,7 @@ impl Band {
             epoch: settings.epoch,
             mag_limit: mag_limit
                 .or(settings.mag_limit)
-                .unwrap_or_else(|| auto_mag_limit(catalog, &middle)),
+                .unwrap_or_else(|| auto_mag_limit_in(catalog, &middle, settings.sky_sr)),
             double_stars: settings.double_stars,
             double_sep_rad: settings.double_star_px * middle.ifov_rad(),
         };
@@ -116,7 +116,7 @@ pub(crate) struct Deeper {
 }
 
 /// (magnitude limit in tenths, epoch in days) of a selection; its value None = the selection
-/// failed (too many stars for 16-bit ids).
+/// failed (fewer than 3 stars).
 pub(crate) type SelectionKey = (i64, i64);
 
 /// Frames dated within this many years of the run's epoch use the run's star positions

@@ -71,7 +71,7 @@ pub fn pair_ranges(
 #[derive(Clone, Debug, Default)]
 pub struct VoteResult {
     /// The best `candidates` packed candidates per voting star (see `cpu::select`).
-    pub candidates: Vec<u32>,
+    pub candidates: Vec<u64>,
     /// Candidates kept per star.
     pub k: usize,
     /// (pair, row) hypotheses scanned: the multiple-testing factor of the false-match probability.

@@ -208,7 +208,7 @@ pub fn image_features(vectors: &[Vector3<f64>], t: &RadialTable) -> Vec<u32> {
 /// are `select`'s packed lists (`k` per star); `ranges` the vote's pair ranges of these stars.
 /// Returns the hypotheses in order.
 pub fn triangles(
-    candidates: &[u32],
+    candidates: &[u64],
     k: usize,
     ranges: &[PairRange],
     vectors: &[Vector3<f64>],

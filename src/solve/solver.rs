@@ -49,6 +49,12 @@ pub struct Settings {
     pub detect_retry: bool,
     /// How stars are identified: the vote, or radial features + triangles.
     pub method: crate::solve::radial::Method,
+    /// Solid angle the catalog covers: the whole sky, or a hinted region's cone (what the
+    /// automatic magnitude limit counts stars per field against).
+    pub sky_sr: f64,
+    /// Searches of one frame that share the false-match budget, each judged against its share:
+    /// 2 when a pointing hint's regional search may be followed by lost-in-space.
+    pub searches: u64,
 }
 
 impl Default for Settings {
@@ -66,6 +72,8 @@ impl Default for Settings {
             retry: true,
             detect_retry: true,
             method: crate::solve::radial::Method::Vote,
+            sky_sr: FULL_SKY_SR,
+            searches: 1,
         }
     }
 }
@@ -76,16 +84,29 @@ pub const AUTO_STARS_IN_VIEW: f64 = 40.0;
 /// The faintest magnitude at which the catalog holds on average [`AUTO_STARS_IN_VIEW`] stars
 /// in the camera's field (at least 5.0, at most the catalog's faintest).
 pub fn auto_mag_limit(catalog: &Catalog, camera: &Camera) -> f64 {
-    mag_limit_for(catalog, camera, AUTO_STARS_IN_VIEW).max(5.0)
+    auto_mag_limit_in(catalog, camera, FULL_SKY_SR)
+}
+
+/// [`auto_mag_limit`] for a catalog that covers `sky_sr` steradians (a hinted region's cone).
+pub fn auto_mag_limit_in(catalog: &Catalog, camera: &Camera, sky_sr: f64) -> f64 {
+    mag_limit_in(catalog, camera, AUTO_STARS_IN_VIEW, sky_sr).max(5.0)
 }
 
 /// The faintest magnitude at which the catalog holds on average `stars` stars in the camera's
 /// field (to a tenth; at most the catalog's faintest).
 pub fn mag_limit_for(catalog: &Catalog, camera: &Camera, stars: f64) -> f64 {
+    mag_limit_in(catalog, camera, stars, FULL_SKY_SR)
+}
+
+/// The solid angle of the whole sky.
+pub const FULL_SKY_SR: f64 = 4.0 * std::f64::consts::PI;
+
+/// [`mag_limit_for`] for a catalog that covers `sky_sr` steradians.
+pub fn mag_limit_in(catalog: &Catalog, camera: &Camera, stars: f64, sky_sr: f64) -> f64 {
     let fov_sr = (camera.fov_x_deg() * camera.fov_y_deg())
         .to_radians()
         .to_radians();
-    let fraction = fov_sr / (4.0 * std::f64::consts::PI);
+    let fraction = (fov_sr / sky_sr).min(1.0);
     let mut mags: Vec<f64> = catalog.stars.iter().map(|s| s.mag).collect();
     mags.sort_by(f64::total_cmp);
     let n = ((stars / fraction).round() as usize).clamp(1, mags.len());
@@ -180,7 +201,7 @@ impl Solver {
             .collect::<Result<Vec<Band>>>()?;
         // The shallow pass's band: with a known scale and the magnitude limit left to the
         // solver, when it is shallower than the automatic one by half a magnitude or more.
-        let shallow_mag = mag_limit_for(catalog, &camera, SHALLOW_STARS_IN_VIEW);
+        let shallow_mag = mag_limit_in(catalog, &camera, SHALLOW_STARS_IN_VIEW, settings.sky_sr);
         let shallow = (settings.retry
             && settings.scale_range.is_none()
             && settings.mag_limit.is_none()
@@ -492,7 +513,7 @@ impl Solver {
         fixed: usize,
     ) -> Option<(Refined, Arc<RefCatalog>)> {
         let deeper = self.deeper.as_ref()?;
-        let mag_limit = auto_mag_limit(&deeper.catalog, &accepted.camera);
+        let mag_limit = auto_mag_limit_in(&deeper.catalog, &accepted.camera, self.settings.sky_sr);
         let voted_with = self.bands[band].refs.selection;
         if mag_limit <= voted_with.mag_limit {
             return None;
@@ -564,7 +585,10 @@ impl Solver {
         // Every pass this frame can be tried with multiplies the hypotheses a chance match could
         // come from; the vote has half the error budget (see `STAGES`).
         let hypotheses = voted.hypotheses.saturating_mul(
-            STAGES * self.detection_stages() * self.passes_for(detections.len()) as u64,
+            STAGES
+                * self.settings.searches
+                * self.detection_stages()
+                * self.passes_for(detections.len()) as u64,
         );
         let refined = refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
             .ok_or("no_consistent_match")?;
@@ -615,7 +639,10 @@ impl Solver {
     ) -> Option<(Refined, u64, usize)> {
         let vectors = &p.vectors[..p.n_vote];
         let hypotheses = matched.saturating_mul(
-            STAGES * self.detection_stages() * self.passes_for(detections.len()) as u64,
+            STAGES
+                * self.settings.searches
+                * self.detection_stages()
+                * self.passes_for(detections.len()) as u64,
         );
         hyps.iter().find_map(|t| {
             let cam = t.stars.map(|i| vectors[i]);
@@ -635,10 +662,21 @@ impl Solver {
 
     /// Solve a decoded frame on the CPU, with its own observation epoch if it has one.
     pub fn solve_frame_at(&self, frame: &Frame, epoch: Option<f64>) -> (Solution, f64, f64) {
+        self.solve_frame_with(frame, |dets| self.identify(dets, epoch))
+    }
+
+    /// Detect, identify with `identify`, and detect again with the matched filter when that
+    /// does not solve (the detection retry). Returns the solution, detection and
+    /// identification times (ms).
+    pub fn solve_frame_with(
+        &self,
+        frame: &Frame,
+        identify: impl Fn(Vec<Detection>) -> Solution,
+    ) -> (Solution, f64, f64) {
         let t0 = Instant::now();
         let dets = detect::detect(frame, &self.settings.detect);
         let t1 = Instant::now();
-        let sol = self.identify(dets, epoch);
+        let sol = identify(dets);
         let t2 = Instant::now();
         let (mut detect_ms, identify_ms) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
         if matches!(sol.outcome, Outcome::Unsolved(_)) && self.detection_stages() > 1 {
@@ -646,7 +684,7 @@ impl Solver {
             let filtered = self.detect_filtered(frame);
             detect_ms += t3.elapsed().as_secs_f64();
             let t4 = Instant::now();
-            let again = self.identify(filtered, epoch);
+            let again = identify(filtered);
             let identify_ms = identify_ms + t4.elapsed().as_secs_f64();
             if matches!(again.outcome, Outcome::Solved(..)) {
                 return (again, detect_ms * 1e3, identify_ms * 1e3);

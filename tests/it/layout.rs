@@ -4,11 +4,10 @@
 use gpustar::cpu::centroid::Blob;
 use gpustar::cpu::streak_filter::StreakParams;
 use gpustar::cpu::threshold::{DetectParams, TileStats};
-use gpustar::cpu::vote::PairRange;
 use gpustar::gpu::detect::{BatchParams, DetectUniform, StreakUniform};
 use gpustar::gpu::psf_fit::{FitOut, PsfUniform};
 use gpustar::gpu::radial::RadialUniform;
-use gpustar::gpu::vote::VoteUniform;
+use gpustar::gpu::vote::{RowSpan, VoteUniform};
 use gpustar::gpu::{KERNELS, kernel_source};
 use std::mem::{offset_of, size_of};
 
@@ -134,12 +133,12 @@ fn host_and_wgsl_structs_have_the_same_layout() {
             refs,
             pairs_per_image,
             k,
-            shift,
-            rows,
-            kvector_len
+            star_lo,
+            row_lo,
+            row_hi
         ]
     );
-    assert_layout!(vote, "PairRange", PairRange, [i, j, lo, hi]);
+    assert_layout!(vote, "RowSpan", RowSpan, [i, j, start, end]);
 
     let streak = module("streak_filter");
     assert_layout!(

@@ -123,7 +123,8 @@ fn damaged_cache_files_are_rebuilt() {
     let file = o.cache_file.unwrap();
     let good = std::fs::read(&file).unwrap();
     let rows = built.len();
-    let (keys, pairs, kvector) = (48, 48 + 4 * rows, 48 + 8 * rows);
+    // Header 48 bytes; a key per row, then a pair of ids per row, then the k-vector.
+    let (keys, pairs, kvector) = (48, 48 + 4 * rows, 48 + 12 * rows);
     let put = |b: &mut Vec<u8>, at: usize, v: u32| b[at..at + 4].copy_from_slice(&v.to_le_bytes());
     type Scribble = Box<dyn Fn(&mut Vec<u8>)>;
     let cases: Vec<(&str, Scribble)> = vec![
@@ -132,8 +133,11 @@ fn damaged_cache_files_are_rebuilt() {
             Box::new(move |b| put(b, pairs + 40, 0xFFFF_FFFF)),
         ),
         (
-            "pair id in range",
-            Box::new(move |b| put(b, pairs + 40, 2 | 1 << 16)),
+            "pair ids in the wrong order",
+            Box::new(move |b| {
+                put(b, pairs + 40, 2);
+                put(b, pairs + 44, 1);
+            }),
         ),
         ("k-vector", Box::new(move |b| put(b, kvector + 8, u32::MAX))),
         (

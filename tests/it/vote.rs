@@ -144,3 +144,35 @@ fn gpu_votes_equal_cpu_on_simulated_frames() {
     assert_eq!(jobs.len(), 6);
     common::assert_votes_equal(&g, &solver, &jobs);
 }
+
+/// Issue 24, item 2: a table larger than one binding is voted through in slices, and vote
+/// counters larger than one binding a window of voting stars at a time; both give the CPU's
+/// counters and candidates exactly. The binding limit is lowered to force both splits.
+#[test]
+fn gpu_votes_equal_cpu_when_table_and_counters_are_split() {
+    let Some(mut g) = common::gpu("gpu_votes_equal_cpu_when_table_and_counters_are_split") else {
+        return;
+    };
+    let size = (1024, 1024);
+    let solver = common::solver(18.0, size);
+    let band = &solver.bands[0];
+    // A binding for the counters of 4 voting stars (a window), and a 60th of the table.
+    let refs = band.refs.len() as u64;
+    g.limits.max_storage_buffer_binding_size = 4 * refs * 4;
+    let table = g.upload_table(&band.table, band.refs.len()).unwrap();
+    assert!(table.slices() > 4, "{} slices", table.slices());
+    let jobs: Vec<VoteJob> = common::sim_frames(3, size, 18.0, 8, 22)
+        .iter()
+        .filter_map(|f| {
+            let d = gpustar::solve::detect::detect(f, &solver.settings.detect);
+            solver.prepare(&d, 0).map(|p| VoteJob {
+                ranges: p.ranges,
+                stars: p.n_vote,
+                k: p.k,
+            })
+        })
+        .collect();
+    assert_eq!(jobs.len(), 3);
+    assert!(jobs.iter().all(|j| j.stars > 8));
+    common::assert_votes_equal(&g, &solver, &jobs);
+}
