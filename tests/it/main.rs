@@ -20,6 +20,7 @@ mod end_to_end;
 mod faults;
 mod fits;
 mod formats;
+mod hint;
 mod gpu_pipeline;
 mod layout;
 mod noise;
