@@ -1,8 +1,8 @@
 //! The GPU side of a batch: frames grouped by size, detected, voted and fitted in few submissions; a failure moves the rest of the run to the CPU.
 
 use super::{
-    BACKEND_CPU, CameraSource, Decoded, DetectKey, Detected, SizeGroup, Solvers, decoded_frame,
-    identify_hinted, solve_with,
+    BACKEND_CPU, CameraSource, Decoded, DetectKey, Detected, Global, SizeGroup, Solvers,
+    decoded_frame, identify_hinted, solve_with,
 };
 use crate::cpu::centroid::Blob;
 use crate::error::{Result, error, fail};
@@ -75,7 +75,10 @@ impl GpuRunner {
                     .map(|(_, d)| {
                         let f = decoded_frame(d);
                         match solvers.regional(d, f) {
-                            Some(r) => solve_with(solvers, &r, None, d, f),
+                            Some(r) => {
+                                let none = Global::Lazy(solvers, (w, h));
+                                solve_with(solvers, &r, Some(&r), &none, d, f)
+                            }
                             None => Record::error(&d.name, e.clone(), &self.name()),
                         }
                     })
@@ -84,7 +87,8 @@ impl GpuRunner {
                     .iter()
                     .map(|(_, d)| {
                         let f = decoded_frame(d);
-                        solve_with(solvers, s, solvers.regional(d, f).as_ref(), d, f)
+                        let r = solvers.regional(d, f);
+                        solve_with(solvers, s, r.as_ref(), &Global::Ready(s), d, f)
                     })
                     .collect(),
                 Ok(s) => self.solve_group(solvers, s, &group),
@@ -220,7 +224,10 @@ impl GpuRunner {
                 group
                     .iter()
                     .zip(&regional)
-                    .map(|((_, d), r)| solve_with(solvers, solver, r.as_ref(), d, decoded_frame(d)))
+                    .map(|((_, d), r)| {
+                        let f = decoded_frame(d);
+                        solve_with(solvers, solver, r.as_ref(), &Global::Ready(solver), d, f)
+                    })
                     .collect()
             }
         }
@@ -365,7 +372,8 @@ impl GpuRunner {
                     .detect(&subset, &detect::params(frames[0], &filtered))?;
                 let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
                 for (&i, d) in unsolved.iter().zip(stars) {
-                    let again = identify_hinted(regional[i].as_ref(), solver, d, epochs[i]);
+                    let global = Global::Ready(solver);
+                    let again = identify_hinted(regional[i].as_ref(), &global, d, epochs[i]);
                     if matches!(again.outcome, Outcome::Solved(..)) {
                         solutions[i] = again;
                     }

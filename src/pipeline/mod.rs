@@ -318,13 +318,16 @@ impl Solvers {
         if matches!(self.camera, CameraSource::None) {
             return self.streaks_only(&d, frame);
         }
-        let regional = self.regional(&d, frame);
+        // A frame with a hint needs the lost-in-space solver (its distance table: for a deep
+        // catalog the largest thing a run builds) only when its region does not solve it.
+        if let Some(r) = self.regional(&d, frame) {
+            let global = Global::Lazy(self, (frame.width, frame.height));
+            return solve_with(self, &r, Some(&r), &global, &d, frame);
+        }
         let solver = self.get(frame.width, frame.height);
-        match (solver.as_ref(), &regional) {
-            (Ok(s), _) => solve_with(self, s, regional.as_ref(), &d, frame),
-            // No lost-in-space solver (e.g. a catalog too deep for one): the region alone.
-            (Err(_), Some(r)) => solve_with(self, r, None, &d, frame),
-            (Err(e), None) => Record::error(&d.name, e.clone(), BACKEND_CPU),
+        match solver.as_ref() {
+            Ok(s) => solve_with(self, s, None, &Global::Ready(s), &d, frame),
+            Err(e) => Record::error(&d.name, e.clone(), BACKEND_CPU),
         }
     }
 
@@ -354,35 +357,70 @@ impl Solvers {
     }
 }
 
+/// A frame's lost-in-space solver: at hand, or the size's, built when first needed.
+pub(crate) enum Global<'a> {
+    Ready(&'a Solver),
+    Lazy(&'a Solvers, (u32, u32)),
+}
+
+impl Global<'_> {
+    /// Identify lost-in-space; None when the size has no solver (the catalog or camera
+    /// cannot make one: the message is in the records of frames without a hint).
+    fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Option<Solution> {
+        match self {
+            Global::Ready(s) => Some(s.identify(detections, epoch)),
+            Global::Lazy(solvers, (w, h)) => match solvers.get(*w, *h).as_ref() {
+                Ok(s) => Some(s.identify(detections, epoch)),
+                Err(e) => {
+                    tracing::debug!("no lost-in-space search after the hint's: {e}");
+                    None
+                }
+            },
+        }
+    }
+}
+
 /// Identify within a frame's hinted region first (when it has one), then lost-in-space.
 pub(crate) fn identify_hinted(
     regional: Option<&Solver>,
-    solver: &Solver,
+    global: &Global,
     detections: Vec<Detection>,
     epoch: Option<f64>,
 ) -> Solution {
-    if let Some(r) = regional {
-        let sol = r.identify(detections.clone(), epoch);
-        if matches!(sol.outcome, Outcome::Solved(..)) {
-            return sol;
-        }
+    let Some(r) = regional else {
+        return global
+            .identify(detections.clone(), epoch)
+            .unwrap_or_else(|| unsolved(detections, epoch));
+    };
+    let sol = r.identify(detections.clone(), epoch);
+    if matches!(sol.outcome, Outcome::Solved(..)) {
+        return sol;
     }
-    solver.identify(detections, epoch)
+    global.identify(detections, epoch).unwrap_or(sol)
 }
 
-/// Solve a decoded frame with a known solver on the CPU (within its hinted region first,
-/// when `regional` is given).
+fn unsolved(detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
+    Solution {
+        detections,
+        outcome: Outcome::Unsolved("no_consistent_match"),
+        epoch,
+    }
+}
+
+/// Solve a decoded frame on the CPU: within its hinted region first when `regional` is given,
+/// then lost-in-space through `global`. `solver` gives detection's settings and the record.
 fn solve_with(
     solvers: &Solvers,
     solver: &Solver,
     regional: Option<&Solver>,
+    global: &Global,
     d: &Decoded,
     frame: &Frame,
 ) -> Record {
     let (sol, found, detect_ms, identify_ms) = match &solvers.streaks {
         None => {
             let (sol, detect_ms, identify_ms) = solver.solve_frame_with(frame, |dets| {
-                identify_hinted(regional, solver, dets, d.epoch)
+                identify_hinted(regional, global, dets, d.epoch)
             });
             (sol, None, detect_ms, identify_ms)
         }
@@ -393,7 +431,7 @@ fn solve_with(
             let (blobs, found) = streaks::detect_cpu(frame, &p, &o.settings, s.k_sigma);
             let dets = detect::stars(frame, &blobs, s);
             let t1 = Instant::now();
-            let sol = identify_hinted(regional, solver, dets, d.epoch);
+            let sol = identify_hinted(regional, global, dets, d.epoch);
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
             (sol, Some(found), ms(t0, t1), ms(t1, Instant::now()))
         }
