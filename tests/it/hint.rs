@@ -6,8 +6,14 @@ use crate::common;
 /// Boresight error of a solved record against its truth, degrees.
 fn boresight_error_deg(r: &serde_json::Value, t: &serde_json::Value) -> f64 {
     let v = |ra: f64, dec: f64| gpustar::catalog::radec_to_vector(ra, dec);
-    let a = v(r["ra_deg"].as_f64().unwrap(), r["dec_deg"].as_f64().unwrap());
-    let b = v(t["ra_deg"].as_f64().unwrap(), t["dec_deg"].as_f64().unwrap());
+    let a = v(
+        r["ra_deg"].as_f64().unwrap(),
+        r["dec_deg"].as_f64().unwrap(),
+    );
+    let b = v(
+        t["ra_deg"].as_f64().unwrap(),
+        t["dec_deg"].as_f64().unwrap(),
+    );
     gpustar::camera::angle(&a, &b).to_degrees()
 }
 
@@ -20,7 +26,17 @@ fn hinted_frames_solve_in_their_region_and_a_wrong_hint_falls_back() {
     let out = dir.path().join("out.jsonl");
     let run = |hint: &str| {
         let (f, o) = (frames.to_str().unwrap(), out.to_str().unwrap());
-        let mut args = vec!["batch", f, "--fov-deg", "18", "--backend", "cpu", "-q", "-o", o];
+        let mut args = vec![
+            "batch",
+            f,
+            "--fov-deg",
+            "18",
+            "--backend",
+            "cpu",
+            "-q",
+            "-o",
+            o,
+        ];
         args.extend(["--hint", hint]);
         common::run_ok(&args);
         std::fs::read_to_string(&out)
@@ -51,7 +67,10 @@ fn hinted_frames_solve_in_their_region_and_a_wrong_hint_falls_back() {
     assert!(offset(&far[0]) > 170.0, "{}", far[0]["hint"]);
     // Frames without header keywords under `--hint header`: lost-in-space, no hint field.
     let none = run("header");
-    assert!(none.iter().all(|r| r["status"] == "solved" && r.get("hint").is_none()));
+    assert!(
+        none.iter()
+            .all(|r| r["status"] == "solved" && r.get("hint").is_none())
+    );
 }
 
 #[test]
@@ -97,7 +116,11 @@ fn a_region_solves_its_own_frames_and_no_others() {
     for (f, t) in &set {
         let dets = gpustar::solve::detect::detect(f, &settings.detect);
         let here = regional_solver(&catalog, &index, &camera, &settings, &hint(t, 0.6)).unwrap();
-        assert!(here.bands[0].refs.len() < 2000, "{} stars", here.bands[0].refs.len());
+        assert!(
+            here.bands[0].refs.len() < 2000,
+            "{} stars",
+            here.bands[0].refs.len()
+        );
         assert_eq!(here.settings.searches, 2);
         if let Outcome::Solved(r, _) = here.identify(dets.clone(), None).outcome {
             let truth = nalgebra::Matrix3::from_fn(|i, j| t.rotation_matrix[i][j]);
@@ -107,7 +130,10 @@ fn a_region_solves_its_own_frames_and_no_others() {
         }
         let elsewhere = regional_solver(&catalog, &index, &camera, &settings, &hint(t, 40.0));
         if let Ok(other) = elsewhere {
-            assert!(matches!(other.identify(dets, None).outcome, Outcome::Unsolved(_)));
+            assert!(matches!(
+                other.identify(dets, None).outcome,
+                Outcome::Unsolved(_)
+            ));
         }
     }
     assert_eq!(solved, set.len());
