@@ -43,7 +43,7 @@ impl Cells {
     /// A layout from stored counts; None when they cannot be one (no bands, an empty band,
     /// more cells than a u32 holds).
     pub fn from_counts(band_cells: Vec<u32>) -> Option<Cells> {
-        if band_cells.is_empty() || band_cells.iter().any(|&c| c == 0) {
+        if band_cells.is_empty() || band_cells.contains(&0) {
             return None;
         }
         let mut first = Vec::with_capacity(band_cells.len() + 1);

@@ -261,8 +261,7 @@ mod tests {
     fn truncated_or_damaged_files_are_refused_with_a_message() {
         let bytes = write(&sample());
         for cut in [0, 8, 40, HEADER, bytes.len() / 2, bytes.len() - 1] {
-            let e = read(&bytes[..cut], "f");
-            let msg = e.err().expect("refused").to_string();
+            let msg = read(&bytes[..cut], "f").unwrap_err().to_string();
             assert!(msg.starts_with("f: "), "{msg}");
         }
         let e = read(&bytes[..bytes.len() - 1], "f")
