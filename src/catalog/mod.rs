@@ -121,11 +121,18 @@ impl Catalog {
         match path {
             None => Ok(Catalog::builtin()),
             Some(p) => {
+                let start = std::time::Instant::now();
                 let bytes = std::fs::read(p)
                     .with_context(|| format!("cannot read catalog {}", p.display()))?;
                 let source = p.display().to_string();
                 if store::is_store(&bytes) {
-                    return store::read(&bytes, &source);
+                    let c = store::read(&bytes, &source)?;
+                    tracing::info!(
+                        "{source}: {} stars loaded in {:.1} ms",
+                        c.stars.len(),
+                        start.elapsed().as_secs_f64() * 1e3
+                    );
+                    return Ok(c);
                 }
                 let text = String::from_utf8(bytes)
                     .into_kind(Error::Catalog)
