@@ -6,6 +6,12 @@ With --centroid ml the GPU's f32 fits differ from the CPU's f64 ones by ~1e-6 px
 tolerance (e.g. 1e-5) to compare centroids within it; exact otherwise."""
 import json, math, sys
 
+def star_key(s):
+    """A star's identity in records and truth files: its catalog_id ("HIP 27989", "Gaia DR3 ...")
+    where written, else its HIP (truth files of the Python simulators, older records)."""
+    return s.get("catalog_id") or f"HIP {s['hip']}"
+
+
 def records(path):
     return [json.loads(l) for l in open(path) if l.strip()]
 
@@ -19,8 +25,8 @@ assert len(a) == len(b), f"{len(a)} vs {len(b)} records"
 worst, differ = 0.0, 0
 for x, y in zip(a, b):
     same = x["file"] == y["file"] and x["status"] == y["status"]
-    mx = [(m["hip"], m["x"], m["y"]) for m in x["matches"] or []]
-    my = [(m["hip"], m["x"], m["y"]) for m in y["matches"] or []]
+    mx = [(star_key(m), m["x"], m["y"]) for m in x["matches"] or []]
+    my = [(star_key(m), m["x"], m["y"]) for m in y["matches"] or []]
     same = same and len(mx) == len(my) and all(
         p[0] == q[0] and abs(p[1] - q[1]) <= tol and abs(p[2] - q[2]) <= tol for p, q in zip(mx, my)
     )

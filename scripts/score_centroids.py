@@ -23,6 +23,12 @@ READ_NOISE_E = 5.0  # scripts/sim_frames.py
 WRONG_ARCSEC = 360.0  # gpustar evaluate --tolerance-deg 0.1
 
 
+def star_key(s):
+    """A star's identity in records and truth files: its catalog_id ("HIP 27989", "Gaia DR3 ...")
+    where written, else its HIP (truth files of the Python simulators, older records)."""
+    return s.get("catalog_id") or f"HIP {s['hip']}"
+
+
 def crb_x(x0, y0, n, b, s, half=4):
     cx, cy = round(x0), round(y0)
     cdf = lambda u: 0.5 * (1 + erf(u / (s * sqrt(2))))
@@ -78,9 +84,9 @@ def score(truth, path, calibration):
             roll, cross = roll_and_cross(r["rotation_matrix"], t["rotation_matrix"])
             cal_b.append(cross / sig["boresight"])
             cal_r.append(roll / sig["roll"])
-        stars = {s["hip"]: s for s in t["stars"]}
+        stars = {star_key(s): s for s in t["stars"]}
         for m in r.get("matches") or []:
-            s = stars.get(m["hip"])
+            s = stars.get(star_key(m))
             if not s:
                 continue
             d = math.hypot(m["x"] - s["x"], m["y"] - s["y"])

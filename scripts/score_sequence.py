@@ -45,6 +45,12 @@ MODES = ("tracking", "lost_in_space", "missing")
 
 # ----------------------------------------------------------------------------- input
 
+def star_key(s):
+    """A star's identity in records and truth files: its catalog_id ("HIP 27989", "Gaia DR3 ...")
+    where written, else its HIP (truth files of the Python simulators, older records)."""
+    return s.get("catalog_id") or f"HIP {s['hip']}"
+
+
 def load_jsonl(path):
     """JSON objects of a JSON Lines file; bad lines are skipped with a warning."""
     out = []
@@ -175,12 +181,12 @@ def score_frame(t, rec):
     })
 
     # identified stars
-    truth_by_hip = {s["hip"]: (s["x"], s["y"]) for s in t["stars"]}
+    truth_by_id = {star_key(s): (s["x"], s["y"]) for s in t["stars"]}
     on_particle = correct_ids = wrong_ids = unverified = on_hot = 0
     wrong_list = []
     for m in (rec or {}).get("matches") or []:
-        x, y, hip = float(m["x"]), float(m["y"]), int(m["hip"])
-        own = truth_by_hip.get(hip)
+        x, y, hip = float(m["x"]), float(m["y"]), m["hip"]
+        own = truth_by_id.get(star_key(m))
         at_own = own is not None and math.hypot(x - own[0], y - own[1]) <= STAR_TOL_PX
         if not at_own and near(x, y, tpts, STAR_TOL_PX):
             on_particle += 1

@@ -41,6 +41,12 @@ SNR_LABELS = ["3-5", "5-10", "10-25"]
 LEN_LABELS = ["<100", "100-300", ">=300"]
 
 
+def star_key(s):
+    """A star's identity in records and truth files: its catalog_id ("HIP 27989", "Gaia DR3 ...")
+    where written, else its HIP (truth files of the Python simulators, older records)."""
+    return s.get("catalog_id") or f"HIP {s['hip']}"
+
+
 def load_jsonl(path):
     out = []
     with open(path) as f:
@@ -267,15 +273,15 @@ def score(truth, records, args):
                                       "defects": [d["type"] for d in t.get("defects", [])],
                                       "length_px": rstreaks[j].get("length_px"), "snr": rstreaks[j].get("snr")})
 
-        # star identification: a match is right when a truth star of the same HIP lies within tol
-        tstars = {s["hip"]: (s["x"], s["y"]) for s in t.get("stars", [])}
+        # star identification: a match is right when a truth star of the same id lies within tol
+        tstars = {star_key(s): (s["x"], s["y"]) for s in t.get("stars", [])}
         right = wrong = 0
         for m in rec.get("matches") or []:
             try:
-                hip, x, y = int(m["hip"]), float(m["x"]), float(m["y"])
+                key, x, y = star_key(m), float(m["x"]), float(m["y"])
             except (KeyError, TypeError, ValueError):
                 continue
-            tp = tstars.get(hip)
+            tp = tstars.get(key)
             if tp is not None and math.hypot(x - tp[0], y - tp[1]) <= args.star_tol:
                 right += 1
             else:

@@ -72,6 +72,12 @@ TOL_DEG = 0.1       # attitude within this of the truth = correct (as `gpustar e
 ID_TOL_PX = 3.0     # a star ID is false when the star is not within this of its true place
 
 
+def star_key(s):
+    """A star's identity in records and truth files: its catalog_id ("HIP 27989", "Gaia DR3 ...")
+    where written, else its HIP (truth files of the Python simulators, older records)."""
+    return s.get("catalog_id") or f"HIP {s['hip']}"
+
+
 def tolerances(params):
     """(attitude tolerance deg, ID tolerance px) of a set. With centroid noise sigma the stars
     are drawn off their true places (the truth keeps those), so a correct ID can be 3 sigma away
@@ -555,7 +561,7 @@ def cedar_id_ok(m, t, id_tol):
     """The criterion of `gpustar evaluate`: a star of the truth list must be within ID_TOL_PX of
     its true place; another star must be within ID_TOL_PX of where the truth attitude puts its
     catalog position."""
-    ts = next((s for s in t["stars"] if s["hip"] == m["hip"]), None)
+    ts = next((s for s in t["stars"] if star_key(s) == star_key(m)), None)
     if ts is not None:
         return math.hypot(ts["x"] - m["x"], ts["y"] - m["y"]) <= id_tol
     p = project(t, m["ra_deg"], m["dec_deg"])

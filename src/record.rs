@@ -18,7 +18,9 @@ pub enum Status {
 pub struct MatchRecord {
     pub x: f64,
     pub y: f64,
-    pub hip: u32,
+    /// The star's Hipparcos number; null for a star without one (Gaia, Tycho-2 and user
+    /// catalogs' stars that the catalog does not cross-identify).
+    pub hip: Option<u32>,
     /// Catalog position at the observation epoch.
     pub ra_deg: f64,
     pub dec_deg: f64,
@@ -29,6 +31,11 @@ pub struct MatchRecord {
     /// information; absent for a centre of gravity.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma_px: Option<f64>,
+    /// The star's id in its catalog: "HIP 71683", "Gaia DR3 1576683529448755328",
+    /// "TYC 4424-1234-1", or a user catalog's id verbatim (of a merged double: its brightest
+    /// member's). Empty in records written before it existed.
+    #[serde(default)]
+    pub catalog_id: String,
 }
 
 /// The pointing hint a frame was solved with (`--hint`).

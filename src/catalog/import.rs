@@ -76,7 +76,7 @@ mod tests {
         let cat = crate::catalog::Catalog::parse(&csv, "test").unwrap();
         assert_eq!(cat.stars.len(), 1);
         let s = cat.stars[0];
-        assert_eq!(s.hip, 3);
+        assert_eq!(s.hip, Some(3));
         assert_eq!(s.ra_rad, 0.0000874051);
         assert_eq!(s.dec_rad, 0.6782224871);
         assert_eq!(s.pmra_mas_yr, 4.27);

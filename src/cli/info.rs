@@ -38,9 +38,20 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
     }
     let catalog = Catalog::load(o.catalog.as_deref())?;
     writeln!(out, "catalog: {}", catalog.source)?;
+    let (e0, e1) = catalog
+        .stars
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), s| {
+            (a.min(s.epoch), b.max(s.epoch))
+        });
+    let epochs = if e0 == e1 {
+        format!("J{e0}")
+    } else {
+        format!("J{e0} to J{e1} (each star's own)")
+    };
     writeln!(
         out,
-        "  stars: {} (Hp {:.2} to {:.2}), positions at J1991.25, propagated to epoch {}",
+        "  stars: {} (mag {:.2} to {:.2}), positions at {epochs}, propagated to epoch {}",
         catalog.stars.len(),
         catalog.stars.iter().map(|s| s.mag).fold(f64::MAX, f64::min),
         catalog.faintest(),

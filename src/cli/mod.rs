@@ -246,10 +246,11 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
             per_frame,
         } => evaluate_cmd(&results, &truth, tolerance_deg, id_tolerance_px, per_frame),
         Command::Catalog(CatalogCommand::Import {
-            hip2,
+            input,
+            format,
             max_mag,
             output,
-        }) => import_cmd(&hip2, max_mag, output.as_deref()),
+        }) => import_cmd(&input, format, max_mag, output.as_deref()),
     }
 }
 

@@ -1,7 +1,7 @@
 //! Annotated PNG previews of a frame and its solution, for people checking results by eye.
 //!
 //! The frame is stretched so faint stars show; detections identified with a
-//! catalog star get a green circle and a "HIP n" label, unmatched detections an
+//! catalog star get a green circle and its catalog id ("HIP n"), unmatched detections an
 //! orange square, and catalog stars predicted in the field but not detected a
 //! small cyan cross. Shapes differ as well as colours so the marks stay apart for
 //! red–green colour-blind readers. Labels go right, left, above or below their
@@ -46,8 +46,8 @@ pub struct Annotation<'a> {
     pub pixels: &'a [u16],
     /// The format's maximum (255 or 65535); values at or above it show white.
     pub saturation: u16,
-    /// Detection + HIP number.
-    pub identified: Vec<(Mark, u32)>,
+    /// Detection + its label (the star's catalog id, e.g. "HIP 27989").
+    pub identified: Vec<(Mark, String)>,
     /// Detections not identified.
     pub unmatched: Vec<Mark>,
     /// Catalog stars projected in the frame with no detection.
@@ -90,10 +90,10 @@ pub fn render(a: &Annotation) -> RgbImage {
     let ring_r = |m: &Mark| (m.radius_px * 2.0).max(6.0 * scale as f64);
 
     let count = |v: &[Mark]| v.iter().filter_map(usable).count();
-    let identified: Vec<(Mark, u32)> = a
+    let identified: Vec<(Mark, &str)> = a
         .identified
         .iter()
-        .filter_map(|(m, hip)| usable(m).map(|m| (m, *hip)))
+        .filter_map(|(m, label)| usable(m).map(|m| (m, label.as_str())))
         .collect();
     let counts = [identified.len(), count(&a.unmatched), count(&a.predicted)];
     let caption = caption_layout(a.width, &a.caption, scale);
@@ -139,15 +139,21 @@ pub fn render(a: &Annotation) -> RgbImage {
         marks: boxes,
     };
     let size = (i64::from(a.width), i64::from(a.height));
-    for (m, hip) in &identified {
-        let text = format!("HIP {hip}");
-        let r = ring_r(m) + thick as f64;
-        let rect = place_label(m, r, text_width(text.len(), scale), scale, size, &around);
+    for &(m, text) in &identified {
+        let r = ring_r(&m) + thick as f64;
+        let rect = place_label(
+            &m,
+            r,
+            text_width(text.chars().count(), scale),
+            scale,
+            size,
+            &around,
+        );
         draw_text(
             &mut img,
             rect.0 + 1,
             rect.1 + 1,
-            &text,
+            text,
             scale,
             IDENTIFIED,
             true,

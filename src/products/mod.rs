@@ -69,7 +69,7 @@ fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
-/// What the annotated image shows: identified detections with their HIP numbers, the other
+/// What the annotated image shows: identified detections with their catalog ids, the other
 /// detections, and the catalog stars the solution puts in the frame that nothing matched.
 fn annotation<'a>(frame: &'a Frame, sol: &Solution, streaks: &[StreakFit]) -> Annotation<'a> {
     let mark = |x: f64, y: f64, area: u32| Mark {
@@ -87,8 +87,7 @@ fn annotation<'a>(frame: &'a Frame, sol: &Solution, streaks: &[StreakFit]) -> An
                 let d = &sol.detections[m.det];
                 matched[m.det] = true;
                 star_matched[m.ref_id as usize] = true;
-                let hip = refs.stars[m.ref_id as usize].hip;
-                identified.push((mark(d.x, d.y, d.area), hip));
+                identified.push((mark(d.x, d.y, d.area), refs.catalog_id(m.ref_id as usize)));
             }
             for (id, x, y) in stars_in_view(&r.r, refs, &r.camera) {
                 if !star_matched[id as usize] {

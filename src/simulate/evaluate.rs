@@ -4,7 +4,7 @@
 use crate::camera::Camera;
 use crate::catalog::radec_to_vector;
 use crate::record::{MatchRecord, Record, Status};
-use crate::simulate::Truth;
+use crate::simulate::{Truth, TruthStar};
 use crate::solve::attitude::attitude_error;
 use nalgebra::{Matrix3, Vector3};
 use serde::Serialize;
@@ -80,6 +80,15 @@ const TRUTH_LENS_MIN_STARS: usize = 5;
 /// that [`truth_lens`] accepts (virgo.jpg's: 0.6 % and 2.3 %).
 const TRUTH_LENS_MAX: f64 = 0.05;
 
+/// Whether a truth star is a record's match: by catalog id where both carry one (truth files
+/// of other tools and older records do not), else by HIP.
+fn same_star(ts: &TruthStar, m: &MatchRecord) -> bool {
+    match &ts.catalog_id {
+        Some(id) if !m.catalog_id.is_empty() => *id == m.catalog_id,
+        _ => ts.hip.is_some() && ts.hip == m.hip,
+    }
+}
+
 /// The truth camera `cam` (a pinhole of the truth's fields of view) with the focal lengths and
 /// radial distortion k1 that the truth's own star list implies: its stars' pixel positions
 /// against their catalog directions through the truth attitude, by least squares (the catalog
@@ -96,7 +105,7 @@ fn truth_lens(t: &Truth, cam: &Camera, r: &Matrix3<f64>, matches: &[MatchRecord]
     let mut b = Vector3::<f64>::zeros();
     let mut n = 0;
     for m in matches {
-        let Some(ts) = t.stars.iter().find(|ts| ts.hip == m.hip) else {
+        let Some(ts) = t.stars.iter().find(|ts| same_star(ts, m)) else {
             continue;
         };
         let Some((px, py)) = cam.vector_to_pixel(&(r * radec_to_vector(m.ra_deg, m.dec_deg)))
@@ -202,7 +211,7 @@ pub fn evaluate(
                     s.matched_ids += 1;
                     // A star of the truth list must be where the truth says; another star must
                     // be where the truth attitude puts its catalog position.
-                    let ok = match t.stars.iter().find(|ts| ts.hip == m.hip) {
+                    let ok = match t.stars.iter().find(|ts| same_star(ts, m)) {
                         Some(ts) => (ts.x - m.x).hypot(ts.y - m.y) <= id_tol_px,
                         None => {
                             let v = truth_r * radec_to_vector(m.ra_deg, m.dec_deg);
@@ -262,7 +271,7 @@ mod tests {
         .collect();
         let star = |k: usize| {
             let (x, y) = lens.vector_to_pixel(&dirs[k]).unwrap();
-            (x, y, 1000 + k as u32)
+            (x, y, Some(1000 + k as u32))
         };
         let truth = Truth {
             file: "f.png".into(),
@@ -282,6 +291,7 @@ mod tests {
                     let (x, y, hip) = star(k);
                     TruthStar {
                         hip,
+                        catalog_id: None,
                         x,
                         y,
                         mag: 5.0,
@@ -308,6 +318,7 @@ mod tests {
                         flux: 1.0,
                         residual_arcsec: 0.0,
                         sigma_px: None,
+                        catalog_id: format!("HIP {}", hip.unwrap()),
                     }
                 })
                 .collect(),

@@ -94,7 +94,12 @@ impl Default for SimSettings {
 /// A star in a truth record.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TruthStar {
-    pub hip: u32,
+    /// Hipparcos number; null for a star without one.
+    pub hip: Option<u32>,
+    /// The star's catalog id as records print it ("HIP 27989", "Gaia DR3 …"); absent in
+    /// truth files that other tools wrote.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub catalog_id: Option<String>,
     pub x: f64,
     pub y: f64,
     pub mag: f64,
@@ -233,13 +238,19 @@ pub fn render_with(
         if camera.contains(x, y) {
             stars.push(TruthStar {
                 hip: star.hip,
+                catalog_id: Some(star.id.display(&catalog.names)),
                 x,
                 y,
                 mag: star.mag,
             });
         }
     }
-    stars.sort_by(|a, b| a.mag.total_cmp(&b.mag).then(a.hip.cmp(&b.hip)));
+    stars.sort_by(|a, b| {
+        a.mag
+            .total_cmp(&b.mag)
+            .then(a.hip.cmp(&b.hip))
+            .then(a.catalog_id.cmp(&b.catalog_id))
+    });
     let mut false_stars = Vec::new();
     for _ in 0..s.false_stars {
         let x = rng.random_range(0.0..w as f64 - 1.0);

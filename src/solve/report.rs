@@ -3,7 +3,7 @@
 use super::attitude::pointing;
 use super::refine;
 use super::{Outcome, Solution, Solver};
-use crate::catalog::{RefCatalog, vector_to_radec};
+use crate::catalog::{RefCatalog, StarId, vector_to_radec};
 use crate::record::{MatchRecord, Record, Status, Timing};
 
 impl Solver {
@@ -49,14 +49,14 @@ impl Solver {
                          det = {det:.12}"
                     ));
                 }
-                let mut matches: Vec<MatchRecord> = r
+                let mut matches: Vec<(MatchRecord, StarId)> = r
                     .matches
                     .iter()
                     .map(|m| {
                         let d = &sol.detections[m.det];
                         let star = &refs.stars[m.ref_id as usize];
                         let (ra, dec) = vector_to_radec(&star.v);
-                        MatchRecord {
+                        let rec = MatchRecord {
                             x: d.x,
                             y: d.y,
                             hip: star.hip,
@@ -66,11 +66,14 @@ impl Solver {
                             flux: d.flux,
                             residual_arcsec: m.residual_arcsec,
                             sigma_px: d.sigma_px,
-                        }
+                            catalog_id: refs.catalog_id(m.ref_id as usize),
+                        };
+                        (rec, star.id)
                     })
                     .collect();
-                matches.sort_by(|a, b| b.flux.total_cmp(&a.flux).then(a.hip.cmp(&b.hip)));
-                rec.matches = Some(matches);
+                // Brightest first; ties by catalog id (by HIP for Hipparcos, as always).
+                matches.sort_by(|(a, ia), (b, ib)| b.flux.total_cmp(&a.flux).then(ia.cmp(ib)));
+                rec.matches = Some(matches.into_iter().map(|(m, _)| m).collect());
             }
         }
         rec

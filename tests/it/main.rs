@@ -12,6 +12,7 @@ mod attitude;
 mod backend;
 mod bad_input;
 mod catalog;
+mod catalog_files;
 mod centroid;
 mod components;
 mod confidence;

@@ -34,7 +34,7 @@ fn annotation(pixels: &[u16]) -> Annotation<'_> {
         height: H,
         pixels,
         saturation: 255,
-        identified: vec![(mark(60.0, 60.0, 2.0), 27989)],
+        identified: vec![(mark(60.0, 60.0, 2.0), "HIP 27989".into())],
         unmatched: vec![mark(140.0, 40.0, 2.0)],
         predicted: vec![mark(120.0, 100.0, 2.0)],
         streaks: vec![],
@@ -132,7 +132,7 @@ fn label_drawn_right_of_identified_star() {
 fn label_moves_left_at_right_edge() {
     let pixels = frame(20, 4, 255, 255, &[]);
     let mut a = annotation(&pixels);
-    a.identified = vec![(mark(185.0, 80.0, 1.0), 7)];
+    a.identified = vec![(mark(185.0, 80.0, 1.0), "HIP 7".into())];
     a.unmatched.clear();
     a.predicted.clear();
     let img = render(&a);
@@ -154,7 +154,7 @@ fn marks_at_edges_are_clipped() {
         mark(199.9, 149.9, 3.0),
         mark(-1e6, 3e6, 1e9),
     ];
-    a.identified = corners.iter().map(|m| (*m, 1)).collect();
+    a.identified = corners.iter().map(|m| (*m, "HIP 1".into())).collect();
     a.unmatched = corners.to_vec();
     a.predicted = corners.to_vec();
     a.predicted.push(mark(0.0, 0.0, f64::INFINITY));
@@ -174,8 +174,8 @@ fn nan_marks_are_skipped() {
     let pixels = frame(20, 4, 255, 255, &[]);
     let mut a = annotation(&pixels);
     a.identified = vec![
-        (mark(f64::NAN, 50.0, 2.0), 5),
-        (mark(60.0, 60.0, f64::NAN), 6),
+        (mark(f64::NAN, 50.0, 2.0), "HIP 5".into()),
+        (mark(60.0, 60.0, f64::NAN), "HIP 6".into()),
     ];
     a.unmatched = vec![mark(10.0, f64::NAN, 2.0)];
     a.predicted = vec![mark(f64::INFINITY, 10.0, 2.0)];
@@ -244,7 +244,7 @@ fn degenerate_frames_do_not_panic() {
         height: 10,
         pixels: &[],
         saturation: 255,
-        identified: vec![(mark(1.0, 1.0, 1.0), 1)],
+        identified: vec![(mark(1.0, 1.0, 1.0), "HIP 1".into())],
         unmatched: vec![],
         predicted: vec![],
         streaks: vec![],

@@ -1,0 +1,78 @@
+//! `gpustar catalog import` and `--catalog` with the binary catalog file, through the binary.
+
+use crate::common::{self, gpustar, run_ok};
+
+/// `gpustar ARGS…`, which must fail; its stderr.
+fn run_err(args: &[&str]) -> String {
+    let out = gpustar().args(args).output().unwrap();
+    assert!(!out.status.success(), "gpustar {args:?} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn a_user_csv_imported_is_read_by_catalog_and_a_cut_file_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("mine.csv");
+    let mut text = String::from("# my stars\nid,ra_deg,dec_deg,mag,epoch\n");
+    for k in 0..12 {
+        text.push_str(&format!(
+            "star {k},{},{},{},2005.5\n",
+            30.0 * k as f64,
+            5.0 * k as f64 - 30.0,
+            2.0 + 0.5 * k as f64
+        ));
+    }
+    std::fs::write(&csv, text).unwrap();
+    let bin = dir.path().join("mine.gpustarcat");
+    let (csv, bin) = (csv.to_str().unwrap(), bin.to_str().unwrap());
+    run_ok(&["catalog", "import", csv, "--max-mag", "6.5", "-o", bin]);
+    let info = run_ok(&["info", "--catalog", bin]);
+    let info = String::from_utf8_lossy(&info.stdout);
+    assert!(info.contains(&format!("catalog: {bin}")), "{info}");
+    assert!(
+        info.contains("stars: 10 (mag 2.00 to 6.50), positions at J2005.5"),
+        "{info}"
+    );
+    // The CSV output is for hip2.dat only; a truncated binary file is refused, by name.
+    let e = run_err(&["catalog", "import", csv, "-o", &format!("{bin}.csv")]);
+    assert!(e.contains("hip2.dat only"), "{e}");
+    let bytes = std::fs::read(bin).unwrap();
+    std::fs::write(bin, &bytes[..bytes.len() - 10]).unwrap();
+    let e = run_err(&["info", "--catalog", bin]);
+    assert!(e.contains("truncated") && e.contains(bin), "{e}");
+}
+
+#[test]
+fn the_shipped_catalog_as_a_binary_file_identifies_the_same_stars() {
+    let dir = tempfile::tempdir().unwrap();
+    let bin = dir.path().join("hip.gpustarcat");
+    let bin = bin.to_str().unwrap();
+    run_ok(&["catalog", "import", "catalog/hip2_hp8.csv", "-o", bin]);
+    let sim = dir.path().join("sim");
+    common::simulate_small(&sim, 2);
+    let records = |catalog: Option<&str>| {
+        let out = dir.path().join(format!("r{}.jsonl", catalog.is_some()));
+        let mut args = common::batch18_args(&sim, &out);
+        if let Some(c) = catalog {
+            args.extend(["--catalog".to_string(), c.to_string()]);
+        }
+        run_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        gpustar::record::read_jsonl::<gpustar::Record>(&out, "record").unwrap()
+    };
+    let (builtin, imported) = (records(None), records(Some(bin)));
+    assert_eq!(builtin.len(), 2);
+    for (a, b) in builtin.iter().zip(&imported) {
+        assert_eq!(a.status, gpustar::record::Status::Solved, "{a:?}");
+        let (ma, mb) = (a.matches.as_ref().unwrap(), b.matches.as_ref().unwrap());
+        let ids = |m: &[gpustar::record::MatchRecord]| {
+            m.iter()
+                .map(|m| (m.hip, m.catalog_id.clone()))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(ids(ma), ids(mb));
+        for m in ma {
+            assert_eq!(m.catalog_id, format!("HIP {}", m.hip.unwrap()));
+        }
+        assert!((a.ra_deg.unwrap() - b.ra_deg.unwrap()).abs() < 1e-9);
+    }
+}
