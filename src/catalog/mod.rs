@@ -157,6 +157,17 @@ impl Catalog {
         })
     }
 
+    /// The stars at `indices` as a catalog of their own (a hinted region's), sharing the names.
+    pub fn subset(&self, indices: &[u32], source: &str) -> Catalog {
+        Catalog {
+            stars: indices.iter().map(|&i| self.stars[i as usize]).collect(),
+            names: self.names.clone(),
+            source: source.to_string(),
+            content_hash: 0,
+            index: OnceLock::new(),
+        }
+    }
+
     /// Use `index` (read from a file) as the catalog's sky index.
     pub(crate) fn with_index(self, index: SkyIndex) -> Catalog {
         let cell = OnceLock::new();

@@ -16,13 +16,13 @@ use crate::record::{Record, Timing};
 use crate::sky::hint::{Hint, HintSource, hint_from_header};
 use crate::solve::detect::Detection;
 use crate::solve::detect::{self, DetectSettings};
-use crate::solve::hinted::{RegionIndex, regional_solver};
+use crate::solve::hinted::regional_solver;
 use crate::solve::{Outcome, Settings, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 pub use gpu_runner::*;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// Where the camera model comes from.
@@ -81,8 +81,6 @@ pub struct Solvers {
     /// `--hint`: solve each frame within its pointing hint's region first.
     pub hint: Option<HintSource>,
     map: Mutex<HashMap<(u32, u32), SharedSolver>>,
-    /// The catalog's directions for hints' cone searches, made on first use.
-    regions: OnceLock<RegionIndex>,
 }
 
 /// A frame after its pixel stages (the sequence stage's input): its detections, or the
@@ -121,7 +119,6 @@ impl Solvers {
             streaks: None,
             hint: None,
             map: Mutex::new(HashMap::new()),
-            regions: OnceLock::new(),
         }
     }
 
@@ -150,10 +147,7 @@ impl Solvers {
     pub fn regional(&self, d: &Decoded, frame: &Frame) -> Option<Solver> {
         let hint = self.hint_of(d, frame)?;
         let camera = self.camera_for(frame.width, frame.height).ok()?;
-        let index = self
-            .regions
-            .get_or_init(|| RegionIndex::new(&self.catalog, self.settings.epoch));
-        match regional_solver(&self.catalog, index, &camera, &self.settings, &hint) {
+        match regional_solver(&self.catalog, &camera, &self.settings, &hint) {
             Ok(s) => Some(s),
             Err(e) => {
                 tracing::debug!(

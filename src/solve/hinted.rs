@@ -11,32 +11,10 @@ use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::error::Result;
 use crate::sky::hint::Hint;
-use nalgebra::Vector3;
 
-/// Unit vectors of a catalog's stars, for cone searches.
-pub struct RegionIndex {
-    vectors: Vec<Vector3<f64>>,
-}
-
-impl RegionIndex {
-    /// The stars' directions at `epoch` (Julian year).
-    pub fn new(catalog: &Catalog, epoch: f64) -> RegionIndex {
-        RegionIndex {
-            vectors: catalog.stars.iter().map(|s| s.vector_at(epoch)).collect(),
-        }
-    }
-
-    /// Indices of the stars within `radius_rad` of `centre` (a unit vector), ascending.
-    pub fn cone(&self, centre: &Vector3<f64>, radius_rad: f64) -> Vec<usize> {
-        let min_dot = radius_rad.min(std::f64::consts::PI).cos();
-        self.vectors
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| v.dot(centre) >= min_dot)
-            .map(|(i, _)| i)
-            .collect()
-    }
-}
+/// How much wider than the region the catalog's cone query reaches: positions are indexed at
+/// each star's own epoch, and the fastest star (Barnard's, 10.4″/yr) moves 0.05° in 17 years.
+const PROPER_MOTION_MARGIN_RAD: f64 = 0.05 * std::f64::consts::PI / 180.0;
 
 /// The region a hint gives a camera: the cone its stars may come from, radians.
 pub fn region_radius(hint: &Hint, camera: &Camera, settings: &Settings) -> f64 {
@@ -49,29 +27,23 @@ pub fn region_radius(hint: &Hint, camera: &Camera, settings: &Settings) -> f64 {
 /// the hint's region. Fails when the region holds fewer stars than the vote needs.
 pub fn regional_solver(
     catalog: &Catalog,
-    index: &RegionIndex,
     camera: &Camera,
     settings: &Settings,
     hint: &Hint,
 ) -> Result<Solver> {
     let radius = region_radius(hint, camera, settings);
     let centre = crate::catalog::radec_to_vector(hint.ra_deg, hint.dec_deg);
-    let stars = index
-        .cone(&centre, radius)
-        .into_iter()
-        .map(|i| catalog.stars[i])
-        .collect();
-    let region = Catalog {
-        stars,
-        source: format!(
+    let stars = catalog.cone(&centre, radius + PROPER_MOTION_MARGIN_RAD);
+    let region = catalog.subset(
+        &stars,
+        &format!(
             "{} within {:.3} deg of {:.4},{:.4}",
             catalog.source,
             radius.to_degrees(),
             hint.ra_deg,
             hint.dec_deg
         ),
-        content_hash: 0,
-    };
+    );
     let s = Settings {
         sky_sr: 2.0 * std::f64::consts::PI * (1.0 - radius.min(std::f64::consts::PI).cos()),
         searches: 2,

@@ -91,7 +91,7 @@ fn bad_hints_are_refused_with_the_usage() {
 /// gives no solution (the fallback is the caller's).
 #[test]
 fn a_region_solves_its_own_frames_and_no_others() {
-    use gpustar::solve::hinted::{RegionIndex, regional_solver};
+    use gpustar::solve::hinted::regional_solver;
     use gpustar::solve::{Outcome, Settings};
     let catalog = gpustar::catalog::Catalog::builtin();
     let size = (512, 512);
@@ -105,7 +105,6 @@ fn a_region_solves_its_own_frames_and_no_others() {
     let set = common::rendered(&s, 4);
     let camera = gpustar::camera::Camera::from_fov(size.0, size.1, 12.0).unwrap();
     let settings = Settings::default();
-    let index = RegionIndex::new(&catalog, settings.epoch);
     let hint = |t: &gpustar::simulate::Truth, off: f64| gpustar::sky::hint::Hint {
         ra_deg: t.ra_deg,
         dec_deg: (t.dec_deg + off).clamp(-90.0, 90.0),
@@ -115,7 +114,7 @@ fn a_region_solves_its_own_frames_and_no_others() {
     let mut solved = 0;
     for (f, t) in &set {
         let dets = gpustar::solve::detect::detect(f, &settings.detect);
-        let here = regional_solver(&catalog, &index, &camera, &settings, &hint(t, 0.6)).unwrap();
+        let here = regional_solver(&catalog, &camera, &settings, &hint(t, 0.6)).unwrap();
         assert!(
             here.bands[0].refs.len() < 2000,
             "{} stars",
@@ -128,7 +127,7 @@ fn a_region_solves_its_own_frames_and_no_others() {
             assert!(err < 0.01, "{err}°");
             solved += 1;
         }
-        let elsewhere = regional_solver(&catalog, &index, &camera, &settings, &hint(t, 40.0));
+        let elsewhere = regional_solver(&catalog, &camera, &settings, &hint(t, 40.0));
         if let Ok(other) = elsewhere {
             assert!(matches!(
                 other.identify(dets, None).outcome,
