@@ -111,7 +111,8 @@ const PAIRS: [(&str, &str, &str); 4] = [
     ("CRVAL1", "CRVAL2", "CRVAL1/CRVAL2"),
 ];
 
-/// The pointing a FITS header gives, if any: the first usable pair of [`PAIRS`]. `size` is the
+/// The pointing a FITS header gives, if any: the first usable keyword pair (OBJCTRA/OBJCTDEC,
+/// RA/DEC, TELRA/TELDEC, CRVAL1/CRVAL2, in that order). `size` is the
 /// frame's (width, height), to accept CRVAL only for a reference pixel within a tenth of the
 /// frame of its centre.
 pub fn hint_from_header(

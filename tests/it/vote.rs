@@ -123,14 +123,12 @@ fn a_star_off_the_catalog_is_left_unidentified() {
     );
 }
 
-#[test]
-fn gpu_votes_equal_cpu_on_simulated_frames() {
-    let Some(g) = common::gpu("gpu_votes_equal_cpu_on_simulated_frames") else {
-        return;
-    };
-    let size = (1024, 1024);
-    let solver = common::solver(18.0, size);
-    let jobs: Vec<VoteJob> = common::sim_frames(6, size, 18.0, 8, 21)
+/// The first pass's vote job of each frame that has one.
+fn vote_jobs(
+    solver: &gpustar::solve::Solver,
+    frames: &[gpustar::io::frame::Frame],
+) -> Vec<VoteJob> {
+    frames
         .iter()
         .filter_map(|f| {
             let d = gpustar::solve::detect::detect(f, &solver.settings.detect);
@@ -140,7 +138,17 @@ fn gpu_votes_equal_cpu_on_simulated_frames() {
                 k: p.k,
             })
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn gpu_votes_equal_cpu_on_simulated_frames() {
+    let Some(g) = common::gpu("gpu_votes_equal_cpu_on_simulated_frames") else {
+        return;
+    };
+    let size = (1024, 1024);
+    let solver = common::solver(18.0, size);
+    let jobs = vote_jobs(&solver, &common::sim_frames(6, size, 18.0, 8, 21));
     assert_eq!(jobs.len(), 6);
     common::assert_votes_equal(&g, &solver, &jobs);
 }
@@ -161,17 +169,7 @@ fn gpu_votes_equal_cpu_when_table_and_counters_are_split() {
     g.limits.max_storage_buffer_binding_size = 4 * refs * 4;
     let table = g.upload_table(&band.table, band.refs.len()).unwrap();
     assert!(table.slices() > 4, "{} slices", table.slices());
-    let jobs: Vec<VoteJob> = common::sim_frames(3, size, 18.0, 8, 22)
-        .iter()
-        .filter_map(|f| {
-            let d = gpustar::solve::detect::detect(f, &solver.settings.detect);
-            solver.prepare(&d, 0).map(|p| VoteJob {
-                ranges: p.ranges,
-                stars: p.n_vote,
-                k: p.k,
-            })
-        })
-        .collect();
+    let jobs = vote_jobs(&solver, &common::sim_frames(3, size, 18.0, 8, 22));
     assert_eq!(jobs.len(), 3);
     assert!(jobs.iter().all(|j| j.stars > 8));
     common::assert_votes_equal(&g, &solver, &jobs);

@@ -5,7 +5,7 @@
 
 mod csv;
 mod gaia;
-mod hip2;
+pub(crate) mod hip2;
 mod tycho2;
 
 use super::{Catalog, Star};
