@@ -101,6 +101,12 @@ impl Band {
         };
         let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
         let day = epoch_day(e);
+        // A deep catalog's stars take tens of MB a day: an archive of frames from hundreds of
+        // nights must not keep them all (2-degree Gaia frames of 200 dates peaked at 7.8 GB).
+        // Made again from the day alone, so dropping them changes no record.
+        if map.len() >= EPOCHS_KEPT && !map.contains_key(&day) {
+            map.clear();
+        }
         // At the day's own epoch, not the first frame's of that day: the positions (and the
         // records' epoch) must not depend on which frame of the day a thread reached first.
         map.entry(day)
@@ -118,6 +124,9 @@ pub(crate) struct Deeper {
 /// (magnitude limit in tenths, epoch in days) of a selection; its value None = the selection
 /// failed (fewer than 3 stars).
 pub(crate) type SelectionKey = (i64, i64);
+
+/// How many days' star positions a band keeps at once (see [`Band::refs_at`]).
+const EPOCHS_KEPT: usize = 8;
 
 /// Frames dated within this many years of the run's epoch use the run's star positions
 /// (about a day: proper motions move no star by a milliarcsecond in that time).
