@@ -66,32 +66,44 @@ impl GpuRunner {
             .collect();
         for ((w, h, _), group) in by_size {
             let indices: Vec<usize> = group.iter().map(|(i, _)| *i).collect();
-            let solver = solvers.get(w, h);
-            let recs: Vec<Record> = match solver.as_ref() {
-                // No lost-in-space solver (e.g. a catalog too deep for one): frames with a
-                // hint are solved within its region, on the CPU.
-                Err(e) => group
-                    .iter()
-                    .map(|(_, d)| {
-                        let f = decoded_frame(d);
-                        match solvers.regional(d, f) {
+            let regional: Vec<Option<Solver>> = group
+                .iter()
+                .map(|(_, d)| solvers.regional(d, decoded_frame(d)))
+                .collect();
+            // When every frame has a hint, the lost-in-space solver (its distance table) is
+            // built only if a region does not solve its frame.
+            let shared;
+            let global = if regional.iter().all(Option::is_some) {
+                Global::Lazy(solvers, (w, h))
+            } else {
+                shared = solvers.get(w, h);
+                match shared.as_ref() {
+                    Ok(s) => Global::Ready(s),
+                    Err(e) => {
+                        // No lost-in-space solver: frames with a hint are solved within its
+                        // region, on the CPU; the others carry the reason.
+                        let recs = group.iter().zip(&regional).map(|((_, d), r)| match r {
                             Some(r) => {
-                                let none = Global::Lazy(solvers, (w, h));
-                                solve_with(solvers, &r, Some(&r), &none, d, f)
+                                let lazy = Global::Lazy(solvers, (w, h));
+                                solve_with(solvers, r, Some(r), &lazy, d, decoded_frame(d))
                             }
                             None => Record::error(&d.name, e.clone(), &self.name()),
+                        });
+                        for (i, r) in indices.into_iter().zip(recs) {
+                            records[i] = Some(r);
                         }
-                    })
-                    .collect(),
-                Ok(s) if self.failed => group
+                        continue;
+                    }
+                }
+            };
+            let recs: Vec<Record> = if self.failed {
+                group
                     .iter()
-                    .map(|(_, d)| {
-                        let f = decoded_frame(d);
-                        let r = solvers.regional(d, f);
-                        solve_with(solvers, s, r.as_ref(), &Global::Ready(s), d, f)
-                    })
-                    .collect(),
-                Ok(s) => self.solve_group(solvers, s, &group),
+                    .zip(&regional)
+                    .map(|((_, d), r)| cpu_record(solvers, r, &global, d))
+                    .collect()
+            } else {
+                self.solve_group(solvers, &global, &group, &regional)
             };
             for (i, r) in indices.into_iter().zip(recs) {
                 records[i] = Some(r);
@@ -181,19 +193,16 @@ impl GpuRunner {
     pub(crate) fn solve_group(
         &mut self,
         solvers: &Solvers,
-        solver: &Solver,
+        global: &Global,
         group: &[(usize, Decoded)],
+        regional: &[Option<Solver>],
     ) -> Vec<Record> {
         let frames: Vec<&Frame> = group.iter().map(|(_, d)| decoded_frame(d)).collect();
         let epochs: Vec<Option<f64>> = group.iter().map(|(_, d)| d.epoch).collect();
-        let regional: Vec<Option<Solver>> = group
-            .iter()
-            .zip(&frames)
-            .map(|((_, d), f)| solvers.regional(d, f))
-            .collect();
         match self.gpu_group(
-            solver,
-            &regional,
+            &solvers.settings.detect,
+            global,
+            regional,
             &frames,
             &epochs,
             solvers.streaks.as_ref(),
@@ -206,15 +215,17 @@ impl GpuRunner {
                     .zip(solutions)
                     .zip(found)
                     .zip(&frames)
-                    .map(|((((_, d), sol), found), frame)| {
+                    .zip(regional)
+                    .map(|(((((_, d), sol), found), frame), r)| {
                         let timing = Timing {
                             decode: d.decode_ms,
                             detect: detect_ms / n,
                             identify: identify_ms / n,
                             total: d.decode_ms + (detect_ms + identify_ms) / n,
                         };
-                        let (solver, found) = (Some(solver), found.as_deref());
-                        solvers.record(solver, d, frame, &sol, found, timing, &backend)
+                        // Any solver of the size makes the record (they share the camera).
+                        let lead = r.as_ref().or(global.ready());
+                        solvers.record(lead, d, frame, &sol, found.as_deref(), timing, &backend)
                     })
                     .collect()
             }
@@ -223,11 +234,8 @@ impl GpuRunner {
                 self.failed = true;
                 group
                     .iter()
-                    .zip(&regional)
-                    .map(|((_, d), r)| {
-                        let f = decoded_frame(d);
-                        solve_with(solvers, solver, r.as_ref(), &Global::Ready(solver), d, f)
-                    })
+                    .zip(regional)
+                    .map(|((_, d), r)| cpu_record(solvers, r, global, d))
                     .collect()
             }
         }
@@ -242,13 +250,13 @@ impl GpuRunner {
     /// (ms).
     pub(crate) fn gpu_group(
         &mut self,
-        solver: &Solver,
+        settings: &DetectSettings,
+        global: &Global,
         regional: &[Option<Solver>],
         frames: &[&Frame],
         epochs: &[Option<f64>],
         streak_opts: Option<&StreakOptions>,
     ) -> Result<GroupOut> {
-        let settings = &solver.settings.detect;
         let t0 = Instant::now();
         let p = detect::params(frames[0], settings);
         let (blobs, found) = match streak_opts {
@@ -278,6 +286,75 @@ impl GpuRunner {
                 }
             }
         }
+        // The lost-in-space solver, for the frames their regions did not solve (built now if
+        // every frame had a hint and it was not needed before).
+        let shared;
+        let global_solver: Option<&Solver> =
+            if outcomes.iter().all(|o| matches!(o, Outcome::Solved(..))) {
+                None
+            } else {
+                match global {
+                    Global::Ready(s) => Some(s),
+                    Global::Lazy(solvers, (w, h)) => {
+                        shared = solvers.get(*w, *h);
+                        shared.as_ref().as_ref().ok()
+                    }
+                }
+            };
+        if let Some(solver) = global_solver {
+            self.vote_passes(solver, &detections, epochs, &mut outcomes)?;
+        }
+        let mut solutions: Vec<Solution> = detections
+            .into_iter()
+            .zip(outcomes)
+            .zip(epochs)
+            .map(|((detections, outcome), &epoch)| Solution {
+                detections,
+                outcome,
+                epoch,
+            })
+            .collect();
+        // The detection retry: frames that did not solve, detected again with the matched
+        // filter (on the GPU, in one submission) and identified again (the CPU twin's vote).
+        // Detection's retry settings are the run's (any solver of the group has them).
+        let lead = global_solver.or_else(|| regional.iter().flatten().next());
+        if let Some(solver) = lead.filter(|s| streak_opts.is_none() && s.detection_stages() > 1) {
+            let unsolved: Vec<usize> = (0..frames.len())
+                .filter(|&i| matches!(solutions[i].outcome, Outcome::Unsolved(_)))
+                .collect();
+            if !unsolved.is_empty() {
+                let subset: Vec<&Frame> = unsolved.iter().map(|&i| frames[i]).collect();
+                let filtered = solver.filtered_settings();
+                let blobs = self
+                    .gpu
+                    .detect(&subset, &detect::params(frames[0], &filtered))?;
+                let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
+                for (&i, d) in unsolved.iter().zip(stars) {
+                    let again = identify_hinted(regional[i].as_ref(), global, d, epochs[i]);
+                    if matches!(again.outcome, Outcome::Solved(..)) {
+                        solutions[i] = again;
+                    }
+                }
+            }
+        }
+        Ok((
+            solutions,
+            found,
+            detect_ms,
+            t1.elapsed().as_secs_f64() * 1e3,
+        ))
+    }
+
+    /// The passes of lost-in-space identification for the frames not solved yet: for each
+    /// scale tried, one vote submission for all of them (the triangle method and radial
+    /// features as `Solver::identify` runs them).
+    fn vote_passes(
+        &mut self,
+        solver: &Solver,
+        detections: &[Vec<Detection>],
+        epochs: &[Option<f64>],
+        outcomes: &mut [Outcome],
+    ) -> Result<()> {
         for h in 0..solver.passes.len() {
             let prepared: Vec<(usize, Prepared)> = detections
                 .iter()
@@ -348,44 +425,24 @@ impl GpuRunner {
                 outcomes[*i] = solver.finish(&detections[*i], p, &v, epochs[*i]);
             }
         }
-        let mut solutions: Vec<Solution> = detections
-            .into_iter()
-            .zip(outcomes)
-            .zip(epochs)
-            .map(|((detections, outcome), &epoch)| Solution {
-                detections,
-                outcome,
-                epoch,
-            })
-            .collect();
-        // The detection retry: frames that did not solve, detected again with the matched
-        // filter (on the GPU, in one submission) and identified again (the CPU twin's vote).
-        if streak_opts.is_none() && solver.detection_stages() > 1 {
-            let unsolved: Vec<usize> = (0..frames.len())
-                .filter(|&i| matches!(solutions[i].outcome, Outcome::Unsolved(_)))
-                .collect();
-            if !unsolved.is_empty() {
-                let subset: Vec<&Frame> = unsolved.iter().map(|&i| frames[i]).collect();
-                let filtered = solver.filtered_settings();
-                let blobs = self
-                    .gpu
-                    .detect(&subset, &detect::params(frames[0], &filtered))?;
-                let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
-                for (&i, d) in unsolved.iter().zip(stars) {
-                    let global = Global::Ready(solver);
-                    let again = identify_hinted(regional[i].as_ref(), &global, d, epochs[i]);
-                    if matches!(again.outcome, Outcome::Solved(..)) {
-                        solutions[i] = again;
-                    }
-                }
-            }
-        }
-        Ok((
-            solutions,
-            found,
-            detect_ms,
-            t1.elapsed().as_secs_f64() * 1e3,
-        ))
+        Ok(())
+    }
+}
+
+/// A frame's record on the CPU (after a GPU failure): within its region first when it has
+/// one, lost-in-space through `global`.
+fn cpu_record(
+    solvers: &Solvers,
+    regional: &Option<Solver>,
+    global: &Global,
+    d: &Decoded,
+) -> Record {
+    let f = decoded_frame(d);
+    match (regional, global.ready()) {
+        (Some(r), _) => solve_with(solvers, r, Some(r), global, d, f),
+        (None, Some(s)) => solve_with(solvers, s, None, global, d, f),
+        // A lazy global is only made when every frame has a region.
+        (None, None) => Record::error(&d.name, "no solver".to_string(), BACKEND_CPU),
     }
 }
 

@@ -358,6 +358,14 @@ pub(crate) enum Global<'a> {
 }
 
 impl Global<'_> {
+    /// The solver when it is at hand (not built on demand).
+    pub(crate) fn ready(&self) -> Option<&Solver> {
+        match self {
+            Global::Ready(s) => Some(s),
+            Global::Lazy(..) => None,
+        }
+    }
+
     /// Identify lost-in-space; None when the size has no solver (the catalog or camera
     /// cannot make one: the message is in the records of frames without a hint).
     fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Option<Solution> {

@@ -137,3 +137,56 @@ fn a_region_solves_its_own_frames_and_no_others() {
     }
     assert_eq!(solved, set.len());
 }
+
+/// GPU = CPU for hinted frames, including one whose hint is wrong (its region does not solve
+/// it, so the GPU run builds the lost-in-space solver on demand and votes on the GPU).
+#[test]
+fn hinted_records_are_the_same_on_both_backends() {
+    if common::gpu("hinted_records_are_the_same_on_both_backends").is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let frames = dir.path().join("frames");
+    common::simulate_small(&frames, 3);
+    let t = &common::truths(&frames)[0];
+    let hint = format!(
+        "{},{},1",
+        t["ra_deg"].as_f64().unwrap(),
+        t["dec_deg"].as_f64().unwrap() - 0.4
+    );
+    let run = |backend: &str| {
+        let out = dir.path().join(format!("{backend}.jsonl"));
+        let (f, o) = (frames.to_str().unwrap(), out.to_str().unwrap());
+        common::run_ok(&[
+            "batch",
+            f,
+            "--fov-deg",
+            "18",
+            "--backend",
+            backend,
+            "-q",
+            "-o",
+            o,
+            "--hint",
+            &hint,
+        ]);
+        std::fs::read_to_string(&out)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .collect::<Vec<_>>()
+    };
+    let (cpu, gpu) = (run("cpu"), run("gpu"));
+    assert_eq!(cpu.len(), 3);
+    for (c, g) in cpu.iter().zip(&gpu) {
+        assert_eq!(c["status"], "solved", "{c}");
+        assert!(g["backend"].as_str().unwrap().starts_with("gpu"), "{}", g["backend"]);
+        let comparable = |r: &serde_json::Value| {
+            let mut r = r.clone();
+            r["backend"] = "".into();
+            r["timing_ms"] = serde_json::Value::Null;
+            r
+        };
+        common::assert_records_match(&comparable(g), &comparable(c));
+    }
+}
