@@ -9,8 +9,9 @@ four models fitted to gpustar's matched stars (record x, y against the catalog's
   sip3    TAN-SIP of order 3 (astropy): as many terms as seed 004's cubic tangent-plane
           polynomial
 
-Two-fold cross-validation per frame (matches alternately in A and B; fit on one, residuals on
-the other), so a model with more terms gains only where the frame's distortion has them.
+Five-fold cross-validation per frame (every fifth match held out in turn, the model fitted to
+the other four fifths), so a model with more terms gains only where the frame's distortion has
+them and the frame has the stars to fix them.
 Centroid errors against the truth of scripts/sim_narrow.py are printed for scale.
 
 Usage: python3 scripts/plate_models.py TRUTH_DIR RECORDS.jsonl [--min-matches 20]
@@ -26,6 +27,9 @@ from astropy.coordinates import SkyCoord
 from astropy.wcs.utils import fit_wcs_from_points
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
+
+
+FOLDS = 5
 
 
 def unit(ra, dec):
@@ -79,8 +83,9 @@ def main():
         xy = np.array([[m["x"], m["y"]] for m in ms])
         rd = np.array([[m["ra_deg"], m["dec_deg"]] for m in ms])
         r0 = np.array(r["rotation_matrix"])
-        folds = [np.arange(len(ms)) % 2 == k for k in (0, 1)]
-        for fit_on, test_on in (folds, folds[::-1]):
+        for k in range(FOLDS):
+            test_on = np.arange(len(ms)) % FOLDS == k
+            fit_on = ~test_on
             models = {
                 "tan": fit_astropy(xy[fit_on], rd[fit_on], size, None),
                 "radial": fit_radial(xy[fit_on], rd[fit_on], size, r0, t["fx_px"]),
