@@ -112,12 +112,12 @@ pub(crate) fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
     };
     simulate::write_set(&catalog, &s, &a.out, threads, |_| {})?;
     eprintln!(
-        "gpustar: wrote {} {}frames, truth.jsonl and camera.toml to {} in {:.1} s",
+        "gpustar: wrote {} {}, truth.jsonl and camera.toml to {} in {:.1} s",
         a.frames,
         if s.hints.is_some() {
-            "FITS (with pointing hints) "
+            "FITS frames with pointing hints"
         } else {
-            ""
+            "frames"
         },
         a.out.display(),
         t0.elapsed().as_secs_f64()

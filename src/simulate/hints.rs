@@ -93,7 +93,7 @@ pub fn header_cards(hint: &TruthHint, epoch: f64, exposure_s: f64) -> Vec<String
         card_real("RA", hint.ra_deg, "[deg] pointing hint"),
         card_real("DEC", hint.dec_deg, "[deg] pointing hint"),
         card_comment(&format!(
-            "written by gpustar simulate: the hint is {} deg off the centre",
+            "gpustar simulate: the hint is {:.6} deg off the true centre",
             hint.offset_deg
         )),
     ]
