@@ -377,7 +377,8 @@ pub struct SimulateArgs {
     /// Frame size, WIDTHxHEIGHT.
     #[arg(long, value_parser = parse_size, default_value = "1024x1024")]
     pub size: (u32, u32),
-    /// Faintest catalog star drawn (Hp).
+    /// Faintest catalog star drawn, in the catalog's own magnitude (Hp for the built-in one);
+    /// camera.toml passes it on to batch.
     #[arg(long, default_value_t = 6.0)]
     pub mag_limit: f64,
     /// False stars per frame.
@@ -420,9 +421,8 @@ pub struct SimulateArgs {
     /// star gives 2e6 electrons (magnitude 6 peaks at SNR 47, magnitude 9 at 3).
     #[arg(long, value_parser = within(0.5, 1e6))]
     pub limit_snr: Option<f64>,
-    /// Where the frames point: `sphere` (uniformly random attitudes) or `catalog` (within half
-    /// the narrower field of view of a random catalog star to --mag-limit, roll random: for a
-    /// catalog of a few regions of the sky).
+    /// Where the frames point: uniformly random attitudes, or near the catalog's own stars
+    /// (for a catalog of a few regions of the sky, where random pointings find no stars).
     #[arg(long, value_enum, default_value_t = Pointing::Sphere, conflicts_with = "sequence")]
     pub pointing: Pointing,
     /// Write 16-bit FITS frames whose header gives the pointing off by this many degrees, in a

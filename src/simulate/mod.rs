@@ -35,7 +35,7 @@ pub struct SimSettings {
     pub width: u32,
     pub height: u32,
     pub fov_x_deg: f64,
-    /// Faintest catalog star drawn (Hp).
+    /// Faintest catalog star drawn, in the catalog's own magnitude (Hp for the built-in one).
     pub mag_limit: f64,
     pub frames: usize,
     pub seed: u64,
@@ -80,9 +80,9 @@ pub enum Pointing {
     /// Uniformly random attitudes (boresight over the whole sphere, roll).
     #[default]
     Sphere,
-    /// Near a catalog star (one of those to `mag_limit`, drawn at random): the boresight
-    /// uniform within half the narrower field of view of it, the roll uniform, so that the
-    /// star is in the field. For catalogs that cover only some regions of the sky.
+    /// Near a catalog star (one of those to the magnitude limit, drawn at random): the
+    /// boresight uniform within half the narrower field of view of it, the roll uniform, so
+    /// that the star is in the field.
     Catalog,
 }
 
