@@ -5,6 +5,7 @@ use gpustar::catalog::DoubleStars;
 use gpustar::io::inputs::Shard;
 use gpustar::io::output::Format;
 use gpustar::pipeline::BackendChoice;
+use gpustar::simulate::Pointing;
 use gpustar::sky::{Station, parse_station};
 use gpustar::solve::refine::CameraFit;
 use gpustar::streaks::reduce::Astrometry;
@@ -376,7 +377,8 @@ pub struct SimulateArgs {
     /// Frame size, WIDTHxHEIGHT.
     #[arg(long, value_parser = parse_size, default_value = "1024x1024")]
     pub size: (u32, u32),
-    /// Faintest catalog star drawn (Hp).
+    /// Faintest catalog star drawn, in the catalog's own magnitude (Hp for the built-in one);
+    /// camera.toml passes it on to batch.
     #[arg(long, default_value_t = 6.0)]
     pub mag_limit: f64,
     /// False stars per frame.
@@ -410,9 +412,26 @@ pub struct SimulateArgs {
     /// Fall-off of sky and stars from centre to corner (0 = none).
     #[arg(long, default_value_t = 0.3)]
     pub vignetting: f64,
-    /// Catalog to draw stars from: a file `gpustar catalog import` made (default: built-in).
+    /// Catalog to draw stars from: a file `gpustar catalog import` made, binary or CSV, of any
+    /// depth and kind of id (default: built-in); truth.jsonl gives each star's catalog_id.
     #[arg(long)]
     pub catalog: Option<PathBuf>,
+    /// Set the zero point so that a star of --mag-limit, centred on a pixel, peaks at this
+    /// SNR over the sky and read noise (e.g. 8 for a deep catalog). Default: a magnitude-0
+    /// star gives 2e6 electrons (magnitude 6 peaks at SNR 47, magnitude 9 at 3).
+    #[arg(long, value_parser = within(0.5, 1e6))]
+    pub limit_snr: Option<f64>,
+    /// Where the frames point: uniformly random attitudes, or near the catalog's own stars
+    /// (for a catalog of a few regions of the sky, where random pointings find no stars).
+    #[arg(long, value_enum, default_value_t = Pointing::Sphere, conflicts_with = "sequence")]
+    pub pointing: Pointing,
+    /// Write 16-bit FITS frames whose header gives the pointing off by this many degrees, in a
+    /// random direction per frame (from --seed): OBJCTRA/OBJCTDEC (sexagesimal), RA/DEC
+    /// (degrees), DATE-OBS (--epoch) and EXPTIME (--exposure); truth.jsonl adds each frame's
+    /// hint. For `batch --hint header`.
+    #[arg(long, value_name = "DEG", value_parser = within(0.0, 90.0),
+          conflicts_with_all = ["streaks", "sequence"], help_heading = "Hints")]
+    pub hint_offset_deg: Option<f64>,
     /// Take the frames with this camera model (TOML, as for batch: non-square pixels,
     /// principal point, distortion, mirror) instead of --size and --fov-deg.
     #[arg(long, conflicts_with_all = ["size", "fov_deg"])]
@@ -426,7 +445,7 @@ pub struct SimulateArgs {
     /// --sequence: mid-exposure of each sequence's first frame.
     #[arg(long, default_value = "2024-03-15T20:00:00", help_heading = "Streaks")]
     pub start_utc: String,
-    /// Exposure time, seconds.
+    /// Exposure time, seconds (also EXPTIME of frames with --hint-offset-deg).
     #[arg(long, default_value_t = 5.0, help_heading = "Streaks")]
     pub exposure: f64,
     /// The station written into the headers: LAT,LON,HEIGHT_M.

@@ -4,6 +4,7 @@ use super::args::*;
 use anyhow::Result;
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
+use gpustar::simulate::hints::HintSim;
 use gpustar::simulate::{self, SimSettings};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -30,8 +31,24 @@ pub(crate) fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
             Some(p) => Some(Camera::from_toml_file(p)?.0),
             None => None,
         },
+        limit_snr: a.limit_snr,
+        pointing: a.pointing,
+        hints: a.hint_offset_deg.map(|offset_deg| HintSim {
+            offset_deg,
+            exposure_s: a.exposure,
+        }),
         ..SimSettings::default()
     };
+    // Stars the frames cannot show, with the camera file saying they are there, make a set
+    // that a solver is wrongly blamed for.
+    let faint = s.peak_snr(s.mag_limit);
+    if a.limit_snr.is_none() && faint < 5.0 {
+        eprintln!(
+            "gpustar: warning: stars of --mag-limit {} peak at SNR {faint:.1} at the default \
+             zero point; --limit-snr 8 makes every star to the limit visible",
+            s.mag_limit
+        );
+    }
     let t0 = Instant::now();
     if a.streaks {
         let start = gpustar::sky::Utc::parse(&a.start_utc)
@@ -88,10 +105,20 @@ pub(crate) fn simulate_cmd(a: SimulateArgs) -> Result<ExitCode> {
         );
         return Ok(ExitCode::SUCCESS);
     }
+    let s = SimSettings {
+        // FITS frames with hints are 16-bit, as --streaks's.
+        bits: if s.hints.is_some() { 16 } else { s.bits },
+        ..s
+    };
     simulate::write_set(&catalog, &s, &a.out, threads, |_| {})?;
     eprintln!(
-        "gpustar: wrote {} frames, truth.jsonl and camera.toml to {} in {:.1} s",
+        "gpustar: wrote {} {}, truth.jsonl and camera.toml to {} in {:.1} s",
         a.frames,
+        if s.hints.is_some() {
+            "FITS frames with pointing hints"
+        } else {
+            "frames"
+        },
         a.out.display(),
         t0.elapsed().as_secs_f64()
     );

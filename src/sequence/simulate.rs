@@ -170,7 +170,7 @@ fn plan(catalog: &Catalog, s: &SimSettings, q: &SequenceSim, j: usize) -> Result
             let spot = Spot {
                 x,
                 y,
-                electrons: s.flux_mag0_e * 10f64.powf(-0.4 * p.mag),
+                electrons: s.zero_point_e() * 10f64.powf(-0.4 * p.mag),
                 sigma_px: p.sigma,
             };
             let truth = TruthParticle {

@@ -299,6 +299,7 @@ mod tests {
                 })
                 .collect(),
             false_stars: Vec::new(),
+            hint: None,
         };
         let mut rec = Record::empty("f.png", "cpu");
         rec.status = Status::Solved;

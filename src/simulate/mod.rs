@@ -3,8 +3,19 @@
 //! have: sky background with vignetting, Poisson and read noise, false stars, hot pixels.
 //!
 //! Frames are reproducible from `--seed`: frame k uses its own ChaCha8 stream.
+//!
+//! Brightness: a star of magnitude m gives `zero_point_e() × 10^(−0.4 m)` electrons. The zero
+//! point is `flux_mag0_e` (2e6 e⁻: a magnitude-6 star peaks at SNR ≈ 47 over the default sky
+//! and read noise, magnitude 9 at ≈ 3), or, with `limit_snr`, whatever puts the faintest star
+//! drawn (`mag_limit`) at that peak SNR: a catalog of any depth then renders all of its stars
+//! to the limit visibly, and the brightest saturate as they would on a real sensor.
+//!
+//! Pointings are uniform over the sphere, or near the catalog's own stars
+//! ([`Pointing::Catalog`], for a catalog that covers a few patches of sky); [`hints`] writes
+//! frames as FITS whose header carries the pointing, off by a set angle.
 
 pub mod evaluate;
+pub mod hints;
 
 use crate::camera::Camera;
 use crate::catalog::Catalog;
@@ -24,7 +35,7 @@ pub struct SimSettings {
     pub width: u32,
     pub height: u32,
     pub fov_x_deg: f64,
-    /// Faintest catalog star drawn (Hp).
+    /// Faintest catalog star drawn, in the catalog's own magnitude (Hp for the built-in one).
     pub mag_limit: f64,
     pub frames: usize,
     pub seed: u64,
@@ -54,6 +65,25 @@ pub struct SimSettings {
     /// A full camera model (non-square pixels, principal point, distortion, mirror) instead
     /// of `width`, `height` and `fov_x_deg`.
     pub camera: Option<Camera>,
+    /// Peak SNR (noise-free, centred on a pixel, over sky and read noise at the centre) of a
+    /// star of `mag_limit`: sets the zero point instead of `flux_mag0_e`.
+    pub limit_snr: Option<f64>,
+    /// Where the frames point.
+    pub pointing: Pointing,
+    /// FITS frames with a pointing hint in the header (see [`hints`]) instead of PNG.
+    pub hints: Option<hints::HintSim>,
+}
+
+/// Where simulated frames point.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Pointing {
+    /// Uniformly random attitudes (boresight over the whole sphere, roll).
+    #[default]
+    Sphere,
+    /// Near a catalog star (one of those to the magnitude limit, drawn at random): the
+    /// boresight uniform within half the narrower field of view of it, the roll uniform, so
+    /// that the star is in the field.
+    Catalog,
 }
 
 impl SimSettings {
@@ -63,6 +93,36 @@ impl SimSettings {
             Some(c) => Ok(c.clone()),
             None => Camera::from_fov(self.width, self.height, self.fov_x_deg),
         }
+    }
+
+    /// Electrons of a magnitude-0 star: `flux_mag0_e`, or from `limit_snr` (see the module).
+    pub fn zero_point_e(&self) -> f64 {
+        match self.limit_snr {
+            None => self.flux_mag0_e,
+            Some(snr) => {
+                snr * self.background_noise_e() / self.peak_fraction()
+                    * 10f64.powf(0.4 * self.mag_limit)
+            }
+        }
+    }
+
+    /// Noise-free peak SNR of a star of magnitude `mag` centred on a pixel at the frame's
+    /// centre (over the sky's Poisson noise and the read noise).
+    pub fn peak_snr(&self, mag: f64) -> f64 {
+        self.zero_point_e() * 10f64.powf(-0.4 * mag) * self.peak_fraction()
+            / self.background_noise_e()
+    }
+
+    /// Fraction of a star's light in the pixel it is centred on.
+    fn peak_fraction(&self) -> f64 {
+        pixel_fraction(0.0, 0.0, self.psf_sigma_px).powi(2)
+    }
+
+    /// Noise of a pixel without a star at the centre, electrons.
+    fn background_noise_e(&self) -> f64 {
+        (self.sky_e.max(0.0) + self.read_noise_e * self.read_noise_e)
+            .sqrt()
+            .max(1e-9)
     }
 }
 
@@ -87,6 +147,9 @@ impl Default for SimSettings {
             hot_pixels: 5,
             centroid_noise_px: 0.0,
             camera: None,
+            limit_snr: None,
+            pointing: Pointing::Sphere,
+            hints: None,
         }
     }
 }
@@ -127,6 +190,9 @@ pub struct Truth {
     /// Positions of the false stars (simulated frames only).
     #[serde(default)]
     pub false_stars: Vec<[f64; 2]>,
+    /// The pointing hint written into the frame's header (`simulate --hint-offset-deg`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hint: Option<hints::TruthHint>,
 }
 
 /// A uniformly random rotation (Shoemake's method).
@@ -167,12 +233,85 @@ pub fn add_spot(signal: &mut [f64], w: u32, h: u32, x: f64, y: f64, electrons: f
     }
 }
 
+/// A rotation whose boresight (camera +z) is `boresight` (a unit vector, ICRS) and whose
+/// camera +x lies at `roll_rad` from the plane of the boresight and the celestial pole.
+pub fn rotation_towards(boresight: &Vector3<f64>, roll_rad: f64) -> Matrix3<f64> {
+    let b = boresight.normalize();
+    // Any axis across the boresight: the pole's, or x's near the poles.
+    let helper = if b.z.abs() < 0.9 {
+        Vector3::z()
+    } else {
+        Vector3::x()
+    };
+    let x0 = helper.cross(&b).normalize();
+    let y0 = b.cross(&x0);
+    let x = x0 * roll_rad.cos() + y0 * roll_rad.sin();
+    let y = b.cross(&x);
+    Matrix3::from_rows(&[x.transpose(), y.transpose(), b.transpose()])
+}
+
+/// A random attitude near a random catalog star to `s.mag_limit` ([`Pointing::Catalog`]).
+fn near_catalog_star(
+    catalog: &Catalog,
+    s: &SimSettings,
+    rng: &mut impl Rng,
+) -> Result<Matrix3<f64>> {
+    let eligible = |st: &&crate::catalog::Star| st.mag <= s.mag_limit;
+    let n = catalog.stars.iter().filter(eligible).count();
+    if n == 0 {
+        fail!(
+            Config,
+            "--pointing catalog: {} has no star to magnitude {}",
+            catalog.source,
+            s.mag_limit
+        );
+    }
+    let k = rng.random_range(0..n);
+    let star = catalog
+        .stars
+        .iter()
+        .filter(eligible)
+        .nth(k)
+        .expect("k < the number of eligible stars");
+    let v = star.vector_at(s.epoch);
+    let camera = s.camera()?;
+    let radius = 0.5 * camera.fov_x_deg().min(camera.fov_y_deg()).to_radians();
+    // Uniform in the cap: the cosine of the distance uniform in [cos radius, 1].
+    let (u, azimuth, roll): (f64, f64, f64) = (
+        rng.random(),
+        rng.random_range(0.0..std::f64::consts::TAU),
+        rng.random_range(0.0..std::f64::consts::TAU),
+    );
+    let cos_d = 1.0 - u * (1.0 - radius.cos());
+    let sin_d = (1.0 - cos_d * cos_d).max(0.0).sqrt();
+    // A direction across the star's, at a uniform angle about it.
+    let across = rotation_towards(&v, azimuth).row(0).transpose();
+    let boresight = v * cos_d + across * sin_d;
+    Ok(rotation_towards(&boresight, roll))
+}
+
 /// Render one frame: the pixels (as u16 in ADU) and its truth.
 pub fn render(catalog: &Catalog, s: &SimSettings, index: usize) -> Result<(Vec<u16>, Truth)> {
     let mut rng = ChaCha8Rng::seed_from_u64(s.seed);
     rng.set_stream(index as u64);
-    let r = random_rotation(&mut rng);
+    let r = match s.pointing {
+        Pointing::Sphere => random_rotation(&mut rng),
+        Pointing::Catalog => near_catalog_star(catalog, s, &mut rng)?,
+    };
     render_with(catalog, s, index, &mut rng, &r, &[])
+}
+
+/// Indices of the catalog stars that may lie within `radius` (radians) of `centre` at
+/// `epoch`: the catalog's cone, widened by the farthest any star moves from its own epoch.
+/// Ascending, as the catalog holds them.
+fn stars_near(catalog: &Catalog, centre: &Vector3<f64>, radius: f64, epoch: f64) -> Vec<u32> {
+    let fastest = catalog
+        .stars
+        .iter()
+        .map(|st| (st.pmra_mas_yr.abs() + st.pmdec_mas_yr.abs()) * (epoch - st.epoch).abs())
+        .fold(0.0, f64::max);
+    let moved = (fastest / 3.6e6).to_radians();
+    catalog.cone(centre, radius + 1.01 * moved + 1e-4)
 }
 
 /// A spot drawn besides the stars (a particle of `simulate --sequence`): where, how many
@@ -214,8 +353,17 @@ pub fn render_with(
     let mut signal = vec![0f64; (w * h) as usize];
     let mut stars = Vec::new();
     let boresight = r.transpose() * Vector3::z();
-    let cos_reach = (camera.diagonal_rad() / 2.0 + 0.02).cos();
-    for star in catalog.stars.iter().filter(|st| st.mag <= s.mag_limit) {
+    let reach = camera.diagonal_rad() / 2.0 + 0.02;
+    let cos_reach = reach.cos();
+    let zero_point = s.zero_point_e();
+    // The stars of the cone, in catalog order (the order they are drawn in, so that the
+    // sums of overlapping spots are those of a walk through the whole catalog).
+    let near = stars_near(catalog, &boresight, reach, s.epoch);
+    for star in near
+        .iter()
+        .map(|&i| &catalog.stars[i as usize])
+        .filter(|st| st.mag <= s.mag_limit)
+    {
         let v = star.vector_at(s.epoch);
         if v.dot(&boresight) < cos_reach {
             continue;
@@ -227,7 +375,7 @@ pub fn render_with(
         {
             continue;
         }
-        let e = s.flux_mag0_e * 10f64.powf(-0.4 * star.mag) * vig(x, y);
+        let e = zero_point * 10f64.powf(-0.4 * star.mag) * vig(x, y);
         // Drawn off its true place by the centroid noise, from a stream of its own: the
         // frame is otherwise the same as without noise (sky, false stars, hot pixels).
         let (dx, dy) = match noise {
@@ -262,7 +410,7 @@ pub fn render_with(
             h,
             x,
             y,
-            s.flux_mag0_e * 10f64.powf(-0.4 * mag),
+            zero_point * 10f64.powf(-0.4 * mag),
             s.psf_sigma_px,
         );
         false_stars.push([x, y]);
@@ -308,6 +456,7 @@ pub fn render_with(
         fov_y_deg: camera.fov_y_deg(),
         stars,
         false_stars,
+        hint: None,
     };
     Ok((pixels, truth))
 }
@@ -330,6 +479,12 @@ pub fn write_set(
     if s.bits != 8 && s.bits != 16 {
         fail!(Config, "--bits must be 8 or 16, got {}", s.bits);
     }
+    if s.hints.is_some() && s.bits != 16 {
+        fail!(
+            Config,
+            "frames with header hints are 16-bit FITS: give --bits 16"
+        );
+    }
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let camera = s.camera()?;
     let next = std::sync::atomic::AtomicUsize::new(0);
@@ -344,7 +499,23 @@ pub fn write_set(
                     if k >= s.frames {
                         break;
                     }
-                    let done = render(catalog, s, k).and_then(|(pixels, truth)| {
+                    let done = render(catalog, s, k).and_then(|(pixels, mut truth)| {
+                        if let Some(h) = &s.hints {
+                            truth.file = hints::frame_name(k);
+                            let hint = hints::hint_for(&truth, s, h, k);
+                            let cards = hints::header_cards(&hint, s.epoch, h.exposure_s);
+                            truth.hint = Some(hint);
+                            let bytes = crate::io::fits::encode_u16(
+                                camera.width,
+                                camera.height,
+                                &pixels,
+                                &cards,
+                            );
+                            let path = out.join(&truth.file);
+                            std::fs::write(&path, bytes)
+                                .with_context(|| format!("cannot write {}", path.display()))?;
+                            return Ok(truth);
+                        }
                         let path = out.join(&truth.file);
                         write_png(&path, camera.width, camera.height, &pixels, s.bits)
                             .with_context(|| format!("cannot write {}", path.display()))?;

@@ -760,3 +760,14 @@ fn seed_004_example() {
         assert!(sep <= 0.05, "{sep}");
     }
 }
+
+#[test]
+fn julian_years_as_dates_read_back() {
+    assert_eq!(iso_of_julian_year(2000.0), "2000-01-01T12:00:00.000");
+    assert_eq!(julian_year(&iso_of_julian_year(2000.0)), Some(2000.0));
+    for year in [1991.25, 2016.0, 2024.2071, 2031.999] {
+        let back = julian_year(&iso_of_julian_year(year)).unwrap();
+        // A millisecond is 3.2e-11 years.
+        assert!((back - year).abs() < 1e-10, "{year} → {back}");
+    }
+}

@@ -301,6 +301,17 @@ pub fn plausible_mjd(mjd: f64) -> bool {
     (MJD_PLAUSIBLE.0..MJD_PLAUSIBLE.1).contains(&mjd)
 }
 
+/// The instant of a Julian year (2000.0 is 2000-01-01T12:00:00), as "YYYY-MM-DDThh:mm:ss.sss"
+/// ([`Utc::iso`]): what [`julian_year`] reads back to the same year within a millisecond. The
+/// time scale is not told apart, as in [`julian_year`].
+pub fn iso_of_julian_year(year: f64) -> String {
+    Utc {
+        jd1: 2_451_545.0,
+        jd2: (year - 2000.0) * 365.25,
+    }
+    .iso()
+}
+
 /// The Julian year of an ISO 8601 date and time as [`parse_iso`] reads it ("2019-07-29T20:47:26.5",
 /// "2019-07-29", a trailing `Z`); None for anything else, an impossible calendar date among them.
 /// The time is taken as is (UTC, or whatever TIMESYS says: seconds do not matter at this

@@ -32,6 +32,7 @@ mod refine;
 mod resume;
 mod select;
 mod sequence;
+mod simulate_narrow;
 mod spread;
 mod streaks;
 mod streaks_cli;
