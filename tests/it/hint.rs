@@ -180,7 +180,11 @@ fn hinted_records_are_the_same_on_both_backends() {
     assert_eq!(cpu.len(), 3);
     for (c, g) in cpu.iter().zip(&gpu) {
         assert_eq!(c["status"], "solved", "{c}");
-        assert!(g["backend"].as_str().unwrap().starts_with("gpu"), "{}", g["backend"]);
+        assert!(
+            g["backend"].as_str().unwrap().starts_with("gpu"),
+            "{}",
+            g["backend"]
+        );
         let comparable = |r: &serde_json::Value| {
             let mut r = r.clone();
             r["backend"] = "".into();
