@@ -74,6 +74,12 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
              streak frames separately"
         );
     }
+    if b.sequence && o.hint.is_some() {
+        anyhow::bail!(
+            "--hint is not used with --sequence: a sequence's frames are identified lost-in-space \
+             and then tracked from frame to frame"
+        );
+    }
     let header_only = o.streaks.streaks && o.streaks.astrometry == Astrometry::Header;
     let (camera, camera_mag, scale_range) = camera_source(&o.camera, header_only)?;
     let catalog = Catalog::load(o.catalog.catalog.as_deref())?;

@@ -194,3 +194,17 @@ fn hinted_records_are_the_same_on_both_backends() {
         common::assert_records_match(&comparable(g), &comparable(c));
     }
 }
+
+#[test]
+fn hints_are_refused_with_sequences() {
+    let dir = tempfile::tempdir().unwrap();
+    common::simulate_small(dir.path(), 1);
+    let out = common::gpustar()
+        .args(["batch", dir.path().to_str().unwrap(), "--fov-deg", "18"])
+        .args(["--sequence", "--hint", "10,10"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--hint is not used with --sequence"), "{err}");
+}
