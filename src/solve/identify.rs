@@ -86,12 +86,18 @@ pub fn vote_cpu(
     n_ref: usize,
     k: usize,
 ) -> VoteResult {
-    let (votes, hypotheses) = cpu::vote::vote(table, ranges, n_stars, n_ref);
-    VoteResult {
-        candidates: cpu::select::select(&votes, n_stars, n_ref, k),
-        k,
-        hypotheses,
+    thread_local! {
+        // The vote counters of this thread's last frame, kept for the next (see `vote_into`).
+        static COUNTERS: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
     }
+    COUNTERS.with_borrow_mut(|votes| {
+        let hypotheses = cpu::vote::vote_into(votes, table, ranges, n_stars, n_ref);
+        VoteResult {
+            candidates: cpu::select::select(votes, n_stars, n_ref, k),
+            k,
+            hypotheses,
+        }
+    })
 }
 
 /// An image star and the reference star it was identified with.
