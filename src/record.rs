@@ -89,6 +89,11 @@ pub struct StreakRecord {
     pub snr: f64,
     /// RMS distance of the track's local centroids from the fitted line.
     pub fit_rms_px: f64,
+    /// The station that observed it, as the TDM names it: the header's OBSERVAT, SITE or
+    /// TELESCOP, and the coordinates Az/El are reduced for (`--station` or the header's);
+    /// null when neither is known. Absent from records of earlier versions.
+    #[serde(default)]
+    pub station: Option<String>,
 }
 
 /// Milliseconds spent per stage.

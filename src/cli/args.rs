@@ -341,7 +341,8 @@ pub struct StreakOpts {
           value_parser = within_f32(0.5, 100.0))]
     pub streak_sigma: f32,
     /// Write the streaks' midpoints at mid-exposure as a CCSDS TDM (KVN): RADEC, and AZEL
-    /// when the station is known.
+    /// when the station is known. A run without a timed streak writes none (and removes an
+    /// older TDM gpustar wrote there).
     #[arg(
         long,
         value_name = "FILE",
@@ -349,7 +350,8 @@ pub struct StreakOpts {
         help_heading = "Streaks"
     )]
     pub tdm: Option<PathBuf>,
-    /// Write the streaks' midpoints at mid-exposure as IOD lines (angle format 2, J2000).
+    /// Write the streaks' midpoints at mid-exposure as IOD lines (angle format 2, J2000), each
+    /// streak its own unidentified object (stvid's 99999-n and YY DOY+500 designation).
     #[arg(
         long,
         value_name = "FILE",
@@ -357,7 +359,7 @@ pub struct StreakOpts {
         help_heading = "Streaks"
     )]
     pub iod: Option<PathBuf>,
-    /// COSPAR station number for the IOD lines.
+    /// COSPAR station number for the IOD lines (the default, 9999, is no site: warned about).
     #[arg(long, default_value_t = 9999, value_parser = clap::value_parser!(u16).range(0..=9999),
           help_heading = "Streaks")]
     pub iod_station: u16,

@@ -97,15 +97,7 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
     s.refine.fit = o.camera.fit;
     s.scale_range = scale_range;
     let so = &o.streaks;
-    let mut exports = Exports::new(
-        so.tdm.clone(),
-        so.iod.clone(),
-        so.iod_station,
-        so.station.map_or_else(
-            || "STATION".to_string(),
-            |s| format!("{:.5},{:.5},{:.1}", s.lat_deg, s.lon_deg, s.height_m),
-        ),
-    );
+    let mut exports = Exports::new(so.tdm.clone(), so.iod.clone(), so.iod_station);
     exports.check_paths()?;
     // The output, and what an earlier run already wrote to it.
     let mut inputs = inputs;

@@ -207,6 +207,8 @@ struct Line {
     error: bool,
     /// Its streaks (`--streaks` runs), for the exports of a resumed run.
     streaks: Option<Vec<crate::record::StreakRecord>>,
+    /// Its plate solution's star residual (the exports' position uncertainty uses it).
+    rmse_arcsec: Option<f64>,
 }
 
 /// An output file opened for a run: locked against a second writer for as long as it is
@@ -321,6 +323,7 @@ pub fn open_output(
                 if let Some(streaks) = l.streaks.take().filter(|s| !s.is_empty()) {
                     let mut r = Record::empty(name, "");
                     r.streaks = Some(streaks);
+                    r.rmse_arcsec = l.rmse_arcsec;
                     previous.streaks.push(r);
                 }
             }
@@ -408,27 +411,34 @@ fn parse_lines(bytes: &[u8], format: Format, path: &Path) -> Result<(Vec<Line>, 
     let mut lines = Vec::with_capacity(ends.len());
     let mut start = 0;
     // CSV: the header's column count, and where its streaks column is (if it has one).
-    let (mut columns, mut streaks_at) = (0, None);
+    let (mut columns, mut streaks_at, mut rmse_at) = (0, None, None);
     for (n, end) in ends.into_iter().enumerate() {
         let text = std::str::from_utf8(&bytes[start..end]).ok();
         let parsed = text.and_then(|text| match format {
-            Format::Jsonl => serde_json::from_str::<Record>(text)
-                .ok()
-                .map(|r| (Some(r.file), r.status == Status::Error, r.streaks)),
+            Format::Jsonl => serde_json::from_str::<Record>(text).ok().map(|r| {
+                (
+                    Some(r.file),
+                    r.status == Status::Error,
+                    r.streaks,
+                    r.rmse_arcsec,
+                )
+            }),
             Format::Csv if n == 0 => {
                 columns = text.split(',').count();
                 streaks_at = text.split(',').position(|c| c == "streaks");
-                is_csv_header(text).then_some((None, false, None))
+                rmse_at = text.split(',').position(|c| c == "rmse_arcsec");
+                is_csv_header(text).then_some((None, false, None, None))
             }
             Format::Csv => csv_fields(text).filter(|f| f.len() == columns).map(|f| {
                 let streaks = streaks_at
                     .and_then(|c| f.get(c))
                     .filter(|s| !s.is_empty())
                     .and_then(|s| serde_json::from_str(s).ok());
-                (Some(f[0].clone()), f[1] == "error", streaks)
+                let rmse = rmse_at.and_then(|c| f.get(c)).and_then(|v| v.parse().ok());
+                (Some(f[0].clone()), f[1] == "error", streaks, rmse)
             }),
         });
-        let Some((file, error, streaks)) = parsed else {
+        let Some((file, error, streaks, rmse_arcsec)) = parsed else {
             let text = String::from_utf8_lossy(&bytes[start..end]);
             let what = if n == 0 && format == Format::Csv {
                 "the CSV header"
@@ -447,6 +457,7 @@ fn parse_lines(bytes: &[u8], format: Format, path: &Path) -> Result<(Vec<Line>, 
             file,
             error,
             streaks,
+            rmse_arcsec,
         });
         start = end + 1;
     }

@@ -99,13 +99,44 @@ fn kvn_value(v: &str, what: &str) -> Result<String, String> {
             t.escape_default()
         ));
     }
-    if t.len() > 200 {
+    if t.len() > KVN_VALUE_MAX {
         return Err(format!(
             "{what} is {} characters; TDM lines are limited to 254",
             t.len()
         ));
     }
     Ok(t.to_string())
+}
+
+/// The longest KVN text value gpustar writes (503.0-B-2 limits a line to 254 characters).
+const KVN_VALUE_MAX: usize = 200;
+
+/// Any name as a KVN text value [`tdm_text`] accepts: characters outside printable ASCII,
+/// and the backslash, written as Rust's `escape_default` writes them (`é` → `\u{e9}`, a
+/// newline → `\n`, `\` → `\\`), so that the original can be told back; blanks at the ends
+/// kept as `\u{20}`; a value over 200 characters shortened in the middle (`...`); an empty
+/// one written `(unnamed)`.
+pub fn kvn_escape(name: &str) -> String {
+    let mut out = String::with_capacity(name.len());
+    let last = name.chars().count().saturating_sub(1);
+    for (i, c) in name.chars().enumerate() {
+        if c == ' ' && (i == 0 || i == last) {
+            out.push_str("\\u{20}");
+        } else if c == '\\' || !(' '..='~').contains(&c) {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    if out.is_empty() {
+        return "(unnamed)".to_string();
+    }
+    if out.len() > KVN_VALUE_MAX {
+        // All ASCII now: byte indices are character indices.
+        let keep = (KVN_VALUE_MAX - 3) / 2;
+        out = format!("{}...{}", &out[..keep], &out[out.len() - keep..]);
+    }
+    out
 }
 
 /// Degrees with 9 decimals (3.6 µas, far below 0.001″), never `-0.000000000` (the TDM
@@ -356,7 +387,39 @@ fn mx_encode(v: f64) -> Option<String> {
     None
 }
 
-/// The value of an MX field; NaN when blank.
+/// Pieces an unidentified object's designation can have in a day: the launch-piece letters
+/// A-Z without I and O (24), then two of them (576). sattools reads the designation's second
+/// part into 6 bytes (`%s` into `char buf2[6]`), so three letters would overflow it.
+pub const PIECES_PER_DAY: usize = 24 + 24 * 24;
+
+/// The `k`-th piece (0-based, below [`PIECES_PER_DAY`]): A, B, … Z, AA, AB, … ZZ.
+fn piece_letters(k: usize) -> String {
+    const L: &[u8; 24] = b"ABCDEFGHJKLMNPQRSTUVWXYZ";
+    if k < 24 {
+        (L[k] as char).to_string()
+    } else {
+        let k = (k - 24) % (24 * 24);
+        format!("{}{}", L[k / 24] as char, L[k % 24] as char)
+    }
+}
+
+/// stvid's international designation for an unidentified object (stvid/extract.py,
+/// `get_cospar`): the two-digit year, the day of year + 500 (never a real launch number),
+/// and a piece, here the `piece`-th of that UTC day (taken modulo [`PIECES_PER_DAY`]):
+/// `26 835A` for the first of 2026-12-01. Columns 7-15 of the IOD line.
+pub fn unidentified_designation(time_utc: &str, piece: usize) -> crate::Result<String> {
+    let (_, (year, month, day, _)) = utc_ms(time_utc).map_err(crate::Error::Output)?;
+    const BEFORE: [i32; 12] = [0, 31, 59, 90, 120, 151, 181, 212, 243, 273, 304, 334];
+    let leap = year % 4 == 0 && (year % 100 != 0 || year % 400 == 0);
+    let doy = BEFORE[(month - 1) as usize] + day + i32::from(leap && month > 2);
+    Ok(format!(
+        "{:02} {}{}",
+        year % 100,
+        doy + 500,
+        piece_letters(piece % PIECES_PER_DAY)
+    ))
+}
+
 /// RA as `HHMMmmm` (hours, minutes, thousandths of a minute), rounded, 24h wrapping to 0.
 fn ra_hhmmmmm(ra_deg: f64) -> String {
     const PER_DAY: i64 = 24 * 60 * 1000;

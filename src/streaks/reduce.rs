@@ -49,6 +49,7 @@ pub fn records(
             s
         }
     };
+    let station_name = station_name(&get, station.as_ref());
     if exposure.is_none() {
         warnings.push("no exposure time in the header: streak ends have no time, Az or El".into());
     }
@@ -110,10 +111,37 @@ pub fn records(
                 flux: f.flux,
                 snr: f.snr,
                 fit_rms_px: f.fit_rms_px,
+                station: station_name.clone(),
             }
         })
         .collect();
     (out, warnings)
+}
+
+/// Header keywords that name the station, in order of preference.
+const STATION_NAME_KEYS: [&str; 3] = ["OBSERVAT", "SITE", "TELESCOP"];
+
+/// The station as the TDM names it (PARTICIPANT_1): the header's name for it, and its
+/// coordinates when known; `None` when neither is.
+fn station_name(
+    get: &dyn Fn(&str) -> Option<String>,
+    station: Option<&sky::Station>,
+) -> Option<String> {
+    let name = STATION_NAME_KEYS
+        .iter()
+        .find_map(|k| crate::sky::header::value(get, k));
+    let at = station.map(|s| {
+        format!(
+            "lat {:.5} lon {:.5} h {:.1} m",
+            s.lat_deg, s.lon_deg, s.height_m
+        )
+    });
+    match (name, at) {
+        (Some(n), Some(at)) => Some(format!("{n} ({at})")),
+        (Some(n), None) => Some(n),
+        (None, Some(at)) => Some(format!("station at {at}")),
+        (None, None) => None,
+    }
 }
 
 /// A map from pixels to ICRS.

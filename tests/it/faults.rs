@@ -503,10 +503,13 @@ fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
             "{}",
             stderr(&o)
         );
-        let text = std::fs::read_to_string(&tdm).unwrap();
+        // A TDM, or none when no streak has a timed midpoint (TDM 2.0 requires a segment).
+        let text = std::fs::read_to_string(&tdm).unwrap_or_default();
         assert!(
-            text.starts_with("CCSDS_TDM_VERS"),
-            "{astrometry}: TDM {text:?}"
+            text.starts_with("CCSDS_TDM_VERS")
+                || !tdm.exists() && astrometry == "header" && stderr(&o).contains("no TDM"),
+            "{astrometry}: TDM {text:?}: {}",
+            stderr(&o)
         );
         if astrometry == "solve" {
             assert!(r.iter().all(|r| r["status"] == "solved"), "{r:?}");

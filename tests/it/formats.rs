@@ -960,3 +960,110 @@ fn parsers_never_panic_on_mangled_input() {
         let _ = parse_tdm(&t);
     }
 }
+
+// ------------------------------------------------------------------------------------
+// The readers' rules (ports in tests/it/common/formats.rs)
+// ------------------------------------------------------------------------------------
+
+#[test]
+fn readers_accept_stvid_lines_and_refuse_gpustar_s_old_short_ones() {
+    use crate::common::formats::{sattools_decode, trusat_format_test};
+    // stvid's format_iod_line: "%05d %-9s %04d G %s 17 25 %s 37 S".
+    let stvid = "99999 26 835A   4171 G 20261201031500123 17 25 0512345-012345 37 S";
+    let o = sattools_decode(stvid).unwrap();
+    assert_eq!((o.satno, o.desig.as_str(), o.site), (99999, "26835A", 4171));
+    assert!((o.st - 0.1).abs() < 1e-12 && (o.sr - 0.3 / 60.0).abs() < 1e-12);
+    assert!((o.ra_deg - (5.0 + 12.345 / 60.0) * 15.0).abs() < 1e-9);
+    assert!((o.dec_deg + 1.0 + 23.45 / 60.0).abs() < 1e-9);
+    assert!(trusat_format_test(stvid));
+    assert!(trusat_format_test(&stvid[..64]));
+    // What gpustar wrote before: 61 characters, no designation, blank MX fields, site 9999.
+    let old = "99999           9999   20240315200002500    25 1945557-075079";
+    assert!(sattools_decode(old).unwrap_err().contains("< 64"));
+    assert!(!trusat_format_test(old));
+    let blank_mx = "99999 26 835A   4171 G 20261201031500123    25 0512345-012345   ";
+    assert!(sattools_decode(blank_mx).unwrap_err().contains("%1d%1d"));
+    assert!(!trusat_format_test(blank_mx));
+    let no_site = stvid.replace(" 4171 ", " 9999 ");
+    assert!(sattools_decode(&no_site).unwrap_err().contains("9999"));
+}
+
+#[test]
+fn unidentified_designations_follow_stvid() {
+    use gpustar::streaks::formats::{PIECES_PER_DAY, unidentified_designation};
+    let d = |t: &str, k| unidentified_designation(t, k).unwrap();
+    assert_eq!(d("2026-12-01T03:15:00.123", 0), "26 835A");
+    assert_eq!(d("2024-03-15T20:00:00", 0), "24 575A"); // leap year: day 75
+    assert_eq!(d("2023-03-15T20:00:00", 0), "23 574A");
+    assert_eq!(d("2026-01-01T00:00:00", 7), "26 501H");
+    assert_eq!(d("2026-01-01T00:00:00", 8), "26 501J"); // no I, no O
+    assert_eq!(d("2026-01-01T00:00:00", 24), "26 501AA");
+    assert_eq!(d("2026-01-01T00:00:00", PIECES_PER_DAY - 1), "26 501ZZ");
+    assert_eq!(d("2026-01-01T00:00:00", PIECES_PER_DAY), "26 501A");
+    let mut all: Vec<_> = (0..PIECES_PER_DAY)
+        .map(|k| d("2026-01-01T00:00:00", k))
+        .collect();
+    all.sort();
+    all.dedup();
+    assert_eq!(all.len(), PIECES_PER_DAY);
+}
+
+#[test]
+fn written_lines_pass_both_readers() {
+    use crate::common::formats::{sattools_decode, trusat_format_test};
+    for (k, (ra, dec)) in [
+        (0.0, 0.0),
+        (359.9999, -89.99),
+        (123.456, 45.678),
+        (5.0, -0.5),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let o = IodObs {
+            norad: 99_999 - k as u32,
+            intl_des: gpustar::streaks::formats::unidentified_designation(
+                "2026-12-01T03:15:00.123",
+                k * 30,
+            )
+            .unwrap(),
+            station: 4171,
+            status: 'G',
+            time_utc: "2026-12-01T03:15:00.123".to_string(),
+            time_unc_s: 0.001,
+            ra_deg: ra,
+            dec_deg: dec,
+            pos_unc_deg: 3.0 / 3600.0,
+            behaviour: ' ',
+        };
+        let line = iod_line(&o).unwrap();
+        assert_eq!(line.len(), 64, "{line}");
+        let s = sattools_decode(&line).unwrap_or_else(|e| panic!("{line}: {e}"));
+        assert!(trusat_format_test(&line), "{line}");
+        assert!(
+            (s.st - 0.001).abs() < 1e-12 && s.sr >= 3.0 / 3600.0,
+            "{line}"
+        );
+        let dra = (s.ra_deg - ra).rem_euclid(360.0);
+        assert!(dra.min(360.0 - dra) < 0.001 / 60.0 * 15.0, "{line}");
+        assert!((s.dec_deg - dec).abs() < 0.01 / 60.0, "{line}");
+    }
+}
+
+#[test]
+fn names_are_escaped_for_the_tdm() {
+    use gpustar::streaks::formats::kvn_escape;
+    assert_eq!(kvn_escape("sub/img_01.fits"), "sub/img_01.fits");
+    assert_eq!(kvn_escape("café.fits"), "caf\\u{e9}.fits");
+    assert_eq!(kvn_escape("a\\b\nc"), "a\\\\b\\nc");
+    assert_eq!(kvn_escape(" x "), "\\u{20}x\\u{20}");
+    assert_eq!(kvn_escape(""), "(unnamed)");
+    let long = kvn_escape(&"é".repeat(300));
+    assert!(long.len() <= 200 && long.contains("..."), "{long}");
+    let t = Track {
+        object: kvn_escape("ñame.fits#1"),
+        station: kvn_escape("Observatório"),
+        observations: vec![obs("2026-12-01T03:15:00", 1.0, 2.0, None)],
+    };
+    assert!(tdm_text("2026-12-01T04:00:00", "GPUSTAR", &[t]).is_ok());
+}

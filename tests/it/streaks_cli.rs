@@ -4,7 +4,7 @@
 
 use crate::common;
 
-use common::formats::{parse_iod_line, parse_tdm};
+use common::formats::{parse_iod_line, parse_tdm, sattools_decode, trusat_format_test};
 use common::{gpustar, run_ok, run_records, truths};
 use gpustar::camera::Camera;
 use gpustar::io::frame::Frame;
@@ -68,6 +68,8 @@ fn streak_ends_times_azel_and_the_tdm_and_iod_files() {
             tdm.to_str().unwrap(),
             "--iod",
             iod.to_str().unwrap(),
+            "--iod-station",
+            "4171",
         ],
     );
     let truth = truths(&dir);
@@ -153,7 +155,23 @@ fn streak_ends_times_azel_and_the_tdm_and_iod_files() {
         .map(str::to_string)
         .collect();
     assert_eq!(lines.len(), mids.len());
+    // Each streak its own object; the station named in the TDM (the headers' OBSGEO-B/L/H).
+    let mut objects: Vec<_> = lines.iter().map(|l| l[..15].to_string()).collect();
+    objects.sort();
+    objects.dedup();
+    assert_eq!(objects.len(), lines.len(), "{lines:?}");
+    for seg in &tdm.segments {
+        assert_eq!(
+            seg.meta_value("PARTICIPANT_1"),
+            Some("station at lat 35.70000 lon 51.40000 h 1200.0 m")
+        );
+    }
     for (line, m) in lines.iter().zip(&mids) {
+        // What sattools and TruSat read.
+        let s = sattools_decode(line).unwrap_or_else(|e| panic!("{line}: {e}"));
+        assert!(trusat_format_test(line), "{line}");
+        assert_eq!(s.site, 4171);
+        assert!(s.st > 0.0 && s.sr > 0.0, "{line}");
         let o = parse_iod_line(line).unwrap();
         let dra = (o.ra_deg - m["ra_deg"].as_f64().unwrap()).abs();
         assert!(dra.min(360.0 - dra) < 0.001 / 60.0 * 15.0, "{line}: {m}");
@@ -301,4 +319,111 @@ fn header_astrometry_gives_the_solution_s_ra_dec() {
             assert!(dra.hypot(ddec) * 3600.0 < 10.0, "{ea} vs {eb}");
         }
     }
+}
+
+/// `batch --streaks --tdm --iod` on `dir`; the process's output.
+fn exports_run(dir: &Path, tdm: &Path, iod: &Path, extra: &[&str]) -> std::process::Output {
+    let mut cmd = gpustar();
+    cmd.args([
+        "batch",
+        dir.to_str().unwrap(),
+        "--backend",
+        "cpu",
+        "--streaks",
+    ])
+    .args(["--camera", dir.join("camera.toml").to_str().unwrap()])
+    .args([
+        "--tdm",
+        tdm.to_str().unwrap(),
+        "--iod",
+        iod.to_str().unwrap(),
+    ])
+    .args(extra);
+    cmd.output().unwrap()
+}
+
+#[test]
+fn exports_without_streaks_with_odd_names_and_after_a_failed_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = simulated(tmp.path());
+    let truth = truths(&dir);
+    let name = |k: usize| truth[k]["file"].as_str().unwrap().to_string();
+    let inside = |k: usize| {
+        truth[k]["streaks"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| !w["edge0"].as_bool().unwrap() && !w["edge1"].as_bool().unwrap())
+    };
+    let (tdm, iod) = (tmp.path().join("o.tdm"), tmp.path().join("o.iod"));
+
+    // 1. No streak: no TDM (an older one gpustar wrote is removed, and stderr says so), an
+    //    empty IOD file, and the warning for the default station code.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    std::fs::copy(dir.join("camera.toml"), empty.join("camera.toml")).unwrap();
+    let k = (0..truth.len())
+        .find(|&k| truth[k]["streaks"].as_array().unwrap().is_empty())
+        .expect("a frame without a streak");
+    std::fs::copy(dir.join(name(k)), empty.join(name(k))).unwrap();
+    std::fs::write(&tdm, "CCSDS_TDM_VERS = 2.0\n").unwrap();
+    let out = exports_run(&empty, &tdm, &iod, &[]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!tdm.exists(), "{err}");
+    assert!(err.contains("no TDM") && err.contains("removed"), "{err}");
+    assert!(err.contains("9999") && err.contains("COSPAR"), "{err}");
+    assert_eq!(std::fs::read_to_string(&iod).unwrap(), "");
+
+    // 2. A name that is not ASCII, and a header that names the observatory: escaped, not
+    //    refused; the IOD line as for any name.
+    let odd = tmp.path().join("odd");
+    std::fs::create_dir(&odd).unwrap();
+    std::fs::copy(dir.join("camera.toml"), odd.join("camera.toml")).unwrap();
+    let k = (0..truth.len())
+        .find(|&k| inside(k))
+        .expect("a streak inside a frame");
+    let q = |v: &str| format!("'{v}'");
+    let t = &truth[k];
+    let cards = [
+        gpustar::io::fits::card("DATE-BEG", &q(t["date_beg_utc"].as_str().unwrap())),
+        gpustar::io::fits::card("DATE-END", &q(t["date_end_utc"].as_str().unwrap())),
+        gpustar::io::fits::card("OBSGEO-B", "35.7"),
+        gpustar::io::fits::card("OBSGEO-L", "51.4"),
+        gpustar::io::fits::card("OBSGEO-H", "1200"),
+        gpustar::io::fits::card("OBSERVAT", &q("Ondrejov")),
+    ];
+    rewrite(&dir.join(name(k)), &odd.join("café €.fits"), &cards);
+    let out = exports_run(&odd, &tdm, &iod, &["--iod-station", "4171"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(!err.contains("9999"), "{err}");
+    let text = std::fs::read_to_string(&tdm).unwrap();
+    let parsed = parse_tdm(&text).unwrap();
+    assert!(!parsed.segments.is_empty());
+    for seg in &parsed.segments {
+        let object = seg.meta_value("PARTICIPANT_2").unwrap();
+        assert!(object.contains("(caf\\u{e9} \\u{20ac}.fits#"), "{object}");
+        assert_eq!(
+            seg.meta_value("PARTICIPANT_1"),
+            Some("Ondrejov (lat 35.70000 lon 51.40000 h 1200.0 m)")
+        );
+    }
+    let lines = std::fs::read_to_string(&iod).unwrap();
+    assert_eq!(lines.lines().count(), parsed.segments.len() / 2, "{lines}");
+    for line in lines.lines() {
+        sattools_decode(line).unwrap_or_else(|e| panic!("{line}: {e}"));
+        assert!(trusat_format_test(line), "{line}");
+    }
+
+    // 3. A run that fails (its output is a file gpustar did not write) leaves both files as
+    //    they were.
+    let before = (std::fs::read(&tdm).unwrap(), std::fs::read(&iod).unwrap());
+    let foreign = tmp.path().join("notes.txt");
+    std::fs::write(&foreign, "my notes\n").unwrap();
+    let out = exports_run(&dir, &tdm, &iod, &["-o", foreign.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert_eq!(std::fs::read(&tdm).unwrap(), before.0);
+    assert_eq!(std::fs::read(&iod).unwrap(), before.1);
+    assert_eq!(std::fs::read_to_string(&foreign).unwrap(), "my notes\n");
 }

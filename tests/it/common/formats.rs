@@ -644,3 +644,270 @@ pub fn parse_iod_line(line: &str) -> Result<IodObs, String> {
         behaviour: col(66),
     })
 }
+
+// ------------------------------------------------------------------------------------
+// The readers orbit-determination users run, ported
+// ------------------------------------------------------------------------------------
+
+/// What sattools keeps of an IOD line: the fields `decode_iod_observation` reads.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SattoolsObs {
+    pub satno: u32,
+    /// `%s %s` of columns 7 onward, joined (`24575A`).
+    pub desig: String,
+    pub site: u32,
+    /// Time uncertainty, s (`p.st`).
+    pub st: f64,
+    /// Position uncertainty, degrees (`p.sr` after the format's unit).
+    pub sr: f64,
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+}
+
+/// C's `%1d` at `i`: skips white space, then one digit; the index after it.
+fn c_1d(b: &[u8], mut i: usize) -> Option<(u32, usize)> {
+    while i < b.len() && b[i].is_ascii_whitespace() {
+        i += 1;
+    }
+    let d = *b.get(i)?;
+    d.is_ascii_digit().then(|| (u32::from(d - b'0'), i + 1))
+}
+
+/// C's `%Nd`/`%Nlf` of digits at `i` (white space skipped first, at most `n` characters).
+fn c_num(b: &[u8], mut i: usize, n: usize) -> Option<(f64, usize)> {
+    while i < b.len() && b[i].is_ascii_whitespace() {
+        i += 1;
+    }
+    let start = i;
+    while i < b.len() && i - start < n && (b[i].is_ascii_digit() || b[i] == b'.') {
+        i += 1;
+    }
+    let v = std::str::from_utf8(&b[start..i]).ok()?.parse().ok()?;
+    Some((v, i))
+}
+
+/// A port of the column rules of sattools' IOD reader (cbassa/sattools, src/satfit.c,
+/// `decode_iod_observation`, the same in residuals.c), for one line as `read_data` hands it
+/// over (without its newline): `Err` says why sattools would drop or misread the line, where
+/// the C sets `p.flag = 0` or reads a field from the wrong columns. Ported: the 64-character
+/// minimum and the sign in column 55 (`strlen(iod_line)<64 || iod_line[54]!='+'...`); the
+/// designation read by `sscanf(iod_line+6,"%s %s")` into 3 and 6 bytes (an empty one reads
+/// the station; a longer one overflows); the station `%4d` looked up in the site list (9999
+/// is none: `get_site` fails, flag 0); the time `%4d%2d%2d%2d%2d%5s`; the MX fields read with
+/// `%1d%1d` at columns 42 and 63, which skip blanks, so a blank field takes digits from the
+/// next columns (refused here rather than misread); format and epoch `%1d%1d` at column 45
+/// (formats 1, 2, 3, 7; epochs 0, 4, 5); RA `%2lf%2lf%3lf` and Dec `%2lf%2lf%2s` with the
+/// formats' units. Not ported: the precession to the date (epoch 5 read as J2000 here).
+pub fn sattools_decode(line: &str) -> Result<SattoolsObs, String> {
+    let b = line.as_bytes();
+    if b.len() < 64 {
+        return Err(format!("{} characters: strlen < 64, flag 0", b.len()));
+    }
+    if b[54] != b'+' && b[54] != b'-' {
+        return Err("column 55 is not + or -: flag 0".into());
+    }
+    let satno = c_num(b, 0, 5).ok_or("no satno in columns 1-5")?.0 as u32;
+    let mut words = line[6..].split_whitespace();
+    let (w1, w2) = (words.next().unwrap_or(""), words.next().unwrap_or(""));
+    if w1.len() > 2 || w2.len() > 5 {
+        return Err(format!("designation '{w1} {w2}' overflows buf1[3]/buf2[6]"));
+    }
+    if w1.len() == 4 && w1.bytes().all(|c| c.is_ascii_digit()) {
+        return Err("no designation: %s %s reads the station".into());
+    }
+    let site = c_num(b, 16, 4).ok_or("no station in columns 17-20")?.0 as u32;
+    if site == 9999 {
+        return Err("site 9999 is in no site list: flag 0".into());
+    }
+    for (i, n) in [(23, 4), (27, 2), (29, 2), (31, 2), (33, 2)] {
+        if !b[i..i + n].iter().all(u8::is_ascii_digit) {
+            return Err(format!("time columns {}-{} not digits", i + 1, i + n));
+        }
+    }
+    let fixed = |i: usize, what: &str| -> Result<(u32, u32), String> {
+        if !(b[i].is_ascii_digit() && b[i + 1].is_ascii_digit()) {
+            return Err(format!(
+                "{what} (columns {}-{}) not two digits: %1d%1d reads other columns",
+                i + 1,
+                i + 2
+            ));
+        }
+        let (m, j) = c_1d(b, i).ok_or(what.to_string())?;
+        Ok((m, c_1d(b, j).ok_or(what.to_string())?.0))
+    };
+    let (me, xe) = fixed(41, "time uncertainty")?;
+    let st = f64::from(me) * 10f64.powi(xe as i32 - 8);
+    let (format, epoch) = fixed(44, "format and epoch")?;
+    let (mr, xr) = fixed(62, "position uncertainty")?;
+    let mut sr = f64::from(mr) * 10f64.powi(xr as i32 - 8);
+    let (h, i) = c_num(b, 47, 2).ok_or("RA hours")?;
+    let (mm, i) = c_num(b, i, 2).ok_or("RA minutes")?;
+    let (ss, _) = c_num(b, i, 3).ok_or("RA fraction")?;
+    let (d, i) = c_num(b, 55, 2).ok_or("Dec degrees")?;
+    let (dd, i) = c_num(b, i, 2).ok_or("Dec minutes")?;
+    let ds_text: String = line[i..]
+        .trim_start()
+        .chars()
+        .take(2)
+        .take_while(|c| !c.is_whitespace())
+        .collect();
+    let mut ds: f64 = ds_text.parse().unwrap_or(0.0);
+    if ds_text.len() == 1 {
+        ds *= 10.0;
+    }
+    let sign = if b[54] == b'-' { -1.0 } else { 1.0 };
+    let (ra_h, dec) = match format {
+        1 => {
+            sr /= 3600.0;
+            (
+                h + mm / 60.0 + ss / 36000.0,
+                sign * (d + dd / 60.0 + ds / 3600.0),
+            )
+        }
+        2 => {
+            sr /= 60.0;
+            (
+                h + mm / 60.0 + ss / 60000.0,
+                sign * (d + dd / 60.0 + ds / 6000.0),
+            )
+        }
+        3 => (
+            h + mm / 60.0 + ss / 60000.0,
+            sign * (d + dd / 100.0 + ds / 10000.0),
+        ),
+        7 => (
+            h + mm / 60.0 + ss / 36000.0,
+            sign * (d + dd / 100.0 + ds / 10000.0),
+        ),
+        f => return Err(format!("IOD format {f} not implemented: flag 0")),
+    };
+    if ![0, 4, 5].contains(&epoch) {
+        return Err(format!("epoch {epoch} not implemented: flag 0"));
+    }
+    Ok(SattoolsObs {
+        satno,
+        desig: format!("{w1}{w2}"),
+        site,
+        st,
+        sr,
+        ra_deg: ra_h * 15.0,
+        dec_deg: dec,
+    })
+}
+
+/// A port of TruSat's `format_test_iod` (PyPI `trusat` 0.9.0, trusat/iod.py,
+/// `new_iod_format_re`), the regex its `parse_iod_lines` admits lines with, written out as
+/// the regex walks a line (`regex` has no look-around):
+/// `^(\d{5}\s\d{2}\s\d{3}(?=[A-Z]+\s*)[\D\s]{3}(?<!\s\w)\s|\s{16})` `[0-9A-HJ-NP-Z]{4}\s`
+/// `[EGFPBTCO ]\s` `[\d+]{8}` then either `\d*\s*$` or `(?=.{9})\d*\s*?\s\d{2}\s` and
+/// `[1-7][\s0-6]\s(?=[\d\s*]{7})\d+\s*?[+-](?=[\d\s*]{6})\d+\s*?\s\d{2}` or 20 blanks; the
+/// optional behaviour and magnitude groups after it never make a match fail (no `$`).
+/// Where `\d*` and `\s*?` could split a run of digits and blanks more than one way, this takes
+/// digits first, blanks after, which is the only split for fields of digits then blanks.
+pub fn trusat_format_test(line: &str) -> bool {
+    let b = line.as_bytes();
+    let at = |i: usize| b.get(i).copied();
+    let ws = |c: Option<u8>| c.is_some_and(|c| c.is_ascii_whitespace());
+    let digit = |c: Option<u8>| c.is_some_and(|c| c.is_ascii_digit());
+    let word = |c: Option<u8>| c.is_some_and(|c| c.is_ascii_alphanumeric() || c == b'_');
+    // NORAD / designation group, or 16 blanks.
+    let i = if (0..16).all(|k| ws(at(k))) {
+        16
+    } else {
+        let ok = (0..5).all(|k| digit(at(k)))
+            && ws(at(5))
+            && digit(at(6))
+            && digit(at(7))
+            && ws(at(8))
+            && (9..12).all(|k| digit(at(k)))
+            && at(12).is_some_and(|c| c.is_ascii_uppercase())
+            && (12..15).all(|k| at(k).is_some_and(|c| !c.is_ascii_digit()))
+            && !(ws(at(13)) && word(at(14)))
+            && ws(at(15));
+        if !ok {
+            return false;
+        }
+        16
+    };
+    let station = |c: Option<u8>| {
+        c.is_some_and(|c| c.is_ascii_digit() || (c.is_ascii_uppercase() && c != b'I' && c != b'O'))
+    };
+    if !((i..i + 4).all(|k| station(at(k))) && ws(at(i + 4))) {
+        return false;
+    }
+    let i = i + 5;
+    if !(at(i).is_some_and(|c| b"EGFPBTCO ".contains(&c) || c.is_ascii_whitespace())
+        && ws(at(i + 1)))
+    {
+        return false;
+    }
+    let i = i + 2;
+    if !(i..i + 8).all(|k| at(k).is_some_and(|c| c.is_ascii_digit() || c == b'+')) {
+        return false;
+    }
+    let mut i = i + 8;
+    // `\d*\s*$`: the record ends after the time.
+    let mut j = i;
+    while digit(at(j)) {
+        j += 1;
+    }
+    while ws(at(j)) {
+        j += 1;
+    }
+    if j == b.len() {
+        return true;
+    }
+    // `(?=.{9})\d*\s*?\s\d{2}\s`
+    if b.len() < i + 9 {
+        return false;
+    }
+    while digit(at(i)) {
+        i += 1;
+    }
+    while ws(at(i)) && ws(at(i + 1)) {
+        i += 1;
+    }
+    if !(ws(at(i)) && digit(at(i + 1)) && digit(at(i + 2)) && ws(at(i + 3))) {
+        return false;
+    }
+    let i = i + 4;
+    if (i..i + 20).all(|k| ws(at(k))) {
+        return true;
+    }
+    if !(at(i).is_some_and(|c| (b'1'..=b'7').contains(&c))
+        && at(i + 1).is_some_and(|c| c.is_ascii_whitespace() || (b'0'..=b'6').contains(&c))
+        && ws(at(i + 2)))
+    {
+        return false;
+    }
+    let angle = |mut i: usize, n: usize, end: &dyn Fn(Option<u8>) -> bool| -> Option<usize> {
+        // (?=[\d\s*]{n})\d+\s*? then the terminator
+        if !(i..i + n).all(|k| {
+            at(k).is_some_and(|c| c.is_ascii_digit() || c.is_ascii_whitespace() || c == b'*')
+        }) {
+            return None;
+        }
+        if !digit(at(i)) {
+            return None;
+        }
+        while digit(at(i)) {
+            i += 1;
+        }
+        while !end(at(i)) && ws(at(i)) {
+            i += 1;
+        }
+        end(at(i)).then_some(i)
+    };
+    let Some(i) = angle(i + 3, 7, &|c| c == Some(b'+') || c == Some(b'-')) else {
+        return false;
+    };
+    let Some(i) = angle(i + 1, 6, &ws) else {
+        return false;
+    };
+    // `\s\d{2}` (the lazy `\s*?` leaves the last blank before the two digits)
+    let mut i = i;
+    while ws(at(i + 1)) {
+        i += 1;
+    }
+    ws(at(i)) && digit(at(i + 1)) && digit(at(i + 2))
+}
