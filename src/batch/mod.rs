@@ -128,7 +128,7 @@ pub fn run(
                         let (rx, tx) = (work_rx.clone(), done_tx.clone());
                         scope.spawn(move || {
                             for (i, input) in until_stop(&rx, stop) {
-                                let r = guarded(&input.name, || {
+                                let r = guarded(solvers, &input.name, || {
                                     solvers.solve_cpu(solvers.decode(&input.path, &input.name))
                                 });
                                 if tx.send((i, r)).is_err() {
@@ -182,7 +182,7 @@ fn gpu_loop(
             let msg = panic_message(&p);
             names
                 .iter()
-                .map(|n| Record::error(n, msg.clone(), &runner.name()))
+                .map(|n| solvers.error_record(n, msg.clone(), &runner.name()))
                 .collect()
         });
         for (i, r) in indices.into_iter().zip(records) {
@@ -306,7 +306,7 @@ fn sequence_loop(
             let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| seq.next(d)))
                 .unwrap_or_else(|p| {
                     seq = Sequencer::new(solvers, opts);
-                    Record::error(&name, panic_message(&p), &backend)
+                    solvers.error_record(&name, panic_message(&p), &backend)
                 });
             if done.send((next, r)).is_err() {
                 return;
@@ -328,9 +328,10 @@ fn guarded_detect(input: &Input, f: impl FnOnce() -> Detected) -> Detected {
 
 /// Run `f` for one input; a panic (a bug, in gpustar or a decoder) becomes that input's
 /// error record instead of ending the run.
-fn guarded(name: &str, f: impl FnOnce() -> Record) -> Record {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
-        .unwrap_or_else(|p| Record::error(name, panic_message(&p), crate::pipeline::BACKEND_CPU))
+fn guarded(solvers: &Solvers, name: &str, f: impl FnOnce() -> Record) -> Record {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| {
+        solvers.error_record(name, panic_message(&p), crate::pipeline::BACKEND_CPU)
+    })
 }
 
 fn panic_message(p: &Box<dyn std::any::Any + Send>) -> String {

@@ -49,7 +49,7 @@ impl GpuRunner {
         let mut records: Vec<Option<Record>> = (0..frames.len()).map(|_| None).collect();
         for (i, d) in frames.iter().enumerate() {
             if let Err(e) = &d.frame {
-                records[i] = Some(Record::error(&d.name, e.clone(), &self.name()));
+                records[i] = Some(solvers.error_record(&d.name, e.clone(), &self.name()));
             }
         }
         let groups = size_groups(&frames);
@@ -87,7 +87,7 @@ impl GpuRunner {
                                 let lazy = Global::Lazy(solvers, (w, h));
                                 solve_with(solvers, r, Some(r), &lazy, d, decoded_frame(d))
                             }
-                            None => Record::error(&d.name, e.clone(), &self.name()),
+                            None => solvers.error_record(&d.name, e.clone(), &self.name()),
                         });
                         for (i, r) in indices.into_iter().zip(recs) {
                             records[i] = Some(r);
@@ -442,7 +442,7 @@ fn cpu_record(
         (Some(r), _) => solve_with(solvers, r, Some(r), global, d, f),
         (None, Some(s)) => solve_with(solvers, s, None, global, d, f),
         // A lazy global is only made when every frame has a region.
-        (None, None) => Record::error(&d.name, "no solver".to_string(), BACKEND_CPU),
+        (None, None) => solvers.error_record(&d.name, "no solver".to_string(), BACKEND_CPU),
     }
 }
 

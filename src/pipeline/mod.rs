@@ -130,6 +130,16 @@ impl Solvers {
         self
     }
 
+    /// An error record; under `--streaks` it carries `"streaks": []` as every other record
+    /// of the run does, so that scripts read one shape.
+    pub fn error_record(&self, name: &str, message: String, backend: &str) -> Record {
+        let mut r = Record::error(name, message, backend);
+        if self.streaks.is_some() {
+            r.streaks = Some(Vec::new());
+        }
+        r
+    }
+
     /// The pointing hint of a frame, if the run uses hints and the frame has one.
     pub fn hint_of(&self, d: &Decoded, frame: &Frame) -> Option<Hint> {
         match self.hint? {
@@ -307,7 +317,7 @@ impl Solvers {
     pub fn solve_cpu(&self, d: Decoded) -> Record {
         let frame = match &d.frame {
             Ok(f) => f,
-            Err(e) => return Record::error(&d.name, e.clone(), BACKEND_CPU),
+            Err(e) => return self.error_record(&d.name, e.clone(), BACKEND_CPU),
         };
         if matches!(self.camera, CameraSource::None) {
             return self.streaks_only(&d, frame);
@@ -321,7 +331,7 @@ impl Solvers {
         let solver = self.get(frame.width, frame.height);
         match solver.as_ref() {
             Ok(s) => solve_with(self, s, None, &Global::Ready(s), &d, frame),
-            Err(e) => Record::error(&d.name, e.clone(), BACKEND_CPU),
+            Err(e) => self.error_record(&d.name, e.clone(), BACKEND_CPU),
         }
     }
 

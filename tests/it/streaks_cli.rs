@@ -427,3 +427,47 @@ fn exports_without_streaks_with_odd_names_and_after_a_failed_run() {
     assert_eq!(std::fs::read(&iod).unwrap(), before.1);
     assert_eq!(std::fs::read_to_string(&foreign).unwrap(), "my notes\n");
 }
+
+/// Issue 26, item 5: under `--streaks` every record carries `streaks`, error records too
+/// (`[]`), on both backends, so that scripts read one shape.
+#[test]
+fn error_records_carry_an_empty_streak_list() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = simulated(tmp.path());
+    std::fs::write(dir.join("zz_broken.fits"), b"SIMPLE  =  not a FITS file").unwrap();
+    let gpu = crate::common::gpu("error_records_carry_an_empty_streak_list").is_some();
+    let backends: &[&str] = if gpu { &["cpu", "gpu"] } else { &["cpu"] };
+    for backend in backends {
+        let camera = dir.join("camera.toml");
+        let mut cmd = gpustar();
+        cmd.args([
+            "batch",
+            dir.to_str().unwrap(),
+            "--backend",
+            backend,
+            "--streaks",
+        ])
+        .args(["--camera", camera.to_str().unwrap()]);
+        // A run with an error record exits 1 (spec/INTERFACE.md); its records are all there.
+        let out = cmd.output().unwrap();
+        assert_eq!(
+            out.status.code(),
+            Some(1),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let records: Vec<Value> = String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(records.len(), 9, "{backend}");
+        assert!(records.iter().all(|r| r["streaks"].is_array()), "{backend}");
+        let broken = records
+            .iter()
+            .find(|r| r["file"] == "zz_broken.fits")
+            .unwrap();
+        assert_eq!(broken["status"], "error");
+        assert_eq!(broken["streaks"], serde_json::json!([]));
+    }
+}
