@@ -1,0 +1,126 @@
+//! Pointing hints in a run (`--hint`): which frames have one, the solver of each hint's
+//! region, and identification that tries the region before lost-in-space, whose solver is
+//! built only when a frame needs it.
+
+use super::{Decoded, Solvers};
+use crate::io::frame::Frame;
+use crate::record::Record;
+use crate::sky::hint::{Hint, HintSource, hint_from_header};
+use crate::solve::detect::Detection;
+use crate::solve::hinted::regional_solver;
+use crate::solve::{Outcome, Solution, Solver};
+
+impl Solvers {
+    /// Use pointing hints: a frame with one is solved within its region first, and
+    /// lost-in-space after; both searches then share the false-match budget.
+    pub fn with_hints(mut self, hint: HintSource) -> Solvers {
+        self.hint = Some(hint);
+        self.settings.searches = 2;
+        self
+    }
+
+    /// The pointing hint of a frame, if the run uses hints and the frame has one.
+    pub fn hint_of(&self, d: &Decoded, frame: &Frame) -> Option<Hint> {
+        match self.hint? {
+            HintSource::Fixed(h) => Some(h),
+            HintSource::Header { radius_deg } => hint_from_header(
+                &|k| d.keywords.get(k).cloned(),
+                (frame.width, frame.height),
+                radius_deg,
+            ),
+        }
+    }
+
+    /// The solver of a frame's hinted region, if it has a hint (None also when the region
+    /// holds too few catalog stars: the frame is then solved lost-in-space alone).
+    pub fn regional(&self, d: &Decoded, frame: &Frame) -> Option<Solver> {
+        let hint = self.hint_of(d, frame)?;
+        let camera = self.camera_for(frame.width, frame.height).ok()?;
+        match regional_solver(&self.catalog, &camera, &self.settings, &hint) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                tracing::debug!(
+                    "{}: no search within the hint ({}): {e:#}",
+                    d.name,
+                    hint.source
+                );
+                None
+            }
+        }
+    }
+}
+
+/// A frame's lost-in-space solver: at hand, or the size's, built when first needed.
+pub(crate) enum Global<'a> {
+    Ready(&'a Solver),
+    Lazy(&'a Solvers, (u32, u32)),
+}
+
+impl Global<'_> {
+    /// The solver when it is at hand (not built on demand).
+    pub(crate) fn ready(&self) -> Option<&Solver> {
+        match self {
+            Global::Ready(s) => Some(s),
+            Global::Lazy(..) => None,
+        }
+    }
+
+    /// Identify lost-in-space; None when the size has no solver (the catalog or camera
+    /// cannot make one: the message is in the records of frames without a hint).
+    fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Option<Solution> {
+        match self {
+            Global::Ready(s) => Some(s.identify(detections, epoch)),
+            Global::Lazy(solvers, (w, h)) => match solvers.get(*w, *h).as_ref() {
+                Ok(s) => Some(s.identify(detections, epoch)),
+                Err(e) => {
+                    tracing::debug!("no lost-in-space search after the hint's: {e}");
+                    None
+                }
+            },
+        }
+    }
+}
+
+/// Identify within a frame's hinted region first (when it has one), then lost-in-space.
+pub(crate) fn identify_hinted(
+    regional: Option<&Solver>,
+    global: &Global,
+    detections: Vec<Detection>,
+    epoch: Option<f64>,
+) -> Solution {
+    let Some(r) = regional else {
+        return global
+            .identify(detections.clone(), epoch)
+            .unwrap_or_else(|| unsolved(detections, epoch));
+    };
+    let sol = r.identify(detections.clone(), epoch);
+    if matches!(sol.outcome, Outcome::Solved(..)) {
+        return sol;
+    }
+    global.identify(detections, epoch).unwrap_or(sol)
+}
+
+fn unsolved(detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
+    Solution {
+        detections,
+        outcome: Outcome::Unsolved("no_consistent_match"),
+        epoch,
+    }
+}
+
+/// A record's account of the hint its frame had: where, from which keywords, and how far the
+/// solution lies from it.
+pub(super) fn hint_record(h: &Hint, r: &Record) -> crate::record::HintRecord {
+    let offset_deg = r.ra_deg.zip(r.dec_deg).map(|(ra, dec)| {
+        let a = crate::catalog::radec_to_vector(ra, dec);
+        let b = crate::catalog::radec_to_vector(h.ra_deg, h.dec_deg);
+        crate::camera::angle(&a, &b).to_degrees()
+    });
+    crate::record::HintRecord {
+        ra_deg: h.ra_deg,
+        dec_deg: h.dec_deg,
+        radius_deg: h.radius_deg,
+        source: h.source.to_string(),
+        offset_deg,
+    }
+}
