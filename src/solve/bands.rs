@@ -64,6 +64,7 @@ impl Band {
             double_sep_rad: settings.double_star_px * middle.ifov_rad(),
         };
         let refs = RefCatalog::select(catalog, selection)?;
+        check_table_size(&refs, scaled(camera, lo).diagonal_rad())?;
         let (table, table_origin) = table::load_or_build(
             &refs,
             catalog.content_hash,
@@ -113,6 +114,32 @@ impl Band {
             .or_insert_with(|| Arc::new(self.refs.at_epoch(day_epoch(day))))
             .clone()
     }
+}
+
+/// The most pairs a lost-in-space distance table may be expected to hold: 500 million rows
+/// take 6 GB (a key and two ids each). A deeper selection (Tycho-2 at 2°: 2 billion pairs) is
+/// refused before it is built, with what to do instead, rather than exhausting the memory;
+/// frames with a `--hint` still solve from their regions.
+pub const MAX_TABLE_ROWS: f64 = 5e8;
+
+/// Refuse a selection whose table would hold more than [`MAX_TABLE_ROWS`] pairs closer than
+/// `max_sep_rad`, estimated as for stars spread evenly over the sky: n²/2 · (1 − cos θ)/2.
+fn check_table_size(refs: &RefCatalog, max_sep_rad: f64) -> Result<()> {
+    let n = refs.len() as f64;
+    let rows = n * n / 2.0 * (1.0 - max_sep_rad.cos()) / 2.0;
+    if rows > MAX_TABLE_ROWS {
+        crate::error::fail!(
+            Catalog,
+            "{} catalog stars to magnitude {} make a lost-in-space table of about {:.0} million \
+             pairs ({:.0} GB) for this field: give the pointing (--hint), or a brighter \
+             --mag-limit",
+            refs.len(),
+            refs.selection.mag_limit,
+            rows / 1e6,
+            rows * 12.0 / 1e9
+        );
+    }
+    Ok(())
 }
 
 /// The catalog, and the selections made from it for solutions' fields.
