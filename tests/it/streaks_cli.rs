@@ -33,19 +33,22 @@ fn simulated(tmp: &Path) -> PathBuf {
     dir
 }
 
-fn batch(dir: &Path, extra: &[&str]) -> Vec<Value> {
-    let camera = dir.join("camera.toml");
+/// `batch DIR --streaks --camera DIR/camera.toml` on `backend`.
+fn streaks_cmd(dir: &Path, backend: &str) -> std::process::Command {
     let mut cmd = gpustar();
     cmd.args([
         "batch",
         dir.to_str().unwrap(),
         "--backend",
-        "cpu",
+        backend,
         "--streaks",
     ])
-    .args(["--camera", camera.to_str().unwrap()])
-    .args(extra);
-    run_records(&mut cmd)
+    .args(["--camera", dir.join("camera.toml").to_str().unwrap()]);
+    cmd
+}
+
+fn batch(dir: &Path, extra: &[&str]) -> Vec<Value> {
+    run_records(streaks_cmd(dir, "cpu").args(extra))
 }
 
 fn xy(v: &Value) -> (f64, f64) {
@@ -323,23 +326,16 @@ fn header_astrometry_gives_the_solution_s_ra_dec() {
 
 /// `batch --streaks --tdm --iod` on `dir`; the process's output.
 fn exports_run(dir: &Path, tdm: &Path, iod: &Path, extra: &[&str]) -> std::process::Output {
-    let mut cmd = gpustar();
-    cmd.args([
-        "batch",
-        dir.to_str().unwrap(),
-        "--backend",
-        "cpu",
-        "--streaks",
-    ])
-    .args(["--camera", dir.join("camera.toml").to_str().unwrap()])
-    .args([
-        "--tdm",
-        tdm.to_str().unwrap(),
-        "--iod",
-        iod.to_str().unwrap(),
-    ])
-    .args(extra);
-    cmd.output().unwrap()
+    streaks_cmd(dir, "cpu")
+        .args([
+            "--tdm",
+            tdm.to_str().unwrap(),
+            "--iod",
+            iod.to_str().unwrap(),
+        ])
+        .args(extra)
+        .output()
+        .unwrap()
 }
 
 #[test]
@@ -438,18 +434,8 @@ fn error_records_carry_an_empty_streak_list() {
     let gpu = crate::common::gpu("error_records_carry_an_empty_streak_list").is_some();
     let backends: &[&str] = if gpu { &["cpu", "gpu"] } else { &["cpu"] };
     for backend in backends {
-        let camera = dir.join("camera.toml");
-        let mut cmd = gpustar();
-        cmd.args([
-            "batch",
-            dir.to_str().unwrap(),
-            "--backend",
-            backend,
-            "--streaks",
-        ])
-        .args(["--camera", camera.to_str().unwrap()]);
         // A run with an error record exits 1 (spec/INTERFACE.md); its records are all there.
-        let out = cmd.output().unwrap();
+        let out = streaks_cmd(&dir, backend).output().unwrap();
         assert_eq!(
             out.status.code(),
             Some(1),
