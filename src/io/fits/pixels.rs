@@ -32,7 +32,15 @@ pub(crate) fn convert_int<T: IntSample>(
 ) -> Result<(Vec<u16>, u16)> {
     let stored = || data.chunks_exact(T::BYTES).map(T::read);
     let (mut lo, mut hi, mut blanks) = (i64::MAX, i64::MIN, 0u64);
+    // Every value the type can store maps into 0..=65535 (16-bit data with BZERO = 32768, the
+    // usual camera frame): the range of the data cannot change the result, so it is not read.
+    let all_fit = s.int.is_some_and(|(zero, scale)| {
+        let physical = |v: i64| zero + scale * i128::from(v);
+        let (a, b) = (physical(T::MIN), physical(T::MAX));
+        a.min(b) >= 0 && a.max(b) <= 65535
+    });
     match blank {
+        None if all_fit => (lo, hi) = (T::MIN, T::MAX),
         // Without BLANK the range is a plain fold, which the compiler vectorises.
         None => {
             (lo, hi) = stored().fold((lo, hi), |(lo, hi), v| (lo.min(v), hi.max(v)));
