@@ -35,8 +35,8 @@ pub struct Triangle {
 struct Side {
     /// (star, partner), both ways round, sorted.
     partners: Vec<(u32, u32)>,
-    /// The pairs as `min << 16 | max`.
-    keys: FxHashSet<u32>,
+    /// The pairs as `min << 32 | max` (ids are 32-bit).
+    keys: FxHashSet<u64>,
 }
 
 impl Side {
@@ -48,7 +48,7 @@ impl Side {
             let (a, b) = table.pair(row);
             partners.push((a, b));
             partners.push((b, a));
-            keys.insert(a.min(b) << 16 | a.max(b));
+            keys.insert(pair_key(a, b));
         }
         partners.sort_unstable();
         Side { partners, keys }
@@ -76,8 +76,13 @@ impl Side {
     }
 
     fn has(&self, a: u32, b: u32) -> bool {
-        self.keys.contains(&(a.min(b) << 16 | a.max(b)))
+        self.keys.contains(&pair_key(a, b))
     }
+}
+
+/// The key of an unordered pair of catalog ids.
+fn pair_key(a: u32, b: u32) -> u64 {
+    u64::from(a.min(b)) << 32 | u64::from(a.max(b))
 }
 
 /// Every triple of `n` stars (in brightness order), first triangles first: by the sum of the
@@ -162,4 +167,18 @@ pub fn triangles(
         }
     }
     (out, matched)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Ids are 32-bit (deep catalogs): the pair key keeps both whole. The 16-bit packing it
+    /// replaces made (1, 65541) and (2, 5) the same pair.
+    #[test]
+    fn pair_keys_of_large_ids_do_not_collide() {
+        assert_ne!(pair_key(1, 65_541), pair_key(2, 5));
+        assert_eq!(pair_key(70_000, 3), pair_key(3, 70_000));
+        assert_ne!(pair_key(u32::MAX, 0), pair_key(0, u32::MAX - 1));
+    }
 }
