@@ -161,11 +161,13 @@ impl Gpu {
             }
             let mut cands = vec![0u64; n * stars * k];
             let mut counters = vec![Vec::new(); if inspect { n } else { 0 }];
+            // Uploaded once for every window of voting stars.
+            let span_buf = self.storage_init("row spans", bytemuck::cast_slice(&spans));
             for lo in (0..stars).step_by(window) {
                 let count = window.min(stars - lo);
                 let (c, v) = self.vote_window(
                     gpu,
-                    &spans,
+                    &span_buf,
                     n,
                     pairs_per_image,
                     (lo, count),
@@ -207,7 +209,7 @@ impl Gpu {
     fn vote_window(
         &self,
         gpu: &GpuTable,
-        spans: &[RowSpan],
+        span_buf: &wgpu::Buffer,
         n: usize,
         pairs_per_image: usize,
         (lo, count): (usize, usize),
@@ -225,7 +227,6 @@ impl Gpu {
             row_lo: rows.start,
             row_hi: rows.end,
         };
-        let span_buf = self.storage_init("row spans", bytemuck::cast_slice(spans));
         let vote_bytes = 4 * (n * count) as u64 * gpu.refs as u64;
         let votes = self.storage("votes", vote_bytes);
         let cand_bytes = 8 * (n * count * k) as u64;
@@ -241,7 +242,7 @@ impl Gpu {
             .slices
             .iter()
             .zip(&uniforms)
-            .map(|((_, pairs), u)| self.bind_group(&pl.vote, &[u, pairs, &span_buf, &votes]))
+            .map(|((_, pairs), u)| self.bind_group(&pl.vote, &[u, pairs, span_buf, &votes]))
             .collect();
         let bg_select = self.bind_group(&pl.select, &[&uniforms[0], &votes, &cands]);
         let stage_votes = inspect.then(|| self.staging("votes out", vote_bytes));

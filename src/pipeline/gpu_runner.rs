@@ -288,20 +288,12 @@ impl GpuRunner {
         }
         // The lost-in-space solver, for the frames their regions did not solve (built now if
         // every frame had a hint and it was not needed before).
-        let shared;
-        let global_solver: Option<&Solver> =
-            if outcomes.iter().all(|o| matches!(o, Outcome::Solved(..))) {
-                None
-            } else {
-                match global {
-                    Global::Ready(s) => Some(s),
-                    Global::Lazy(solvers, (w, h)) => {
-                        shared = solvers.get(*w, *h);
-                        shared.as_ref().as_ref().ok()
-                    }
-                }
-            };
-        if let Some(solver) = global_solver {
+        let global_solver = if outcomes.iter().all(|o| matches!(o, Outcome::Solved(..))) {
+            None
+        } else {
+            global.solver()
+        };
+        if let Some(solver) = &global_solver {
             self.vote_passes(solver, &detections, epochs, &mut outcomes)?;
         }
         let mut solutions: Vec<Solution> = detections
@@ -317,7 +309,9 @@ impl GpuRunner {
         // The detection retry: frames that did not solve, detected again with the matched
         // filter (on the GPU, in one submission) and identified again (the CPU twin's vote).
         // Detection's retry settings are the run's (any solver of the group has them).
-        let lead = global_solver.or_else(|| regional.iter().flatten().next());
+        let lead = global_solver
+            .as_deref()
+            .or_else(|| regional.iter().flatten().next());
         if let Some(solver) = lead.filter(|s| streak_opts.is_none() && s.detection_stages() > 1) {
             let unsolved: Vec<usize> = (0..frames.len())
                 .filter(|&i| matches!(solutions[i].outcome, Outcome::Unsolved(_)))

@@ -2,7 +2,7 @@
 //! region, and identification that tries the region before lost-in-space, whose solver is
 //! built only when a frame needs it.
 
-use super::{Decoded, Solvers};
+use super::{Decoded, SharedSolver, Solvers};
 use crate::io::frame::Frame;
 use crate::record::Record;
 use crate::sky::hint::{Hint, HintSource, hint_from_header};
@@ -65,18 +65,42 @@ impl Global<'_> {
         }
     }
 
-    /// Identify lost-in-space; None when the size has no solver (the catalog or camera
-    /// cannot make one: the message is in the records of frames without a hint).
-    fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Option<Solution> {
+    /// The solver, built now if it is lazy and was not yet; None when the size has none (the
+    /// catalog or camera cannot make one: the message is in the records of frames without a
+    /// hint).
+    pub(crate) fn solver(&self) -> Option<GlobalSolver<'_>> {
         match self {
-            Global::Ready(s) => Some(s.identify(detections, epoch)),
-            Global::Lazy(solvers, (w, h)) => match solvers.get(*w, *h).as_ref() {
-                Ok(s) => Some(s.identify(detections, epoch)),
-                Err(e) => {
-                    tracing::debug!("no lost-in-space search after the hint's: {e}");
-                    None
+            Global::Ready(s) => Some(GlobalSolver::Borrowed(s)),
+            Global::Lazy(solvers, (w, h)) => {
+                let shared = solvers.get(*w, *h);
+                match shared.as_ref() {
+                    Ok(_) => Some(GlobalSolver::Shared(shared)),
+                    Err(e) => {
+                        tracing::debug!("no lost-in-space search after the hint's: {e}");
+                        None
+                    }
                 }
-            },
+            }
+        }
+    }
+}
+
+/// A lost-in-space solver at hand: borrowed, or the size's shared one (only ever a built one).
+pub(crate) enum GlobalSolver<'a> {
+    Borrowed(&'a Solver),
+    Shared(SharedSolver),
+}
+
+impl std::ops::Deref for GlobalSolver<'_> {
+    type Target = Solver;
+
+    fn deref(&self) -> &Solver {
+        match self {
+            GlobalSolver::Borrowed(s) => s,
+            GlobalSolver::Shared(shared) => shared
+                .as_ref()
+                .as_ref()
+                .expect("Global::solver wraps built solvers only"),
         }
     }
 }
@@ -88,16 +112,21 @@ pub(crate) fn identify_hinted(
     detections: Vec<Detection>,
     epoch: Option<f64>,
 ) -> Solution {
-    let Some(r) = regional else {
-        return global
-            .identify(detections.clone(), epoch)
-            .unwrap_or_else(|| unsolved(detections, epoch));
+    // The detections are copied only for a frame that has a region.
+    let in_region = match regional {
+        Some(r) => {
+            let sol = r.identify(detections.clone(), epoch);
+            if matches!(sol.outcome, Outcome::Solved(..)) {
+                return sol;
+            }
+            Some(sol)
+        }
+        None => None,
     };
-    let sol = r.identify(detections.clone(), epoch);
-    if matches!(sol.outcome, Outcome::Solved(..)) {
-        return sol;
+    match global.solver() {
+        Some(g) => g.identify(detections, epoch),
+        None => in_region.unwrap_or_else(|| unsolved(detections, epoch)),
     }
-    global.identify(detections, epoch).unwrap_or(sol)
 }
 
 fn unsolved(detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
