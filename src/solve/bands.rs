@@ -1,8 +1,9 @@
 //! Scale bands (one distance table per band of focal-length factors), the passes and retries
 //! of identification, and the order detections are tried in.
 
+use super::Settings;
 use super::detect::Detection;
-use super::{Settings, auto_mag_limit_in};
+use super::mag_limit::auto_mag_limit_in;
 use crate::camera::Camera;
 use crate::catalog::table::{self, PairTable, TableOrigin};
 use crate::catalog::{Catalog, RefCatalog, Selection};

@@ -9,6 +9,7 @@ mod bands;
 pub mod detect;
 pub mod hinted;
 pub mod identify;
+mod mag_limit;
 pub mod radial;
 pub mod refine;
 mod report;
@@ -16,5 +17,6 @@ mod solver;
 pub mod triangle;
 
 pub use bands::*;
+pub use mag_limit::*;
 pub use report::*;
 pub use solver::*;
