@@ -2,7 +2,8 @@
 //! refine → accept, producing one result record.
 //!
 //! Scale bands and passes are in `bands.rs`, the automatic magnitude limits in `mag_limit.rs`,
-//! the record of a solution in `report.rs`.
+//! the record of a solution in `report.rs`. About 700 lines: the passes of one frame (vote,
+//! triangles, radial, the deeper check) share the `Prepared` state and the false-match budget.
 
 use super::attitude::wahba;
 use super::bands::{

@@ -50,12 +50,10 @@ const OBJECTS: usize = 10_000;
 const MIN_POS_UNC_DEG: f64 = 0.01 / 60.0;
 const MIN_TIME_UNC_S: f64 = 0.001;
 
-/// Angle between two ICRS directions, degrees (haversine, good at small angles).
+/// Angle between two ICRS directions, degrees.
 fn separation_deg(ra0: f64, dec0: f64, ra1: f64, dec1: f64) -> f64 {
-    let (d0, d1) = (dec0.to_radians(), dec1.to_radians());
-    let h = ((d1 - d0) / 2.0).sin().powi(2)
-        + d0.cos() * d1.cos() * ((ra1 - ra0).to_radians() / 2.0).sin().powi(2);
-    2.0 * h.sqrt().min(1.0).asin().to_degrees()
+    use crate::catalog::radec_to_vector as v;
+    crate::camera::angle(&v(ra0, dec0), &v(ra1, dec1)).to_degrees()
 }
 
 /// IOD's two uncertainties of a streak's midpoint: (time in s, position in degrees).
