@@ -94,6 +94,59 @@ pub struct StreakRecord {
     /// null when neither is known. Absent from records of earlier versions.
     #[serde(default)]
     pub station: Option<String>,
+    /// The tracklet this streak belongs to: streaks of one object in consecutive frames of a
+    /// directory, named by its first streak, `FILE#N` (N counts that record's streaks from
+    /// 1). Absent from records of earlier versions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracklet: Option<String>,
+    /// This streak's place in its tracklet, from 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracklet_index: Option<usize>,
+    /// With `--tle`: the object of the file whose predicted path the streak lies on; null
+    /// when none does (then `uncorrelated` is true). Absent without `--tle`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub satellite: Option<SatelliteRecord>,
+    /// With `--tle`: true when the streak could be tested and no object of the file matched,
+    /// false when one did; absent without `--tle` or where the frame gave no RA/Dec, time or
+    /// station to test with.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncorrelated: Option<bool>,
+    /// The ends the other way along the streak (positions swapped, each end's time kept, Az/El
+    /// recomputed for it), for the tracklet stage to turn the streak once it knows the
+    /// direction. Never written.
+    #[serde(skip)]
+    pub reversed: Option<Box<[StreakEnd; 2]>>,
+}
+
+impl StreakRecord {
+    /// Turn the streak the other way along (ends swapped, times kept); false when it cannot
+    /// be (no reversed ends were made).
+    pub fn reverse(&mut self) -> bool {
+        match self.reversed.as_mut() {
+            Some(r) => {
+                std::mem::swap(&mut self.ends, r);
+                true
+            }
+            None => false,
+        }
+    }
+}
+
+/// The object a streak was matched to (`--tle`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SatelliteRecord {
+    /// The NORAD catalog number.
+    pub norad: u64,
+    /// The file's name for it (empty when it gives none).
+    pub name: String,
+    /// International designator as the file gives it (`98067A`, `1998-067A`).
+    pub intl_des: Option<String>,
+    /// The ends' mean distance across the predicted path (arcsec; positive towards the pole
+    /// of the motion, start × end).
+    pub cross_track_arcsec: f64,
+    /// The time offset along the path (s): the streak is where the elements put the object
+    /// this much later (positive: the object is ahead of its elements).
+    pub along_track_s: f64,
 }
 
 /// Milliseconds spent per stage.

@@ -27,6 +27,9 @@ pub struct RunOptions {
     pub flush_every: Duration,
     /// `--sequence`: each directory's frames are solved as one sequence, in input order.
     pub sequence: Option<SequenceOptions>,
+    /// `--streaks`: link the streaks of consecutive frames of a directory into tracklets
+    /// ([`crate::streaks::tracklet`]); each record is then written when the next one is done.
+    pub tracklets: bool,
 }
 
 /// Records written between flushes at most: a crash loses at most this many (plus those the
@@ -154,6 +157,7 @@ pub fn run(
             opts.flush_every,
             stop,
             &replay,
+            opts.tracklets,
             &mut on_record,
         )?;
         Ok(())
@@ -359,9 +363,17 @@ fn write_in_order(
     flush_every: Duration,
     stop: &AtomicBool,
     replay: &std::collections::HashSet<usize>,
+    tracklets: bool,
     on_record: &mut impl FnMut(&Record, &Counts),
 ) -> Result<RunSummary> {
     let mut summary = RunSummary::default();
+    let mut linker = tracklets.then(crate::streaks::tracklet::Linker::new);
+    let mut emit = |r: Record, w: &mut RecordWriter, summary: &mut RunSummary, n: &mut usize| {
+        summary.counts.add(&r);
+        w.write(&r);
+        on_record(&r, &summary.counts);
+        *n += 1;
+    };
     let mut waiting: BTreeMap<usize, Record> = BTreeMap::new();
     let mut next = 0usize;
     let mut last_flush = Instant::now();
@@ -377,16 +389,23 @@ fn write_in_order(
         while let Some(r) = waiting.remove(&next) {
             // A replayed input's record is already in the file.
             if !replay.contains(&next) {
-                summary.counts.add(&r);
-                writer.write(&r);
-                on_record(&r, &summary.counts);
-                unflushed += 1;
+                let ready = match linker.as_mut() {
+                    Some(l) => l.push(r),
+                    None => Some(r),
+                };
+                if let Some(r) = ready {
+                    emit(r, writer, &mut summary, &mut unflushed);
+                }
             }
             next += 1;
             // The feeder may hand out one more input.
             let _ = tickets.try_send(());
         }
         let stopping = stop.load(Ordering::SeqCst);
+        // Nothing more comes before a flush forced by a stop: the held record goes too.
+        if stopping && let Some(r) = linker.as_mut().and_then(|l| l.finish()) {
+            emit(r, writer, &mut summary, &mut unflushed);
+        }
         if unflushed > 0
             && (stopping || unflushed >= FLUSH_RECORDS || last_flush.elapsed() >= flush_every)
         {
@@ -398,6 +417,9 @@ fn write_in_order(
             last_flush = Instant::now();
             unflushed = 0;
         }
+    }
+    if let Some(r) = linker.as_mut().and_then(|l| l.finish()) {
+        emit(r, writer, &mut summary, &mut unflushed);
     }
     if let Err(e) = writer.flush() {
         summary.write_error = Some(format!("{e:#}"));

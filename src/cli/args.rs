@@ -363,6 +363,25 @@ pub struct StreakOpts {
     #[arg(long, default_value_t = 9999, value_parser = clap::value_parser!(u16).range(0..=9999),
           help_heading = "Streaks")]
     pub iod_station: u16,
+    /// Name each streak's object from orbital elements: a TLE (2- or 3-line) or OMM (XML or
+    /// JSON) file, thousands of objects. Each is propagated by SGP4 to the frame's times and
+    /// station; a streak on an object's predicted path gets "satellite" (NORAD id, name,
+    /// cross- and along-track offsets), else "uncorrelated": true. TDM and IOD use the NORAD id.
+    #[arg(
+        long,
+        value_name = "FILE",
+        requires = "streaks",
+        help_heading = "Streaks"
+    )]
+    pub tle: Option<PathBuf>,
+    /// --tle: largest distance of a streak's ends across an object's predicted path (arcsec).
+    #[arg(long, value_name = "ARCSEC", default_value_t = 300.0, help_heading = "Streaks",
+          value_parser = within(1.0, 36_000.0))]
+    pub tle_cross: f64,
+    /// --tle: largest time offset along an object's predicted path (seconds).
+    #[arg(long, value_name = "SECONDS", default_value_t = 5.0, help_heading = "Streaks",
+          value_parser = within(0.01, 600.0))]
+    pub tle_along: f64,
 }
 
 #[derive(Args, Debug)]

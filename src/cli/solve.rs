@@ -12,7 +12,9 @@ use gpustar::io::output::{self, RecordWriter};
 use gpustar::pipeline::{Backend, BackendNote, CameraSource, Solvers};
 use gpustar::products::Products;
 use gpustar::sequence::SequenceOptions;
+use gpustar::sky::tle::TleCatalog;
 use gpustar::solve::Settings;
+use gpustar::streaks::identify::IdentifySettings;
 use gpustar::streaks::reduce::Astrometry;
 use gpustar::streaks::{StreakOptions, StreakSettings, export::Exports};
 use std::io::Write;
@@ -97,6 +99,21 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
     s.refine.fit = o.camera.fit;
     s.scale_range = scale_range;
     let so = &o.streaks;
+    // Read before the run, so that a bad file stops it before any frame is done.
+    let tle = match &so.tle {
+        Some(p) => {
+            let c = TleCatalog::load(p)?;
+            if !o.quiet {
+                eprintln!(
+                    "gpustar: --tle {}: {} objects",
+                    p.display(),
+                    c.satellites.len()
+                );
+            }
+            Some(c)
+        }
+        None => None,
+    };
     let mut exports = Exports::new(so.tdm.clone(), so.iod.clone(), so.iod_station);
     exports.check_paths()?;
     // The output, and what an earlier run already wrote to it.
@@ -181,6 +198,11 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
         station: so.station,
         dut1_s: so.dut1,
         astrometry: so.astrometry,
+        tle: tle.map(std::sync::Arc::new),
+        identify: IdentifySettings {
+            cross_arcsec: so.tle_cross,
+            along_s: so.tle_along,
+        },
     });
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
@@ -197,6 +219,7 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
             frame_interval_s: b.frame_interval,
             ..SequenceOptions::default()
         }),
+        tracklets: so.streaks,
     };
     let summary = batch::run(
         inputs,

@@ -1,6 +1,7 @@
 //! The sky side of an observation: the one time type and ISO parser ([`time`]), exposure times
 //! from FITS headers ([`header`]), the observing station ([`station`]), Earth orientation from
-//! the bundled IERS table ([`earth`]) and topocentric Az/El ([`azel`]).
+//! the bundled IERS table ([`earth`]), topocentric Az/El ([`azel`]) and orbital elements
+//! propagated to the station ([`tle`]).
 //!
 //! Time scales, leap seconds and the ICRS -> observed chain come from `sofars`, a Rust port of
 //! the IAU SOFA library; results made with it should acknowledge "IAU SOFA". Az/El is what
@@ -15,6 +16,7 @@ pub mod header;
 pub mod hint;
 pub mod station;
 pub mod time;
+pub mod tle;
 
 pub use azel::*;
 pub use earth::*;

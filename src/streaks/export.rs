@@ -1,20 +1,24 @@
 //! `--tdm` and `--iod`: the streaks of a run as orbit-determination users read them.
 //!
-//! One frame cannot tell which end of a streak is its start, so these files carry each
-//! streak's midpoint at mid-exposure, which is order-free (as stvid's IOD output does); a
-//! streak that leaves the frame has no point at a known time and is left out (counted).
+//! Each tracklet ([`super::tracklet`]: the streaks of one object in consecutive frames) is
+//! one object. A streak whose direction is known (linked into a tracklet, or matched one way
+//! only to `--tle` elements) gives its ends inside the frame at the exposure's start and end;
+//! one whose direction is unknown gives its midpoint at mid-exposure, which is order-free (as
+//! stvid's IOD output does); a streak with neither (an end on the edge and no direction) is
+//! left out (counted).
 //!
-//! Each streak is its own object: nothing in one frame says which streaks are one object.
-//! IOD lines carry stvid's scheme for unidentified objects (stvid/satellite.py numbers a
-//! frame's unidentified tracks 99999, 99998, …; stvid/extract.py designates them `YY DDD+500
-//! A`): here the `n`-th streak of the run is object 99999 − (n mod 10,000) and its
-//! designation's piece counts the streaks of its UTC day (A … Z, AA … ZZ without I and O), so
-//! no two streaks of a run share an object at one time. The TDM names the same object in
-//! PARTICIPANT_2, with the input file and streak number.
+//! An object matched to `--tle` elements (the NORAD id most of its streaks were matched to)
+//! is written with that NORAD id and the elements' international designator. Others follow
+//! stvid's scheme for unidentified objects (stvid/satellite.py numbers a frame's unidentified
+//! tracks 99999, 99998, …; stvid/extract.py designates them `YY DDD+500 A`): the `n`-th
+//! unidentified tracklet of the run is object 99999 − (n mod 10,000) and its designation's
+//! piece counts the unidentified tracklets of its UTC day (A … Z, AA … ZZ without I and O),
+//! so no two tracklets of a run share an object. The TDM names the same object in
+//! PARTICIPANT_2, with the tracklet's name (its first input file and streak number).
 
 use super::formats::{self, AngleObs, IodObs, Track};
 use crate::error::{Context, Result};
-use crate::record::{Record, StreakRecord};
+use crate::record::{Record, StreakEnd, StreakRecord};
 use crate::sky::Utc;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -26,16 +30,30 @@ pub struct Exports {
     pub iod: Option<PathBuf>,
     /// The COSPAR station number written in IOD lines (9999, no site, when not given).
     pub iod_station: u16,
-    /// One per streak with a timed midpoint.
-    tracks: Vec<Track>,
-    /// The IOD lines of the same midpoints.
-    iod_lines: Vec<String>,
-    /// Streaks numbered so far (the next object is 99999 minus this, modulo 10,000).
-    objects: usize,
-    /// Streaks numbered so far per UTC date (the next designation piece).
-    per_day: BTreeMap<String, usize>,
-    /// Streaks without a timed midpoint with RA/Dec (edge ends, no time, no plate).
+    /// One per tracklet with a timed observation, in the order they began.
+    groups: Vec<Group>,
+    /// Tracklet name → its place in `groups`.
+    index: std::collections::HashMap<String, usize>,
+    /// Streaks without a timed observation with RA/Dec (edge ends, no time, no plate).
     pub left_out: usize,
+}
+
+/// One tracklet's observations.
+#[derive(Debug)]
+struct Group {
+    /// The tracklet's name (`FILE#N` of its first streak), escaped for the TDM.
+    name: String,
+    station: String,
+    /// (observation, time uncertainty s, position uncertainty deg), in the order taken.
+    obs: Vec<(AngleObs, f64, f64)>,
+    /// NORAD id → (streaks matched to it, name, international designator).
+    votes: BTreeMap<u64, (usize, String, Option<String>)>,
+}
+
+/// What a finished run writes: the TDM's tracks and the IOD lines.
+struct Written {
+    tracks: Vec<Track>,
+    iod_lines: Vec<String>,
 }
 
 /// The station code gpustar writes when `--iod-station` is not given: no COSPAR site (sattools
@@ -111,80 +129,157 @@ impl Exports {
     /// Take the streaks of one record.
     pub fn add(&mut self, r: &Record) {
         for (k, s) in r.streaks.iter().flatten().enumerate() {
-            let Some(m) = &s.mid else {
+            let (time_unc_s, pos_unc_deg) = uncertainties(s, r.rmse_arcsec);
+            let timed = |e: &StreakEnd| {
+                let (Some(t), Some(ra), Some(dec)) = (&e.time_utc, e.ra_deg, e.dec_deg) else {
+                    return None;
+                };
+                (e.edge != Some(true)).then(|| AngleObs {
+                    time_utc: t.clone(),
+                    ra_deg: ra,
+                    dec_deg: dec,
+                    az_deg: e.az_deg,
+                    el_deg: e.el_deg,
+                })
+            };
+            let obs: Vec<AngleObs> = if s.direction_known {
+                s.ends.iter().filter_map(timed).collect()
+            } else {
+                s.mid.iter().filter_map(timed).collect()
+            };
+            if obs.is_empty() {
                 self.left_out += 1;
                 continue;
-            };
-            let (Some(t), Some(ra), Some(dec)) = (&m.time_utc, m.ra_deg, m.dec_deg) else {
-                self.left_out += 1;
-                continue;
-            };
-            let norad = 99_999 - (self.objects % OBJECTS) as u32;
-            let day = t.get(..10).unwrap_or(t).to_string();
-            let piece = *self.per_day.get(&day).unwrap_or(&0);
-            let designation = match formats::unidentified_designation(t, piece) {
-                Ok(d) => d,
-                Err(e) => {
-                    tracing::warn!("{}: streak {} left out of the exports: {e}", r.file, k + 1);
-                    self.left_out += 1;
-                    continue;
+            }
+            let name = s
+                .tracklet
+                .clone()
+                .unwrap_or_else(|| format!("{}#{}", r.file, k + 1));
+            let g = *self.index.entry(name.clone()).or_insert_with(|| {
+                self.groups.push(Group {
+                    name: formats::kvn_escape(&name),
+                    station: s.station.as_deref().map_or_else(
+                        || "UNKNOWN STATION (no --station, no station in the header)".to_string(),
+                        formats::kvn_escape,
+                    ),
+                    obs: Vec::new(),
+                    votes: BTreeMap::new(),
+                });
+                self.groups.len() - 1
+            });
+            let group = &mut self.groups[g];
+            group
+                .obs
+                .extend(obs.into_iter().map(|o| (o, time_unc_s, pos_unc_deg)));
+            if let Some(sat) = &s.satellite {
+                let v = group.votes.entry(sat.norad).or_insert((
+                    0,
+                    sat.name.clone(),
+                    sat.intl_des.clone(),
+                ));
+                v.0 += 1;
+            }
+        }
+    }
+
+    /// The tracks and IOD lines of every tracklet, numbering the unidentified ones; a tracklet
+    /// either file cannot hold is left out of both (warned about and counted).
+    fn written(&self) -> (Written, usize) {
+        let mut out = Written {
+            tracks: Vec::new(),
+            iod_lines: Vec::new(),
+        };
+        let mut unidentified = 0usize;
+        let mut per_day: BTreeMap<String, usize> = BTreeMap::new();
+        let mut left_out = 0;
+        for g in &self.groups {
+            let mut obs = g.obs.clone();
+            obs.sort_by(|a, b| a.0.time_utc.cmp(&b.0.time_utc));
+            // TDM epochs must differ: one frame's end at the next one's start keeps the first.
+            obs.dedup_by(|b, a| same_ms(&a.0.time_utc, &b.0.time_utc));
+            let first = obs[0].0.time_utc.clone();
+            let day = first.get(..10).unwrap_or(&first).to_string();
+            // The NORAD id most streaks were matched to (ties: the lower id).
+            let voted = g
+                .votes
+                .iter()
+                .max_by(|a, b| a.1.0.cmp(&b.1.0).then(b.0.cmp(a.0)))
+                .and_then(|(&norad, (_, name, des))| {
+                    let des = des.as_deref().and_then(iod_designation)?;
+                    (norad <= 99_999).then(|| (norad as u32, des, name.clone()))
+                });
+            let identified = voted.is_some();
+            let (norad, designation, object) = match voted {
+                Some((norad, des, name)) => {
+                    let object = format!(
+                        "{norad:05} {} ({des}; tracklet {})",
+                        formats::kvn_escape(&name),
+                        g.name
+                    );
+                    (norad, des, object)
+                }
+                None => {
+                    let norad = 99_999 - (unidentified % OBJECTS) as u32;
+                    let piece = *per_day.get(&day).unwrap_or(&0);
+                    let des = match formats::unidentified_designation(&first, piece) {
+                        Ok(d) => d,
+                        Err(e) => {
+                            tracing::warn!("tracklet {} left out of the exports: {e}", g.name);
+                            left_out += 1;
+                            continue;
+                        }
+                    };
+                    let object = format!("{norad:05} {des} ({})", g.name);
+                    (norad, des, object)
                 }
             };
-            let (time_unc_s, pos_unc_deg) = uncertainties(s, r.rmse_arcsec);
-            let iod = IodObs {
-                norad,
-                intl_des: designation.clone(),
-                station: self.iod_station,
-                // Sky conditions good enough to measure the frame (stvid writes G too).
-                status: 'G',
-                time_utc: t.clone(),
-                time_unc_s,
-                ra_deg: ra,
-                dec_deg: dec,
-                pos_unc_deg,
-                behaviour: ' ',
-            };
-            let obs = AngleObs {
-                time_utc: t.clone(),
-                ra_deg: ra,
-                dec_deg: dec,
-                az_deg: m.az_deg,
-                el_deg: m.el_deg,
-            };
             let track = Track {
-                object: format!(
-                    "{norad:05} {designation} ({}#{})",
-                    formats::kvn_escape(&r.file),
-                    k + 1
-                ),
-                station: s.station.as_deref().map_or_else(
-                    || "UNKNOWN STATION (no --station, no station in the header)".to_string(),
-                    formats::kvn_escape,
-                ),
-                observations: vec![obs],
+                object,
+                station: g.station.clone(),
+                observations: obs.iter().map(|o| o.0.clone()).collect(),
             };
-            // A streak either file cannot hold is left out of both, never a whole file.
-            let line = formats::iod_line(&iod).and_then(|line| {
+            let lines: crate::Result<Vec<String>> = obs
+                .iter()
+                .map(|(o, time_unc_s, pos_unc_deg)| {
+                    formats::iod_line(&IodObs {
+                        norad,
+                        intl_des: designation.clone(),
+                        station: self.iod_station,
+                        // Sky conditions good enough to measure the frame (stvid writes G too).
+                        status: 'G',
+                        time_utc: o.time_utc.clone(),
+                        time_unc_s: *time_unc_s,
+                        ra_deg: o.ra_deg,
+                        dec_deg: o.dec_deg,
+                        pos_unc_deg: *pos_unc_deg,
+                        behaviour: ' ',
+                    })
+                })
+                .collect();
+            let checked = lines.and_then(|l| {
                 formats::tdm_text(
                     "2000-01-01T00:00:00",
                     "GPUSTAR",
                     std::slice::from_ref(&track),
                 )?;
-                Ok(line)
+                Ok(l)
             });
-            match line {
-                Ok(line) => {
-                    self.iod_lines.push(line);
-                    self.tracks.push(track);
-                    self.objects += 1;
-                    self.per_day.insert(day, piece + 1);
+            match checked {
+                Ok(l) => {
+                    out.iod_lines.extend(l);
+                    out.tracks.push(track);
+                    if !identified {
+                        unidentified += 1;
+                        *per_day.entry(day).or_insert(0) += 1;
+                    }
                 }
                 Err(e) => {
-                    tracing::warn!("{}: streak {} left out of the exports: {e}", r.file, k + 1);
-                    self.left_out += 1;
+                    tracing::warn!("tracklet {} left out of the exports: {e}", g.name);
+                    left_out += 1;
                 }
             }
         }
+        (out, left_out)
     }
 
     /// Refuse, before a run, export paths that could not be written at its end: a directory
@@ -213,14 +308,15 @@ impl Exports {
     pub fn finish(&self, created_utc: &str) -> Result<String> {
         let mut said = Vec::new();
         let mut failed = None;
+        let (written, unwritable) = self.written();
         if let Some(p) = &self.tdm {
-            match self.write_tdm(p, created_utc) {
+            match write_tdm(&written.tracks, p, created_utc) {
                 Ok(s) => said.push(s),
                 Err(e) => failed = Some(e),
             }
         }
         if let Some(p) = &self.iod {
-            let mut text = self.iod_lines.join("\n");
+            let mut text = written.iod_lines.join("\n");
             if !text.is_empty() {
                 // sattools takes the last byte of every line for its newline.
                 text.push('\n');
@@ -229,7 +325,7 @@ impl Exports {
                 Ok(()) => said.push(format!(
                     "{} (IOD, {} lines)",
                     p.display(),
-                    self.iod_lines.len()
+                    written.iod_lines.len()
                 )),
                 Err(e) => {
                     failed.get_or_insert(e);
@@ -238,9 +334,14 @@ impl Exports {
         }
         if self.left_out > 0 {
             said.push(format!(
-                "{} streaks without a timed midpoint left out (an end on the frame's edge, or \
-                 no time or plate solution)",
+                "{} streaks without a timed observation left out (an end on the frame's edge \
+                 and no direction, or no time or plate solution)",
                 self.left_out
+            ));
+        }
+        if unwritable > 0 {
+            said.push(format!(
+                "{unwritable} tracklets the formats cannot hold left out"
             ));
         }
         match failed {
@@ -253,35 +354,61 @@ impl Exports {
             None => Ok(said.join("; ")),
         }
     }
+}
 
-    fn write_tdm(&self, p: &std::path::Path, created_utc: &str) -> Result<String> {
-        if self.tracks.is_empty() {
-            let removed = match std::fs::remove_file(p) {
-                Ok(()) => "; the older file there removed",
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => "",
-                Err(e) => {
-                    return Err(e).with_context(|| {
-                        format!(
-                            "no streak with a timed midpoint, so no TDM; cannot remove the \
-                             older {}",
-                            p.display()
-                        )
-                    });
-                }
-            };
-            return Ok(format!(
-                "no TDM at {} (no streak with a timed midpoint; TDM 2.0 requires a \
-                 segment){removed}",
-                p.display()
-            ));
-        }
-        let text = formats::tdm_text(created_utc, "GPUSTAR", &self.tracks)
-            .with_context(|| format!("cannot write {}", p.display()))?;
-        crate::io::output::write_atomically(p, text.as_bytes())?;
-        Ok(format!(
-            "{} (TDM, {} streaks)",
-            p.display(),
-            self.tracks.len()
-        ))
+fn write_tdm(tracks: &[Track], p: &std::path::Path, created_utc: &str) -> Result<String> {
+    if tracks.is_empty() {
+        let removed = match std::fs::remove_file(p) {
+            Ok(()) => "; the older file there removed",
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => "",
+            Err(e) => {
+                return Err(e).with_context(|| {
+                    format!(
+                        "no streak with a timed observation, so no TDM; cannot remove the \
+                         older {}",
+                        p.display()
+                    )
+                });
+            }
+        };
+        return Ok(format!(
+            "no TDM at {} (no streak with a timed observation; TDM 2.0 requires a \
+             segment){removed}",
+            p.display()
+        ));
     }
+    let text = formats::tdm_text(created_utc, "GPUSTAR", tracks)
+        .with_context(|| format!("cannot write {}", p.display()))?;
+    crate::io::output::write_atomically(p, text.as_bytes())?;
+    let obs: usize = tracks.iter().map(|t| t.observations.len()).sum();
+    Ok(format!(
+        "{} (TDM, {} objects, {obs} observations)",
+        p.display(),
+        tracks.len()
+    ))
+}
+
+/// Do two UTC strings name the same millisecond (as the formats write them)?
+fn same_ms(a: &str, b: &str) -> bool {
+    match (Utc::parse(a), Utc::parse(b)) {
+        (Ok(x), Ok(y)) => x.seconds_since(&y).abs() < 0.0005,
+        _ => a == b,
+    }
+}
+
+/// An international designator as IOD's columns 7–15 hold it, `YY NNNPPP`: from TLE's
+/// `98067A` or OMM's `1998-067A`; `None` for anything else.
+pub fn iod_designation(des: &str) -> Option<String> {
+    let d = des.trim();
+    let (yy, rest) = match d.find('-') {
+        Some(4) => (d.get(2..4)?, &d[5..]),
+        None => (d.get(..2)?, d.get(2..)?),
+        _ => return None,
+    };
+    let (num, piece) = (rest.get(..3)?, rest.get(3..)?.trim());
+    let ok = yy.bytes().all(|c| c.is_ascii_digit())
+        && num.bytes().all(|c| c.is_ascii_digit())
+        && (1..=3).contains(&piece.len())
+        && piece.bytes().all(|c| c.is_ascii_uppercase());
+    ok.then(|| format!("{yy} {num}{piece}"))
 }

@@ -13,9 +13,11 @@
 pub mod export;
 pub mod fit;
 pub mod formats;
+pub mod identify;
 pub mod reduce;
 pub mod segments;
 pub mod simulate;
+pub mod tracklet;
 
 use crate::cpu::centroid::Blob;
 use crate::cpu::streak_filter::{BIN, StreakParams, grid, mask_runs, streak_mask};
@@ -80,7 +82,7 @@ impl StreakSettings {
 }
 
 /// What `--streaks` asks for: detection settings and how the ends are reduced.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct StreakOptions {
     pub settings: StreakSettings,
     /// `--station`; else each frame's header says.
@@ -88,6 +90,9 @@ pub struct StreakOptions {
     /// `--dut1`: UT1 − UTC (s) instead of the bundled table's.
     pub dut1_s: Option<f64>,
     pub astrometry: reduce::Astrometry,
+    /// `--tle`: the objects streaks are matched to, shared by the frames.
+    pub tle: Option<std::sync::Arc<sky::tle::TleCatalog>>,
+    pub identify: identify::IdentifySettings,
 }
 
 /// Lines closer to a frame axis than this (degrees) are suspects: bad columns and rows, and

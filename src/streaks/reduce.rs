@@ -87,13 +87,18 @@ pub fn records(
         }
     };
     let times = |e: &Exposure| [e.start, e.end];
-    let out = found
+    let mut out: Vec<StreakRecord> = found
         .iter()
         .map(|f| {
             let t = exposure.as_ref().map(times);
             let ends = [0, 1].map(|k| {
                 let (x, y) = f.ends[k];
                 end(x, y, Some(f.edge[k]), t.map(|t| t[k]))
+            });
+            // The other way along: each place at the other end's time (its Az/El with it).
+            let reversed = [0, 1].map(|k| {
+                let (x, y) = f.ends[1 - k];
+                end(x, y, Some(f.edge[1 - k]), t.map(|t| t[k]))
             });
             let mid = (!f.edge[0] && !f.edge[1]).then(|| {
                 let (x, y) = (
@@ -112,9 +117,35 @@ pub fn records(
                 snr: f.snr,
                 fit_rms_px: f.fit_rms_px,
                 station: station_name.clone(),
+                tracklet: None,
+                tracklet_index: None,
+                satellite: None,
+                uncorrelated: None,
+                reversed: Some(Box::new(reversed)),
             }
         })
         .collect();
+    if let Some(catalog) = &opts.tle {
+        match (station, exposure) {
+            (Some(station), Some(exposure)) => {
+                let (table_dut1, xp, yp, _) = sky::earth_orientation(&exposure.mid());
+                let frame = super::identify::FrameSky {
+                    catalog,
+                    station,
+                    exposure,
+                    dut1_s: opts.dut1_s.unwrap_or(table_dut1),
+                    xp,
+                    yp,
+                };
+                frame.identify(&mut out, &opts.identify);
+            }
+            _ => warnings.push(
+                "--tle: no station or no exposure time, so the streaks are not matched to the \
+                 elements"
+                    .into(),
+            ),
+        }
+    }
     (out, warnings)
 }
 
