@@ -116,6 +116,10 @@ pub struct StreakRecord {
     /// direction. Never written.
     #[serde(skip)]
     pub reversed: Option<Box<[StreakEnd; 2]>>,
+    /// The frame's exposure start and end (UTC, as the ends' times), for the tracklet stage:
+    /// an end on the frame's edge has no time. Never written.
+    #[serde(skip)]
+    pub exposure_utc: Option<[String; 2]>,
 }
 
 impl StreakRecord {

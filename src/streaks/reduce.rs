@@ -122,6 +122,7 @@ pub fn records(
                 satellite: None,
                 uncorrelated: None,
                 reversed: Some(Box::new(reversed)),
+                exposure_utc: exposure.as_ref().map(|e| [e.start.iso(), e.end.iso()]),
             }
         })
         .collect();

@@ -62,31 +62,19 @@ fn directory(file: &str) -> &str {
     file.rfind(['/', '\\']).map_or("", |i| &file[..i])
 }
 
-/// A frame's exposure start and end (seconds from J2000 UTC) from its streaks' ends: an end
-/// inside the frame has the start time as `ends[0]`, the end time as `ends[1]`.
+/// A frame's exposure start and end (seconds from J2000 UTC), as its streaks carry them.
 fn frame_times(r: &Record) -> Option<(f64, f64)> {
     let j2000 = Utc {
         jd1: 2_451_545.0,
         jd2: 0.0,
     };
-    let secs = |t: &Option<String>| {
-        t.as_deref()
-            .and_then(|t| Utc::parse(t).ok())
-            .map(|u| u.seconds_since(&j2000))
-    };
-    let streaks = r.streaks.as_ref()?;
-    let start = streaks.iter().find_map(|s| secs(&s.ends[0].time_utc));
-    let end = streaks.iter().find_map(|s| secs(&s.ends[1].time_utc));
-    let mid = streaks
+    let secs = |t: &str| Utc::parse(t).ok().map(|u| u.seconds_since(&j2000));
+    let [a, b] = r
+        .streaks
+        .as_ref()?
         .iter()
-        .find_map(|s| secs(&s.mid.as_ref().and_then(|m| m.time_utc.clone())));
-    match (start, end, mid) {
-        (Some(a), Some(b), _) => Some((a, b)),
-        (Some(a), None, Some(m)) => Some((a, 2.0 * m - a)),
-        (None, Some(b), Some(m)) => Some((2.0 * m - b, b)),
-        _ => None,
-    }
-    .filter(|(a, b)| b > a)
+        .find_map(|s| s.exposure_utc.clone())?;
+    Some((secs(&a)?, secs(&b)?)).filter(|(a, b)| b > a)
 }
 
 type V3 = [f64; 3];
