@@ -248,7 +248,7 @@ def main(argv=None):
     def add_object(sat, norad, in_file):
         if in_file:
             s, dt, dn = perturbed(rng, sat, norad)
-            des = f"{24 + int(rng.integers(0, 2)):02d}{int(rng.integers(1, 999)):03d}{'ABCDEFGH'[int(rng.integers(0, 8))]}"
+            des = f"{24 + int(rng.integers(0, 2)):02d}{int(rng.integers(1, 300)):03d}{'ABCDEFGH'[int(rng.integers(0, 8))]}"
             file_objs.append((norad, f"SIM-{norad}", des, s))
             true_objs[norad] = (sat, True, dt, dn)
         else:

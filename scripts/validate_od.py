@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Read gpustar's --tdm and --iod files with the readers orbit-determination users run.
 
-    python3 scripts/validate_od.py [--trusat DIR] TDM IOD
+    python3 scripts/validate_od.py [--trusat DIR] [--tle FILE] TDM IOD
 
 * TDM: ccsds-ndm-py (PyPI `ccsds-ndm-py`, module `ccsds_ndm`; `pip install ccsds-ndm-py`):
   `Tdm.from_file(path).validate(strict=True)`, its strict CCSDS 503.0-B-2 validation. (PyPI's
@@ -20,6 +20,12 @@
   here again: at least 64 characters, `+`/`-` in column 55, digits in the MX columns 42-43
   and 63-64 (read with `%1d%1d`, which skip blanks), a designation in columns 7-15, a 4-digit
   station that is not 9999.
+
+* Objects (tracklets, --tle): every TDM RADEC segment names its own object (PARTICIPANT_2)
+  and is in time order; in the IOD lines an object number goes with one designation and a
+  designation with one number. With --tle FILE (the elements the run was given), every
+  object the lines name with a designation that is not stvid's unidentified scheme (day of
+  year + 500) must be in the file with that NORAD id and its international designator.
 
 Exit status 0 when every reader accepts every line (and the TDM), 1 otherwise.
 """
@@ -122,14 +128,60 @@ def check_iod(path, trusat_dir):
     return ok
 
 
+def check_objects(tdm_path, iod_path, tle_path):
+    ok = True
+    if os.path.exists(tdm_path):
+        segs, cur = [], None
+        for line in open(tdm_path, encoding="ascii"):
+            k, _, v = line.partition("=")
+            k, v = k.strip(), v.strip()
+            if k == "META_START" or line.startswith("META_START"):
+                cur = {"epochs": []}
+                segs.append(cur)
+            elif k in ("PARTICIPANT_2", "ANGLE_TYPE") and cur is not None:
+                cur[k] = v
+            elif k == "ANGLE_1" and cur is not None:
+                cur["epochs"].append(v.split()[0])
+        radec = [s for s in segs if s.get("ANGLE_TYPE") == "RADEC"]
+        names = [s["PARTICIPANT_2"] for s in radec]
+        dup = len(names) - len(set(names))
+        unordered = sum(1 for s in radec if s["epochs"] != sorted(s["epochs"]))
+        multi = sum(1 for s in radec if len(s["epochs"]) > 1)
+        print(f"TDM objects: {len(radec)} RADEC segments, {len(set(names))} distinct objects "
+              f"({dup} repeated), {multi} with more than one observation, {unordered} out of time order")
+        ok &= dup == 0 and unordered == 0
+    lines = [l for l in open(iod_path, encoding="ascii").read().split("\n") if l]
+    by_num, by_des = {}, {}
+    for l in lines:
+        by_num.setdefault(l[0:5], set()).add(l[6:15].strip())
+        by_des.setdefault(l[6:15].strip(), set()).add(l[0:5])
+    clash = [n for n, d in by_num.items() if len(d) > 1] + [d for d, n in by_des.items() if len(n) > 1]
+    print(f"IOD objects: {len(by_num)} object numbers, {len(clash)} numbers or designations shared")
+    ok &= not clash
+    if tle_path:
+        tle = {}
+        for l in open(tle_path, encoding="ascii"):
+            if l.startswith("1 ") and len(l) >= 17:
+                d = l[9:17].strip()
+                tle[l[2:7].strip().zfill(5)] = f"{d[:2]} {d[2:]}"
+        named = {n: d for n, ds in by_num.items() for d in ds if not (d[3:6].isdigit() and int(d[3:6]) >= 500)}
+        wrong = {n: d for n, d in named.items() if tle.get(n) != d}
+        print(f"IOD objects: {len(named)} named from the elements, {len(wrong)} not in {tle_path} as named"
+              + (f" e.g. {list(wrong.items())[:3]}" if wrong else ""))
+        ok &= not wrong
+    return ok
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("tdm")
     ap.add_argument("iod")
     ap.add_argument("--trusat", help="folder holding TruSat's trusat/ package sources")
+    ap.add_argument("--tle", help="the elements the run was given (--tle): named objects checked")
     a = ap.parse_args()
     ok = check_tdm(a.tdm)
     ok &= check_iod(a.iod, a.trusat)
+    ok &= check_objects(a.tdm, a.iod, a.tle)
     sys.exit(0 if ok else 1)
 
 

@@ -116,8 +116,13 @@ impl TleCatalog {
     pub fn load(path: &std::path::Path) -> Result<TleCatalog> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read --tle {}", path.display()))?;
-        let (elements, mut skipped) = parse(&text)
-            .map_err(|e| crate::Error::Input(format!("--tle {}: {e}", path.display())))?;
+        TleCatalog::from_text(&text, &format!("--tle {}", path.display()))
+    }
+
+    /// [`TleCatalog::load`] of a file's text; `what` names it in messages.
+    pub fn from_text(text: &str, what: &str) -> Result<TleCatalog> {
+        let (elements, mut skipped) =
+            parse(text).map_err(|e| crate::Error::Input(format!("{what}: {e}")))?;
         let mut satellites = Vec::with_capacity(elements.len());
         for e in elements {
             match Satellite::from_elements(&e) {
@@ -127,8 +132,7 @@ impl TleCatalog {
         }
         if !skipped.is_empty() {
             tracing::warn!(
-                "--tle {}: {} objects skipped ({}{})",
-                path.display(),
+                "{what}: {} objects skipped ({}{})",
                 skipped.len(),
                 skipped[..skipped.len().min(3)].join("; "),
                 if skipped.len() > 3 { "; …" } else { "" }
@@ -136,8 +140,7 @@ impl TleCatalog {
         }
         if satellites.is_empty() {
             return Err(crate::Error::Input(format!(
-                "--tle {}: no object with usable elements",
-                path.display()
+                "{what}: no object with usable elements"
             )));
         }
         Ok(TleCatalog::new(satellites))

@@ -350,3 +350,110 @@ mod tests {
         assert!(fit(&far, &q0, &q1, dt, false, &s).is_none());
     }
 }
+
+#[cfg(test)]
+mod chain_tests {
+    use super::*;
+    use crate::record::StreakEnd;
+
+    const ISS: &str = "ISS (ZARYA)\n\
+        1 25544U 98067A   24075.50000000  .00016717  00000-0  30306-3 0  9990\n\
+        2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.49815795443217\n\
+        OTHER\n\
+        1 43013U 17073A   24075.50000000  .00000000  00000-0  10000-3 0  9996\n\
+        2 43013  98.7000  10.0000 0012000  90.0000 200.0000 14.20000000    09\n";
+
+    fn end(v: [f64; 3], t: &str) -> StreakEnd {
+        StreakEnd {
+            x: 0.0,
+            y: 0.0,
+            ra_deg: Some(v[1].atan2(v[0]).to_degrees().rem_euclid(360.0)),
+            dec_deg: Some(v[2].asin().to_degrees()),
+            edge: Some(false),
+            time_utc: Some(t.to_string()),
+            az_deg: None,
+            el_deg: None,
+        }
+    }
+
+    /// A streak where the ISS is predicted (read back from its own elements, written the
+    /// wrong way round) is named for it, turned, and offset by nothing; 20 s further along
+    /// its path it is no one's.
+    #[test]
+    fn names_the_object_and_its_direction() {
+        let cat = TleCatalog::from_text(ISS, "test").unwrap();
+        // Where the ISS is above Graz at some moment of that day.
+        let station = Station {
+            lat_deg: 47.0678,
+            lon_deg: 15.4933,
+            height_m: 493.0,
+        };
+        let (t0, sky) = (0..2880)
+            .find_map(|k| {
+                let t = Utc::parse("2024-03-15T12:00:00")
+                    .unwrap()
+                    .add_seconds(30.0 * k as f64);
+                let topo = Topocentre::new(&t, &station, 0.0, 0.0, 0.0)?;
+                let d = seen(&cat.satellites[0], &t, &topo)?;
+                (d[2] > 0.5).then_some(t)
+            })
+            .map(|t| {
+                let exposure = Exposure {
+                    start: t,
+                    end: t.add_seconds(2.0),
+                };
+                (
+                    t,
+                    FrameSky {
+                        catalog: &cat,
+                        station,
+                        exposure,
+                        dut1_s: 0.0,
+                        xp: 0.0,
+                        yp: 0.0,
+                    },
+                )
+            })
+            .expect("a pass in a day");
+        let t1 = t0.add_seconds(2.0);
+        let at = |t: &Utc| {
+            let topo = sky.topo(t).unwrap();
+            sky.predicted(&cat.satellites[0], t, &topo).unwrap()
+        };
+        let streak = |shift: f64| {
+            let (a, b) = (t0.add_seconds(shift), t1.add_seconds(shift));
+            let (p0, p1) = (at(&a), at(&b));
+            StreakRecord {
+                // Written end first, as one frame may have it.
+                ends: [end(p1, &t0.iso()), end(p0, &t1.iso())],
+                direction_known: false,
+                mid: None,
+                length_px: 100.0,
+                width_px: 3.0,
+                flux: 1e4,
+                snr: 50.0,
+                fit_rms_px: 0.2,
+                station: None,
+                tracklet: None,
+                tracklet_index: None,
+                satellite: None,
+                uncorrelated: None,
+                reversed: Some(Box::new([end(p0, &t0.iso()), end(p1, &t1.iso())])),
+                exposure_utc: None,
+            }
+        };
+        let mut s = [streak(0.0), streak(20.0)];
+        sky.identify(&mut s, &IdentifySettings::default());
+        let sat = s[0].satellite.as_ref().expect("named");
+        assert_eq!((sat.norad, sat.name.as_str()), (25544, "ISS (ZARYA)"));
+        assert!(
+            sat.along_track_s.abs() < 0.01 && sat.cross_track_arcsec.abs() < 1.0,
+            "{sat:?}"
+        );
+        assert!(s[0].direction_known);
+        assert_eq!(s[0].ends[0].time_utc.as_deref(), Some(t0.iso().as_str()));
+        assert_eq!(s[0].uncorrelated, Some(false));
+        assert!(s[1].satellite.is_none(), "{:?}", s[1].satellite);
+        assert_eq!(s[1].uncorrelated, Some(true));
+    }
+}

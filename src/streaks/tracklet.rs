@@ -225,3 +225,160 @@ fn link(a: &mut Record, b: &mut Record) {
         sb[j].tracklet_index = sa[i].tracklet_index.map(|k| k + 1);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::StreakEnd;
+
+    /// A point `phi` radians along the great circle from (RA 30°, Dec 10°) towards the north
+    /// east, and `across` radians off it.
+    fn along(phi: f64, across: f64) -> (f64, f64) {
+        let a = unit(30.0, 10.0);
+        let n = {
+            let c = cross(&a, &unit(31.0, 10.6));
+            let l = dot(&c, &c).sqrt();
+            c.map(|v| v / l)
+        };
+        let u = cross(&n, &a);
+        let p: V3 = [0, 1, 2]
+            .map(|i| (a[i] * phi.cos() + u[i] * phi.sin()) * across.cos() + n[i] * across.sin());
+        (
+            p[1].atan2(p[0]).to_degrees().rem_euclid(360.0),
+            p[2].asin().to_degrees(),
+        )
+    }
+
+    fn end(phi: f64, across: f64, edge: bool, t: Option<&str>) -> StreakEnd {
+        let (ra, dec) = along(phi, across);
+        StreakEnd {
+            x: phi.to_degrees() * 100.0,
+            y: across.to_degrees() * 100.0,
+            ra_deg: Some(ra),
+            dec_deg: Some(dec),
+            edge: Some(edge),
+            time_utc: if edge { None } else { t.map(str::to_string) },
+            az_deg: None,
+            el_deg: None,
+        }
+    }
+
+    /// A streak from `phi0` (exposure start) to `phi1` (end), written in the order `swap`
+    /// says (one frame does not know which end came first); `edge0` puts the start off the
+    /// frame.
+    fn streak(
+        phi0: f64,
+        phi1: f64,
+        across: f64,
+        times: [&str; 2],
+        swap: bool,
+        edge0: bool,
+    ) -> StreakRecord {
+        let fwd = [
+            end(phi0, across, edge0, Some(times[0])),
+            end(phi1, across, false, Some(times[1])),
+        ];
+        let rev = [
+            end(phi1, across, false, Some(times[0])),
+            end(phi0, across, edge0, Some(times[1])),
+        ];
+        let (ends, reversed) = if swap { (rev, fwd) } else { (fwd, rev) };
+        StreakRecord {
+            length_px: (phi1 - phi0).abs().to_degrees() * 100.0,
+            ends,
+            direction_known: false,
+            mid: None,
+            width_px: 3.0,
+            flux: 1e4,
+            snr: 50.0,
+            fit_rms_px: 0.2,
+            station: None,
+            tracklet: None,
+            tracklet_index: None,
+            satellite: None,
+            uncorrelated: None,
+            reversed: Some(Box::new(reversed)),
+            exposure_utc: Some(times.map(str::to_string)),
+        }
+    }
+
+    fn frame(name: &str, streaks: Vec<StreakRecord>) -> Record {
+        let mut r = Record::empty(name, "cpu");
+        r.streaks = Some(streaks);
+        r
+    }
+
+    const T: [[&str; 2]; 3] = [
+        ["2025-01-01T20:00:00.000", "2025-01-01T20:00:02.000"],
+        ["2025-01-01T20:00:03.000", "2025-01-01T20:00:05.000"],
+        ["2025-01-01T20:00:06.000", "2025-01-01T20:00:08.000"],
+    ];
+
+    /// Two objects over three frames, their streaks written either way round: one moving
+    /// 0.01 rad/s along the circle, the other the opposite way 0.02 rad off it; a third
+    /// streak in the last frame at another rate is no one's continuation.
+    #[test]
+    fn links_objects_and_fixes_directions() {
+        let rate = 0.01;
+        let (mut linker, mut out) = (Linker::new(), Vec::new());
+        for (k, t) in T.iter().enumerate() {
+            let t0 = 3.0 * k as f64;
+            let mut s = vec![
+                streak(rate * t0, rate * (t0 + 2.0), 0.0, *t, k % 2 == 0, k == 0),
+                streak(-rate * t0, -rate * (t0 + 2.0), 0.02, *t, k == 1, false),
+            ];
+            if k == 2 {
+                s.push(streak(0.3, 0.3 + 3.0 * rate * 2.0, -0.02, *t, false, false));
+            }
+            out.extend(linker.push(frame(&format!("night/f{k}.fits"), s)));
+        }
+        out.extend(linker.finish());
+        assert_eq!(out.len(), 3);
+        for (k, r) in out.iter().enumerate() {
+            let s = r.streaks.as_ref().unwrap();
+            // Object 1 (its first streak leaves the frame at its start: linked all the same).
+            assert_eq!(
+                s[0].tracklet.as_deref(),
+                Some("night/f0.fits#1"),
+                "frame {k}"
+            );
+            assert_eq!(s[0].tracklet_index, Some(k));
+            assert_eq!(
+                s[1].tracklet.as_deref(),
+                Some("night/f0.fits#2"),
+                "frame {k}"
+            );
+            for (j, sign) in [(0, 1.0), (1, -1.0)] {
+                assert!(s[j].direction_known, "frame {k} streak {j}");
+                // ends[0] is the start: x grows with phi, so the motion's sign shows.
+                let dx = s[j].ends[1].x - s[j].ends[0].x;
+                assert!(dx * sign > 0.0, "frame {k} streak {j}: {dx}");
+                // Times stay where they were: ends[0] at the exposure start (or edge).
+                assert!(s[j].ends[1].time_utc.as_deref() == Some(T[k][1]));
+            }
+        }
+        let last = &out[2].streaks.as_ref().unwrap()[2];
+        assert_eq!(last.tracklet.as_deref(), Some("night/f2.fits#3"));
+        assert!(!last.direction_known);
+    }
+
+    /// Frames of another directory are another station's: nothing links across.
+    #[test]
+    fn directories_are_not_linked() {
+        let mut linker = Linker::new();
+        let a = frame(
+            "a/f0.fits",
+            vec![streak(0.0, 0.02, 0.0, T[0], false, false)],
+        );
+        let b = frame(
+            "b/f1.fits",
+            vec![streak(0.03, 0.05, 0.0, T[1], false, false)],
+        );
+        assert!(linker.push(a).is_none());
+        let a = linker.push(b).unwrap();
+        let b = linker.finish().unwrap();
+        assert_eq!(a.streaks.unwrap()[0].tracklet_index, Some(0));
+        let s = &b.streaks.unwrap()[0];
+        assert_eq!((s.tracklet_index, s.direction_known), (Some(0), false));
+    }
+}
