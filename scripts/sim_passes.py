@@ -231,6 +231,8 @@ def main(argv=None):
     ap.add_argument("--decoys", type=int, default=2000)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--catalog", default=str(ss.DEFAULT_CATALOG))
+    ap.add_argument("--first-id", type=int, default=1000,
+                    help="NORAD ids are drawn from FIRST..FIRST+89000 (another file's ids apart)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -240,15 +242,21 @@ def main(argv=None):
     loc = EarthLocation.from_geodetic(LON * u.deg, LAT * u.deg, HGT * u.m)
     cam = ss.Camera(SIZE, SIZE, FOV)
     scale_deg = FOV / SIZE
-    ids = iter(rng.permutation(np.arange(1000, 90000))[: 4 * args.passes + args.decoys + 10].tolist())
+    ids = iter(rng.permutation(np.arange(args.first_id, args.first_id + 89000))[: 4 * args.passes + args.decoys + 10].tolist())
     t0 = Time("2024-01-01T00:00:00", scale="utc")
     file_objs = []  # (norad, name, des, satrec as written)
     true_objs = {}  # norad -> (true satrec, in_file, along_s, dnode_deg)
+    used_des = set()
 
     def add_object(sat, norad, in_file):
         if in_file:
             s, dt, dn = perturbed(rng, sat, norad)
-            des = f"{24 + int(rng.integers(0, 2)):02d}{int(rng.integers(1, 300)):03d}{'ABCDEFGH'[int(rng.integers(0, 8))]}"
+            while True:  # designators are unique, as real ones are
+                des = (f"{20 + int(rng.integers(0, 6)):02d}{int(rng.integers(1, 300)):03d}"
+                       f"{'ABCDEFGHJKLMNPQRSTUVWXYZ'[int(rng.integers(0, 24))]}")
+                if des not in used_des:
+                    used_des.add(des)
+                    break
             file_objs.append((norad, f"SIM-{norad}", des, s))
             true_objs[norad] = (sat, True, dt, dn)
         else:

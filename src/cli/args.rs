@@ -340,9 +340,10 @@ pub struct StreakOpts {
     #[arg(long, default_value_t = 3.5, help_heading = "Streaks",
           value_parser = within_f32(0.5, 100.0))]
     pub streak_sigma: f32,
-    /// Write the streaks' midpoints at mid-exposure as a CCSDS TDM (KVN): RADEC, and AZEL
-    /// when the station is known. A run without a timed streak writes none (and removes an
-    /// older TDM gpustar wrote there).
+    /// Write the streaks as a CCSDS TDM (KVN): a RADEC segment, and AZEL when the station is
+    /// known, per tracklet (one object over consecutive frames): the ends at the exposure's
+    /// start and end where the direction is known, else midpoints at mid-exposure. A run
+    /// without a timed streak writes none (and removes an older TDM gpustar wrote there).
     #[arg(
         long,
         value_name = "FILE",
@@ -350,8 +351,9 @@ pub struct StreakOpts {
         help_heading = "Streaks"
     )]
     pub tdm: Option<PathBuf>,
-    /// Write the streaks' midpoints at mid-exposure as IOD lines (angle format 2, J2000), each
-    /// streak its own unidentified object (stvid's 99999-n and YY DOY+500 designation).
+    /// Write the streaks as IOD lines (angle format 2, J2000), the same observations as the
+    /// TDM; each tracklet one object: its NORAD id and designator when --tle named it, else
+    /// an unidentified one (stvid's 99999-n and YY DOY+500 designation).
     #[arg(
         long,
         value_name = "FILE",

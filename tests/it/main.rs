@@ -38,6 +38,7 @@ mod streaks;
 mod streaks_cli;
 mod table;
 mod threshold;
+mod tracklets_cli;
 mod triangle;
 mod unseen;
 mod vote;
