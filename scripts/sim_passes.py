@@ -27,6 +27,8 @@ Model
   topocentric (astropy, pressure 0) -> the ICRS direction a star seen there would have (astropy
   AltAz -> ICRS), projected by the camera: the sky the stars are drawn in. Each streak is the
   straight segment between the places at exposure start and end.
+* --night UTC: every pass within 10 h of UTC and the decoys' elements 0-3 days older than it
+  (a night's archive against a current catalog); otherwise passes over 2024-2025.
 * Other objects: with p = 0.6 one object NOT in the TLE file crosses the field during the pass,
   with p = 0.3 one more object of the file; each built like the pass's object to cross a random
   point of the field at a random instant of the pass. The file also holds --decoys random
@@ -231,6 +233,8 @@ def main(argv=None):
     ap.add_argument("--decoys", type=int, default=2000)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--catalog", default=str(ss.DEFAULT_CATALOG))
+    ap.add_argument("--night", help="one night from this UTC (passes over 10 h, elements of the "
+                    "decoys 0-3 days old) instead of passes spread over 2024-2025")
     ap.add_argument("--first-id", type=int, default=1000,
                     help="NORAD ids are drawn from FIRST..FIRST+89000 (another file's ids apart)")
     args = ap.parse_args(argv)
@@ -264,7 +268,10 @@ def main(argv=None):
 
     passes = []
     for p in range(args.passes):
-        t_mid = t0 + rng.uniform(0, 730) * u.day
+        if args.night:
+            t_mid = Time(args.night, scale="utc") + rng.uniform(0, 10) * u.hour
+        else:
+            t_mid = t0 + rng.uniform(0, 730) * u.day
         t_mid = Time(ss.iso_ms(t_mid), format="isot", scale="utc")
         norad = next(ids)
         main_sat = orbit_through(rng, norad, t_mid, loc, rng.uniform(0, 2 * math.pi),
@@ -303,7 +310,11 @@ def main(argv=None):
 
     for _ in range(args.decoys):
         k = next(ids)
-        add_object(random_orbit(rng, k, t0 + rng.uniform(0, 730) * u.day), k, True)
+        if args.night:
+            epoch = Time(args.night, scale="utc") - rng.uniform(0, 3) * u.day
+        else:
+            epoch = t0 + rng.uniform(0, 730) * u.day
+        add_object(random_orbit(rng, k, epoch), k, True)
 
     # The file: 3-line TLEs, in random order.
     order = rng.permutation(len(file_objs))

@@ -154,10 +154,9 @@ pub fn run(
             done_rx,
             ticket_tx,
             writer,
-            opts.flush_every,
+            &opts,
             stop,
             &replay,
-            opts.tracklets,
             &mut on_record,
         )?;
         Ok(())
@@ -360,14 +359,14 @@ fn write_in_order(
     done: Receiver<(usize, Record)>,
     tickets: Sender<()>,
     writer: &mut RecordWriter,
-    flush_every: Duration,
+    opts: &RunOptions,
     stop: &AtomicBool,
     replay: &std::collections::HashSet<usize>,
-    tracklets: bool,
     on_record: &mut impl FnMut(&Record, &Counts),
 ) -> Result<RunSummary> {
+    let flush_every = opts.flush_every;
     let mut summary = RunSummary::default();
-    let mut linker = tracklets.then(crate::streaks::tracklet::Linker::new);
+    let mut linker = opts.tracklets.then(crate::streaks::tracklet::Linker::new);
     let mut emit = |r: Record, w: &mut RecordWriter, summary: &mut RunSummary, n: &mut usize| {
         summary.counts.add(&r);
         w.write(&r);
