@@ -5,7 +5,7 @@
 //! great circle through its ends at the rate that covers it in the exposure, either way along.
 //! A streak of the next frame is the same object when, for one choice of the two streaks'
 //! directions, its ends lie where that motion puts the object at that frame's start and end
-//! (and the other way round when both are whole): within 5 % of the distance extrapolated plus
+//! (and the other way round when both are whole): within 10 % of the distance extrapolated plus
 //! 10 pixels' worth of angle. The choice that fits says which end of each streak was the
 //! exposure's start: the streaks are turned so that `ends[0]` is the start, and
 //! `direction_known` is set. A pair that fits both ways is not linked; two streaks that leave
@@ -20,8 +20,9 @@
 use crate::record::{Record, StreakRecord};
 use crate::sky::Utc;
 
-/// Extrapolation error allowed, as a share of the angle extrapolated.
-const REL_TOL: f64 = 0.05;
+/// Extrapolation error allowed, as a share of the angle extrapolated: a low object's rate on
+/// the sky changes by up to a fifth from one frame to the next (independent passes).
+const REL_TOL: f64 = 0.10;
 /// And in pixels of the streak that extrapolates (the ends' own errors, a bent path).
 const PX_TOL: f64 = 10.0;
 
