@@ -228,9 +228,22 @@ fn tle_lines(text: &str) -> (Vec<sgp4::Elements>, Vec<String>) {
                 let n = lines[i - 1].trim();
                 n.strip_prefix("0 ").unwrap_or(n).to_string()
             });
-            match sgp4::Elements::from_tle(name, lines[i].as_bytes(), lines[i + 1].as_bytes()) {
-                Ok(e) => out.push(e),
-                Err(e) => bad.push(format!("line {}: {e}", i + 1)),
+            // The crate reads the checksum column as a digit unchecked (an overflow on
+            // anything else) and indexes fixed columns: check them first, and keep a panic
+            // of its parser on a line gpustar did not foresee to that object.
+            let digit = |l: &str| l.as_bytes().get(68).is_some_and(u8::is_ascii_digit);
+            let (l1, l2) = (lines[i], lines[i + 1]);
+            if !(digit(l1) && digit(l2) && l1.is_ascii() && l2.is_ascii()) {
+                bad.push(format!("line {}: not TLE columns", i + 1));
+            } else {
+                let parsed = std::panic::catch_unwind(|| {
+                    sgp4::Elements::from_tle(name, l1.as_bytes(), l2.as_bytes())
+                });
+                match parsed {
+                    Ok(Ok(e)) => out.push(e),
+                    Ok(Err(e)) => bad.push(format!("line {}: {e}", i + 1)),
+                    Err(_) => bad.push(format!("line {}: unreadable", i + 1)),
+                }
             }
             i += 2;
         } else {
@@ -540,6 +553,58 @@ mod tests {
         assert!(parse("<ndm></ndm>").is_err());
         assert!(parse("[{\"NORAD_CAT_ID\": 1}]").unwrap().1.len() == 1);
         assert!(tle_lines("1 2\n2 3\n").0.is_empty());
+        // Lines of the right shape with anything in their columns, and cut OMM: refused or
+        // read, never a panic.
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(26);
+        let good = tle.lines().collect::<Vec<_>>();
+        for _ in 0..3000 {
+            let mut pair: Vec<Vec<u8>> = good[1..].iter().map(|l| l.as_bytes().to_vec()).collect();
+            for _ in 0..rng.random_range(1..6) {
+                let (k, c) = (rng.random_range(0..2), rng.random_range(2..69));
+                pair[k][c] = rng.random_range(b' '..=b'~');
+            }
+            let text = format!(
+                "{}\n{}\n",
+                String::from_utf8_lossy(&pair[0]),
+                String::from_utf8_lossy(&pair[1])
+            );
+            let _ = parse(&text);
+            // Elements of any size: refused, or propagated to a finite state or none.
+            let mut v = |a: f64, b: f64| {
+                if rng.random_bool(0.2) {
+                    [0.0, -1.0, 1e12, f64::MIN_POSITIVE][rng.random_range(0..4)]
+                } else {
+                    rng.random_range(a..b)
+                }
+            };
+            let omm = format!(
+                r#"{{"OBJECT_NAME": "X", "OBJECT_ID": "2000-001A", "EPOCH": "2024-01-01T00:00:00",
+                "MEAN_MOTION": {}, "ECCENTRICITY": {}, "INCLINATION": {}, "RA_OF_ASC_NODE": {},
+                "ARG_OF_PERICENTER": {}, "MEAN_ANOMALY": {}, "EPHEMERIS_TYPE": 0,
+                "CLASSIFICATION_TYPE": "U", "NORAD_CAT_ID": 1, "ELEMENT_SET_NO": 1,
+                "REV_AT_EPOCH": 1, "BSTAR": {}, "MEAN_MOTION_DOT": 0, "MEAN_MOTION_DDOT": 0}}"#,
+                v(0.5, 17.0),
+                v(0.0, 0.99),
+                v(0.0, 180.0),
+                v(0.0, 360.0),
+                v(0.0, 360.0),
+                v(0.0, 360.0),
+                v(-1e-3, 1e-3)
+            );
+            if let Ok((e, _)) = parse(&omm)
+                && let Some(Ok(s)) = e.first().map(Satellite::from_elements)
+            {
+                let t = Utc::parse("2024-01-03T00:00:00").unwrap();
+                if let Some((r, v)) = s.teme(&t) {
+                    assert!(r.iter().chain(&v).all(|x| x.is_finite()));
+                }
+            }
+            let cut = rng.random_range(0..xml.len());
+            if xml.is_char_boundary(cut) {
+                let _ = parse(&xml[..cut]);
+            }
+        }
     }
 
     /// The coarse prefilter's interpolation stays within metres of SGP4 itself.

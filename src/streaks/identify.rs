@@ -172,7 +172,9 @@ impl FrameSky<'_> {
                     + (s.along_s + dt) * rate
                     + s.cross_arcsec.to_radians() / 3600.0
                     + 0.2f64.to_radians();
-                if distance_to_arc(&mid_enu, &a, &b) > margin {
+                let d = distance_to_arc(&mid_enu, &a, &b);
+                // A path that cannot be measured (NaN) is no candidate either.
+                if d.is_nan() || d > margin {
                     continue;
                 }
                 let (Some(q0), Some(q1)) = (
