@@ -265,6 +265,13 @@ fn epoch<'a>(
     (None, warnings)
 }
 
+/// 32-bit float values to u16 pixels and the saturation, exactly as a BITPIX −32 file of these
+/// values (BZERO 0, BSCALE 1) is read, with its sentinel warning (for `io::array`).
+pub(crate) fn float_pixels(values: &[f32]) -> Result<(Vec<u16>, u16, Option<String>)> {
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
+    convert_float::<f32>(&bytes, Scaling::new(0.0, 1.0), values.len() as u64)
+}
+
 /// An integer stored type (BITPIX 8, 16, 32, 64), read as i64.
 trait IntSample {
     const BYTES: usize;
