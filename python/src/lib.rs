@@ -367,10 +367,13 @@ fn frame_of(
                 "the image is {w}x{h} pixels: too large"
             )));
         };
-        match a.as_slice() {
-            Ok(s) => Frame::from_samples(w32, h32, wrap(s)),
-            Err(_) => {
-                let v: Vec<T> = a.as_array().iter().copied().collect();
+        // ndarray's as_slice is Some only in row-major order (numpy's `as_slice` also takes
+        // Fortran order, whose memory is the transpose).
+        let view = a.as_array();
+        match view.as_slice() {
+            Some(s) => Frame::from_samples(w32, h32, wrap(s)),
+            None => {
+                let v: Vec<T> = view.iter().copied().collect();
                 Frame::from_samples(w32, h32, wrap(&v))
             }
         }
