@@ -228,12 +228,14 @@ class Solver:
         return Result(self._inner.solve(image, name, epoch, _header(time, header)))
 
     def solve_many(self, images: Iterable[np.ndarray], *, names: Optional[_Seq[str]] = None,
-                   progress: Progress = None, batch_size: Optional[int] = None) -> Iterator[Result]:
+                   epochs: Optional[_Seq[Optional[float]]] = None, progress: Progress = None,
+                   batch_size: Optional[int] = None) -> Iterator[Result]:
         """Solve frames in batches (one GPU submission per batch of one size; on the CPU,
         ``threads`` frames at once): an iterator of results in input order.
 
         ``images`` may be a list or a generator (read one batch ahead); ``names`` the records'
-        ``file`` fields (default "image_00000", ...). A bad array in a batch gives that frame
+        ``file`` fields (default "image_00000", ...); ``epochs`` each frame's epoch (Julian
+        year, or None), as ``solve``'s ``epoch``. A bad array in a batch gives that frame
         an error record rather than losing the others. ``progress`` is called as
         ``progress(done, total)`` (total None for a generator), or ``progress.update(1)`` when
         it has ``update`` (a tqdm bar).
@@ -252,7 +254,8 @@ class Solver:
                 return
             chunk_names = [names[done + i] if names is not None else f"image_{done + i:05d}"
                            for i in range(len(chunk))]
-            for line in self._inner.solve_many(chunk, chunk_names):
+            chunk_epochs = None if epochs is None else [epochs[done + i] for i in range(len(chunk))]
+            for line in self._inner.solve_many(chunk, chunk_names, chunk_epochs):
                 done += 1
                 _tick(progress, done, total)
                 yield Result(line)

@@ -523,16 +523,28 @@ impl Solver {
     }
 
     /// Frames in one call (one GPU batch per frame size): their records as JSON lines.
+    #[pyo3(signature = (images, names, epochs=None))]
     fn solve_many(
         &self,
         py: Python<'_>,
         images: Vec<Bound<'_, PyAny>>,
         names: Vec<String>,
+        epochs: Option<Vec<Option<f64>>>,
     ) -> PyResult<Vec<String>> {
+        let epochs = epochs.unwrap_or_else(|| vec![None; images.len()]);
+        if names.len() != images.len() || epochs.len() != images.len() {
+            return Err(InputError::new_err(format!(
+                "{} images, {} names and {} epochs: give one of each per image",
+                images.len(),
+                names.len(),
+                epochs.len()
+            )));
+        }
         let frames = images
             .iter()
             .zip(&names)
-            .map(|(im, n)| decoded_of(im, n, None, None, false))
+            .zip(&epochs)
+            .map(|((im, n), e)| decoded_of(im, n, *e, None, false))
             .collect::<PyResult<Vec<_>>>()?;
         Ok(self
             .run(py, frames)
