@@ -553,6 +553,41 @@ impl Solver {
             .collect())
     }
 
+    /// The Rust path's time (ms) of each of `reps` solves of this image, the frame made
+    /// beforehand and no Python in between: what scripts/bench_python.py sets the per-call
+    /// cost of `solve` against.
+    fn _library_call_ms(
+        &self,
+        py: Python<'_>,
+        image: Bound<'_, PyAny>,
+        reps: usize,
+    ) -> PyResult<Vec<f64>> {
+        let (frame, _) = frame_of(&image)?.map_err(py_err)?;
+        Ok(py.detach(|| {
+            (0..reps)
+                .map(|_| {
+                    let d = Decoded::in_memory(
+                        "x",
+                        Ok((frame.clone(), Vec::new())),
+                        None,
+                        BTreeMap::new(),
+                    );
+                    let t0 = std::time::Instant::now();
+                    let r = match &self.engine {
+                        Engine::Cpu => self.solvers.solve_cpu(d),
+                        Engine::Gpu(g) => {
+                            let mut g = g.lock().unwrap_or_else(|e| e.into_inner());
+                            g.solve(&self.solvers, vec![d]).remove(0)
+                        }
+                    };
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    drop(r);
+                    ms
+                })
+                .collect()
+        }))
+    }
+
     /// Stars the caller detected: x, y (pixels) and fluxes (or brightest first when None).
     #[pyo3(signature = (x, y, width, height, fluxes=None, name="centroids", epoch=None))]
     #[allow(clippy::too_many_arguments)]

@@ -429,6 +429,11 @@ fn solve_with(
 /// order given (what `batch::run` does with files, for frames a library user already holds).
 pub fn solve_cpu_many(solvers: &Solvers, frames: Vec<Decoded>, threads: usize) -> Vec<Record> {
     let n = frames.len();
+    if n <= 1 || threads <= 1 {
+        // On the caller's thread: a thread started per call costs a one-frame solve its
+        // start-up (milliseconds on a loaded machine).
+        return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
+    }
     let work: Vec<Mutex<Option<Decoded>>> =
         frames.into_iter().map(|d| Mutex::new(Some(d))).collect();
     let done: Vec<Mutex<Option<Record>>> = (0..n).map(|_| Mutex::new(None)).collect();
