@@ -348,12 +348,13 @@ def batch(directory: PathLike, camera: Optional[PathLike] = None,
     return Batch(run, progress)
 
 
-def simulate(n: int = 1, size: Tuple[int, int] = (1024, 1024), fov_deg: float = 10.0, seed: int = 0,
-             *, mag_limit: Optional[float] = None, bits: int = 16, false_stars: Optional[int] = None,
+def simulate(n: int = 1, size: Tuple[int, int] = (1024, 1024), fov_deg: float = 18.0, seed: int = 1,
+             *, mag_limit: Optional[float] = None, bits: int = 8, false_stars: Optional[int] = None,
              catalog: Optional[PathLike] = None) -> list:
-    """``gpustar simulate``'s frames: a list of (image, truth) with image a (height, width)
-    uint16 array (values 0-255 for ``bits=8``) and truth the frame's line of truth.jsonl
-    (attitude, the catalog stars on the frame with their positions, false stars)."""
+    """``gpustar simulate``'s frames (its defaults: 1024x1024, 18 degrees, Hp <= 6, 8 bits, 3
+    false stars): a list of (image, truth) with image a (height, width) uint8 array (uint16
+    for ``bits=16``) and truth the frame's line of truth.jsonl (attitude, the catalog stars on
+    the frame with their positions, false stars)."""
     w, h = (int(v) for v in size)
     out = []
     for raw, truth in _gpustar.simulate(int(n), (w, h), float(fov_deg), int(seed), mag_limit, int(bits),

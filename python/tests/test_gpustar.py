@@ -79,7 +79,7 @@ def comparable(record: dict) -> dict:
 def frames():
     """Four 512x512 simulated frames (gpustar's own simulator: this suite checks the binding,
     not the solver) as uint16, and their truths."""
-    return gpustar.simulate(4, size=(512, 512), fov_deg=FOV, seed=7)
+    return gpustar.simulate(4, size=(512, 512), fov_deg=FOV, seed=7, bits=16)
 
 
 @pytest.fixture(scope="module")
