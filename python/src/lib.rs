@@ -185,13 +185,16 @@ impl<'py> Opts<'py> {
     }
 }
 
+/// The camera source, the camera file's magnitude limit, and the scale range to search.
+type CameraChoice = (CameraSource, Option<f64>, Option<(f64, f64)>);
+
 /// The camera from `camera` (a camera file's path, or its TOML text) or `fov_deg` (a number,
 /// or a (low, high) range to search), as `--camera` and `--fov-deg` give it.
 fn camera_source(
     camera: Option<&Bound<'_, PyAny>>,
     fov_deg: Option<&Bound<'_, PyAny>>,
     fov_tolerance: Option<f64>,
-) -> PyResult<(CameraSource, Option<f64>, Option<(f64, f64)>)> {
+) -> PyResult<CameraChoice> {
     let tolerance = match fov_tolerance {
         Some(t) if !(t > 0.0 && t < 0.5) => {
             return Err(config("fov_tolerance must be between 0 and 0.5"));
