@@ -68,6 +68,22 @@ def write_fits(path: pathlib.Path, image: np.ndarray) -> None:
     path.write_bytes(header + data)
 
 
+def read_fits(path: pathlib.Path):
+    """(uint16 array, keywords as text) of a 16-bit FITS file with BZERO 32768, as gpustar
+    simulate writes them."""
+    raw = path.read_bytes()
+    header, pos = {}, 0
+    while raw[pos:pos + 8].decode().strip() != "END":
+        card = raw[pos:pos + 80].decode()
+        if card[8:10] == "= ":
+            header[card[:8].strip()] = card[10:].split("/")[0].strip().strip("'").strip()
+        pos += 80
+    pos = (pos + 80 + 2879) // 2880 * 2880
+    w, h = int(header["NAXIS1"]), int(header["NAXIS2"])
+    data = np.frombuffer(raw, ">i2", w * h, pos).astype(np.int32) + int(header["BZERO"])
+    return data.reshape(h, w).astype(np.uint16), header
+
+
 def comparable(record: dict) -> dict:
     """A record less its timings (which differ between any two runs)."""
     r = dict(record)
@@ -248,6 +264,23 @@ def test_batch_shard_resume_and_progress(tmp_path, frames):
     assert sorted(json.loads(line)["file"] for line in out.read_text().splitlines()) == every
     with pytest.raises(gpustar.ConfigError, match="resume needs output"):
         gpustar.batch(d, fov_deg=FOV, resume=True)
+
+
+def test_streak_records_equal_the_clis(tmp_path):
+    d = tmp_path / "streaks"
+    p = subprocess.run([cli(), "simulate", "--streaks", "--out", str(d), "-n", "2"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    out = tmp_path / "cli.jsonl"
+    p = subprocess.run([cli(), "batch", str(d), "--camera", str(d / "camera.toml"), "--streaks", "--backend", "cpu",
+                        "-q", "-o", str(out)], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    expected = [json.loads(line) for line in out.read_text().splitlines()]
+    solver = gpustar.Solver(camera=d / "camera.toml", backend="cpu", streaks=True)
+    for want in expected:
+        image, header = read_fits(d / want["file"])
+        got = solver.solve(image, name=want["file"], header=header).to_dict()
+        assert comparable(got) == comparable(want)
+    assert sum(len(r["streaks"]) for r in expected) >= 1 and expected[0]["epoch"] is not None
 
 
 def test_sequence_tracks_frames(cpu_solver, frames):

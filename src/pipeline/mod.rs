@@ -111,17 +111,26 @@ pub struct Decoded {
 impl Decoded {
     /// A frame the caller holds in memory (from [`Frame::from_samples`]) under the record name
     /// `name`, with its epoch (Julian year) and header keywords (a streak frame's times and
-    /// station) when the caller has them. A frame that could not be taken becomes the error
-    /// its record carries, as an unreadable file's does.
+    /// station) when the caller has them; without an epoch, the keywords' time gives it as a
+    /// FITS file's does. A frame that could not be taken becomes the error its record
+    /// carries, as an unreadable file's does.
     pub fn in_memory(
         name: &str,
         frame: Result<(Frame, Vec<String>)>,
         epoch: Option<f64>,
         keywords: std::collections::BTreeMap<String, String>,
     ) -> Decoded {
-        let (frame, warnings) = match frame {
+        let (frame, mut warnings) = match frame {
             Ok((f, w)) => (Ok(f), w),
             Err(e) => (Err(format!("{e:#}")), Vec::new()),
+        };
+        let epoch = match epoch {
+            Some(e) => Some(e),
+            None => {
+                let (e, w) = crate::io::fits::epoch_of_keywords(&keywords);
+                warnings.extend(w);
+                e
+            }
         };
         Decoded {
             name: name.to_string(),
