@@ -367,13 +367,15 @@ def simulate(n: int = 1, size: Tuple[int, int] = (1024, 1024), fov_deg: float = 
 
 
 def calibrate(directory: PathLike, camera: PathLike, *, fov_tolerance: Optional[float] = None,
-              recursive: bool = False, catalog: Optional[PathLike] = None, fit_k2: bool = False) -> dict:
-    """``gpustar calibrate``: fit the camera (fx, fy, cx, cy, k1[, k2]) to every solvable
-    frame of the directory, starting from a camera file. Returns ``camera_file`` (the TOML
+              recursive: bool = False, catalog: Optional[PathLike] = None, fit_k2: bool = True,
+              fixed_centre: bool = False) -> dict:
+    """``gpustar calibrate``: fit the camera (fx, fy, cx, cy, k1, k2) to every solvable frame
+    of the directory, starting from a camera file (``fit_k2=False`` = ``--no-k2``,
+    ``fixed_centre=True`` = ``--fixed-centre``). Returns ``camera_file`` (the TOML
     text to save), ``camera`` (the fitted values), ``sigmas`` (their 1-sigma),
     ``rms_before_px``, ``rms_after_px``, ``stars_used``, ``stars_rejected``, ``frames`` and
     ``records`` (the frames' results with the fitted camera)."""
     d = _gpustar.calibrate(os.fspath(directory), os.fspath(camera), fov_tolerance, recursive,
-                           None if catalog is None else os.fspath(catalog), fit_k2)
+                           None if catalog is None else os.fspath(catalog), fit_k2, fixed_centre)
     d["records"] = [Result(line) for line in d["records"]]
     return d

@@ -915,7 +915,8 @@ fn simulate(
 /// `gpustar calibrate`: fit the camera to the solvable frames of a directory. Returns the
 /// camera file's text, the fitted parameters with their 1σ, and the residuals.
 #[pyfunction]
-#[pyo3(signature = (directory, camera, fov_tolerance=None, recursive=false, catalog=None, fit_k2=false))]
+#[pyo3(signature = (directory, camera, fov_tolerance=None, recursive=false, catalog=None, fit_k2=true, fixed_centre=false))]
+#[allow(clippy::too_many_arguments)]
 fn calibrate(
     py: Python<'_>,
     directory: PathBuf,
@@ -924,6 +925,7 @@ fn calibrate(
     recursive: bool,
     catalog: Option<PathBuf>,
     fit_k2: bool,
+    fixed_centre: bool,
 ) -> PyResult<Py<PyDict>> {
     use gpustar::calibrate::{self as cal, FitOptions};
     let inputs: Vec<(PathBuf, String)> = inputs::list(&directory, recursive)
@@ -945,6 +947,7 @@ fn calibrate(
     };
     let opts = FitOptions {
         fit_k2,
+        fit_principal_point: !fixed_centre,
         ..FitOptions::default()
     };
     let found = py

@@ -291,6 +291,20 @@ def test_sequence_tracks_frames(cpu_solver, frames):
     assert records[0].solved and records[0].file == "sequence/frame_00000"
 
 
+def test_calibrate_writes_the_clis_camera_file(tmp_path):
+    data = REPO.parent / "shared/data/real/esa-tetra3"
+    if not (data / "truth.jsonl").exists():
+        skip(f"no real frames at {data}")
+    cam = REPO / "scripts/cameras/esa-tetra3.toml"
+    out = tmp_path / "fitted.toml"
+    p = subprocess.run([cli(), "calibrate", str(data), "--camera", str(cam), "-o", str(out)],
+                       capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    fit = gpustar.calibrate(data, cam)
+    assert fit["camera_file"] == out.read_text()
+    assert fit["frames"] == 8 and fit["rms_after_px"] < fit["rms_before_px"]
+
+
 def test_example_solves_the_real_frames():
     data = REPO.parent / "shared/data/real/esa-tetra3"
     if not (data / "truth.jsonl").exists():
