@@ -48,6 +48,30 @@ pub struct RunSummary {
     pub write_error: Option<String>,
 }
 
+/// The inputs still to do after an earlier run recorded `done`. Sequences are tracked frame
+/// to frame, so an unfinished sequence is taken from its first frame, the recorded ones marked
+/// `replay` (tracked, not written): the records that follow are those of an uninterrupted run.
+pub fn resumed_inputs(
+    inputs: Vec<Input>,
+    done: &std::collections::HashSet<String>,
+    sequence: bool,
+) -> Vec<Input> {
+    use crate::sequence::sequence_of;
+    let unfinished: std::collections::HashSet<&str> = inputs
+        .iter()
+        .filter(|i| sequence && !done.contains(&i.name))
+        .map(|i| sequence_of(&i.name))
+        .collect();
+    inputs
+        .iter()
+        .filter(|i| !done.contains(&i.name) || unfinished.contains(sequence_of(&i.name)))
+        .map(|i| Input {
+            replay: done.contains(&i.name),
+            ..i.clone()
+        })
+        .collect()
+}
+
 /// Process `inputs` and write one record per input, in order, until done or `stop` is set
 /// (then no input is started; those in flight are written when they finish). Inputs marked
 /// `replay` are processed for their sequence's state, their records not written.

@@ -129,7 +129,7 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
                 .iter()
                 .filter(|i| prev.done.contains(&i.name))
                 .count();
-            inputs = resumed_inputs(inputs, &prev.done, b.sequence);
+            inputs = batch::resumed_inputs(inputs, &prev.done, b.sequence);
             if b.resume && !o.quiet {
                 if prev.truncated > 0 {
                     eprintln!(
@@ -278,28 +278,4 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
     } else {
         ExitCode::SUCCESS
     })
-}
-
-/// The inputs still to do after an earlier run recorded `done`. Sequences are tracked frame
-/// to frame, so an unfinished sequence is taken from its first frame, the recorded ones marked
-/// `replay` (tracked, not written): the records that follow are those of an uninterrupted run.
-pub(crate) fn resumed_inputs(
-    inputs: Vec<Input>,
-    done: &std::collections::HashSet<String>,
-    sequence: bool,
-) -> Vec<Input> {
-    use gpustar::sequence::sequence_of;
-    let unfinished: std::collections::HashSet<&str> = inputs
-        .iter()
-        .filter(|i| sequence && !done.contains(&i.name))
-        .map(|i| sequence_of(&i.name))
-        .collect();
-    inputs
-        .iter()
-        .filter(|i| !done.contains(&i.name) || unfinished.contains(sequence_of(&i.name)))
-        .map(|i| Input {
-            replay: done.contains(&i.name),
-            ..i.clone()
-        })
-        .collect()
 }

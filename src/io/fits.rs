@@ -265,6 +265,42 @@ fn epoch<'a>(
     (None, warnings)
 }
 
+/// The epoch (Julian year) of a frame held in memory whose caller gives FITS-like keywords
+/// as text (the Python `header=`, `time=`): the same keywords in the same order, and the same
+/// plausibility rule and warning, as [`decode_fits`] applies to a file's header.
+pub fn epoch_of_keywords(keywords: &BTreeMap<String, String>) -> (Option<f64>, Vec<String>) {
+    const J2000_MJD: f64 = 51_544.5;
+    let mut warnings = Vec::new();
+    for key in ["DATE-BEG", "DATE-OBS", "MJD-BEG", "MJD-OBS"] {
+        let Some(text) = keywords.get(key) else {
+            continue;
+        };
+        let year = if key.starts_with("MJD") {
+            text.trim()
+                .parse::<f64>()
+                .ok()
+                .map(|mjd| 2000.0 + (mjd - J2000_MJD) / 365.25)
+        } else {
+            julian_year(text)
+        };
+        let Some(year) = year else { continue };
+        if year.is_finite() && plausible_mjd(J2000_MJD + (year - 2000.0) * 365.25) {
+            return (Some(year), warnings);
+        }
+        warnings.push(format!(
+            "{key} = '{text}' is outside 1960-2100: not used as the epoch of proper motion"
+        ));
+    }
+    (None, warnings)
+}
+
+/// 32-bit float values to u16 pixels and the saturation, exactly as a BITPIX −32 file of these
+/// values (BZERO 0, BSCALE 1) is read, with its sentinel warning (for `io::array`).
+pub(crate) fn float_pixels(values: &[f32]) -> Result<(Vec<u16>, u16, Option<String>)> {
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
+    convert_float::<f32>(&bytes, Scaling::new(0.0, 1.0), values.len() as u64)
+}
+
 /// An integer stored type (BITPIX 8, 16, 32, 64), read as i64.
 trait IntSample {
     const BYTES: usize;

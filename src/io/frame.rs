@@ -40,7 +40,7 @@ pub fn is_image_path(path: &Path) -> bool {
 
 /// Largest frame accepted, in pixels per side, and its decoder memory budget: a header that
 /// claims more is refused before anything is allocated.
-const MAX_SIDE: u32 = 32768;
+pub(crate) const MAX_SIDE: u32 = 32768;
 const MAX_ALLOC: u64 = 2 << 30;
 
 impl Frame {

@@ -1,6 +1,8 @@
-//! Files in and out: images and FITS ([`frame`], [`fits`], [`dark`]), the inputs of a run
-//! ([`inputs`]), world coordinate systems ([`wcs`]), and the record file ([`output`]).
+//! Files in and out: images and FITS ([`frame`], [`fits`], [`dark`]), pixels already in memory
+//! ([`array`]), the inputs of a run ([`inputs`]), world coordinate systems ([`wcs`]), and the
+//! record file ([`output`]).
 
+pub mod array;
 pub mod dark;
 pub mod fits;
 pub mod frame;

@@ -108,6 +108,42 @@ pub struct Decoded {
     pub decode_ms: f64,
 }
 
+impl Decoded {
+    /// A frame the caller holds in memory (from [`Frame::from_samples`]) under the record name
+    /// `name`, with its epoch (Julian year) and header keywords (a streak frame's times and
+    /// station) when the caller has them; without an epoch, the keywords' time gives it as a
+    /// FITS file's does. A frame that could not be taken becomes the error its record
+    /// carries, as an unreadable file's does.
+    pub fn in_memory(
+        name: &str,
+        frame: Result<(Frame, Vec<String>)>,
+        epoch: Option<f64>,
+        keywords: std::collections::BTreeMap<String, String>,
+    ) -> Decoded {
+        let (frame, mut warnings) = match frame {
+            Ok((f, w)) => (Ok(f), w),
+            Err(e) => (Err(format!("{e:#}")), Vec::new()),
+        };
+        let epoch = match epoch {
+            Some(e) => Some(e),
+            None => {
+                let (e, w) = crate::io::fits::epoch_of_keywords(&keywords);
+                warnings.extend(w);
+                e
+            }
+        };
+        Decoded {
+            name: name.to_string(),
+            path: PathBuf::from(name),
+            epoch,
+            keywords,
+            warnings,
+            frame,
+            decode_ms: 0.0,
+        }
+    }
+}
+
 impl Solvers {
     pub fn new(catalog: Catalog, settings: Settings, camera: CameraSource) -> Solvers {
         Solvers {
@@ -297,6 +333,35 @@ impl Solvers {
         }
     }
 
+    /// Identify stars the caller detected in a `width` × `height` frame (`stars`: pixel
+    /// positions with fluxes; sorted here brightest first, as detection hands them on): the
+    /// record the frame would get with these detections, without hints, streaks or products,
+    /// which need the pixels.
+    pub fn solve_detections(
+        &self,
+        name: &str,
+        (width, height): (u32, u32),
+        mut stars: Vec<detect::Detection>,
+        epoch: Option<f64>,
+    ) -> Record {
+        let solver = self.get(width, height);
+        let solver = match solver.as_ref() {
+            Ok(s) => s,
+            Err(e) => return self.error_record(name, e.clone(), BACKEND_CPU),
+        };
+        let t0 = Instant::now();
+        stars.sort_by(|a, b| b.flux.total_cmp(&a.flux));
+        let sol = solver.identify(stars, epoch);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let timing = Timing {
+            decode: 0.0,
+            detect: 0.0,
+            identify: ms,
+            total: ms,
+        };
+        solver.record(name, &sol, timing, BACKEND_CPU)
+    }
+
     /// A frame without a camera: its streaks through the header's WCS, its stars detected
     /// (and kept off the streaks) but not identified.
     fn streaks_only(&self, d: &Decoded, frame: &Frame) -> Record {
@@ -367,6 +432,43 @@ fn solve_with(
         timing,
         BACKEND_CPU,
     )
+}
+
+/// Solve decoded frames on the CPU over `threads` threads: one record per frame, in the
+/// order given (what `batch::run` does with files, for frames a library user already holds).
+pub fn solve_cpu_many(solvers: &Solvers, frames: Vec<Decoded>, threads: usize) -> Vec<Record> {
+    let n = frames.len();
+    if n <= 1 || threads <= 1 {
+        // On the caller's thread: a thread started per call costs a one-frame solve its
+        // start-up (milliseconds on a loaded machine).
+        return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
+    }
+    let work: Vec<Mutex<Option<Decoded>>> =
+        frames.into_iter().map(|d| Mutex::new(Some(d))).collect();
+    let done: Vec<Mutex<Option<Record>>> = (0..n).map(|_| Mutex::new(None)).collect();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    std::thread::scope(|scope| {
+        for _ in 0..threads.clamp(1, n.max(1)) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    if i >= n {
+                        break;
+                    }
+                    let d = work[i].lock().unwrap_or_else(|e| e.into_inner()).take();
+                    let r = solvers.solve_cpu(d.expect("each frame taken once"));
+                    *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                }
+            });
+        }
+    });
+    done.into_iter()
+        .map(|r| {
+            r.into_inner()
+                .unwrap_or_else(|e| e.into_inner())
+                .expect("one record per frame")
+        })
+        .collect()
 }
 
 /// The frame of a decoded input that was grouped for solving (only decoded ones are).

@@ -118,9 +118,26 @@ struct State {
     solved: Vec<Solved>,
 }
 
+/// The solvers a sequencer uses: a run's, borrowed, or shared with a library user's object
+/// that feeds frames one at a time (the Python `Sequence`).
+enum SolversRef<'a> {
+    Borrowed(&'a Solvers),
+    Shared(std::sync::Arc<Solvers>),
+}
+
+impl std::ops::Deref for SolversRef<'_> {
+    type Target = Solvers;
+    fn deref(&self) -> &Solvers {
+        match self {
+            SolversRef::Borrowed(s) => s,
+            SolversRef::Shared(s) => s,
+        }
+    }
+}
+
 /// Solves sequences frame by frame, in input order.
 pub struct Sequencer<'a> {
-    solvers: &'a Solvers,
+    solvers: SolversRef<'a>,
     opts: SequenceOptions,
     state: Option<State>,
     chains: u64,
@@ -129,7 +146,18 @@ pub struct Sequencer<'a> {
 impl<'a> Sequencer<'a> {
     pub fn new(solvers: &'a Solvers, opts: SequenceOptions) -> Sequencer<'a> {
         Sequencer {
-            solvers,
+            solvers: SolversRef::Borrowed(solvers),
+            opts,
+            state: None,
+            chains: 0,
+        }
+    }
+
+    /// A sequencer that holds its solvers, for a caller that feeds frames as they come
+    /// rather than running a directory.
+    pub fn shared(solvers: std::sync::Arc<Solvers>, opts: SequenceOptions) -> Sequencer<'static> {
+        Sequencer {
+            solvers: SolversRef::Shared(solvers),
             opts,
             state: None,
             chains: 0,

@@ -521,3 +521,27 @@ fn fits_extensions() {
         assert!(!is_fits_extension(e));
     }
 }
+
+#[test]
+fn keywords_of_a_frame_in_memory_give_the_epoch_a_file_would() {
+    let kw = |pairs: &[(&str, &str)]| -> BTreeMap<String, String> {
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect()
+    };
+    let date = "2024-03-15T20:00:00.000";
+    let (year, w) = epoch_of_keywords(&kw(&[("DATE-OBS", date)]));
+    assert_eq!((year, w.len()), (julian_year(date), 0));
+    // DATE-BEG first, as in a file; MJD as a number.
+    let (year, _) = epoch_of_keywords(&kw(&[("DATE-OBS", "2010-01-01"), ("DATE-BEG", date)]));
+    assert_eq!(year, julian_year(date));
+    let (year, _) = epoch_of_keywords(&kw(&[("MJD-OBS", "51544.5")]));
+    assert_eq!(year, Some(2000.0));
+    // A placeholder date is passed over with the file's warning.
+    let (year, w) = epoch_of_keywords(&kw(&[("DATE-OBS", "9999-12-31T00:00:00")]));
+    assert!(
+        year.is_none() && w[0].contains("outside 1960-2100"),
+        "{w:?}"
+    );
+}

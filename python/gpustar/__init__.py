@@ -1,0 +1,381 @@
+"""gpustar: lost-in-space star identification and attitude for sky frames, from numpy.
+
+A thin layer over the gpustar Rust crate (the same code as the ``gpustar`` command line):
+every result is the command line's JSON Lines record, field for field.
+
+    import numpy as np, gpustar
+    solver = gpustar.Solver(fov_deg=10.0)          # built once: catalog, tables, GPU
+    result = solver.solve(image)                   # 2-D uint8, uint16 or float32
+    if result.solved:
+        print(result.ra_deg, result.dec_deg, result.roll_deg, result.quaternion)
+        print(result.matches.hip, result.matches.x, result.matches.y)
+    record = result.to_dict()                      # exactly the JSONL record
+
+``Solver`` is safe to share between threads; solving releases the GIL.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+from typing import Any, Callable, Iterable, Iterator, Optional, Sequence as _Seq, Tuple, Union
+
+import numpy as np
+
+from . import _gpustar
+from ._gpustar import (
+    CatalogError,
+    ConfigError,
+    Error,
+    GpuError,
+    InputError,
+    IoError,
+    OutputError,
+    __version__,
+)
+
+__all__ = [
+    "Solver",
+    "Result",
+    "Matches",
+    "Sequence",
+    "Batch",
+    "batch",
+    "simulate",
+    "calibrate",
+    "Error",
+    "InputError",
+    "CatalogError",
+    "ConfigError",
+    "OutputError",
+    "GpuError",
+    "IoError",
+    "__version__",
+]
+
+PathLike = Union[str, "os.PathLike[str]"]
+Progress = Union[Callable[[int, Optional[int]], Any], Any]
+
+
+class Matches:
+    """The identified stars of a result, as arrays (one entry per star, brightest first).
+
+    ``x``, ``y``: centroid (pixels; x = column, y = row, (0, 0) the centre of the top-left
+    pixel); ``hip``: Hipparcos number (-1 where the star has none); ``catalog_id``: the id in
+    its catalog ("HIP 71683", "Gaia DR3 ..."); ``ra_deg``, ``dec_deg``: catalog position at the
+    epoch; ``mag``; ``flux``; ``residual_arcsec``; ``sigma_px``: the centroid's 1-sigma (NaN
+    for a centre of gravity).
+    """
+
+    __slots__ = ("x", "y", "hip", "catalog_id", "ra_deg", "dec_deg", "mag", "flux",
+                 "residual_arcsec", "sigma_px")
+
+    def __init__(self, matches: list):
+        def col(key: str, dtype=np.float64, missing=np.nan) -> np.ndarray:
+            return np.array([missing if m.get(key) is None else m[key] for m in matches],
+                            dtype=dtype)
+
+        self.x = col("x")
+        self.y = col("y")
+        self.hip = col("hip", np.int64, -1)
+        self.catalog_id = [m.get("catalog_id") for m in matches]
+        self.ra_deg = col("ra_deg")
+        self.dec_deg = col("dec_deg")
+        self.mag = col("mag")
+        self.flux = col("flux")
+        self.residual_arcsec = col("residual_arcsec")
+        self.sigma_px = col("sigma_px")
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+    def __repr__(self) -> str:
+        return f"Matches({len(self)} stars)"
+
+
+class Result:
+    """One frame's result: the fields of its JSON Lines record as attributes.
+
+    ``status`` is "solved", "unsolved" (see ``reason``) or "error" (see ``error``).
+    ``quaternion`` ([w, x, y, z], w >= 0) and ``rotation_matrix`` (3x3, ICRS into the camera
+    frame) are numpy arrays; ``matches`` is a :class:`Matches` of arrays. Every other record
+    field (``ra_deg``, ``dec_deg``, ``roll_deg``, ``fov_x_deg``, ``false_match_prob``,
+    ``rmse_arcsec``, ``streaks``, ``timing_ms``, ...) is the record's value; a field the
+    record does not have is None. :meth:`to_dict` gives the record exactly.
+    """
+
+    __slots__ = ("_line", "_record")
+
+    def __init__(self, line: str):
+        self._line = line
+        self._record = json.loads(line)
+
+    @property
+    def solved(self) -> bool:
+        return self._record["status"] == "solved"
+
+    @property
+    def quaternion(self) -> Optional[np.ndarray]:
+        q = self._record.get("quaternion")
+        return None if q is None else np.array(q, dtype=np.float64)
+
+    @property
+    def rotation_matrix(self) -> Optional[np.ndarray]:
+        m = self._record.get("rotation_matrix")
+        return None if m is None else np.array(m, dtype=np.float64)
+
+    @property
+    def matches(self) -> Matches:
+        return Matches(self._record.get("matches") or [])
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return self._record.get(name)
+
+    def to_dict(self) -> dict:
+        """The JSON Lines record, exactly as ``gpustar batch`` writes it (a fresh copy)."""
+        return json.loads(self._line)
+
+    def to_json(self) -> str:
+        """The record as one JSON line (no newline)."""
+        return self._line
+
+    def __repr__(self) -> str:
+        r = self._record
+        if r["status"] == "solved":
+            return (f"Result({r['file']!r}, solved, ra={r['ra_deg']:.4f}, dec={r['dec_deg']:.4f}, "
+                    f"roll={r['roll_deg']:.3f}, {r['stars_matched']} stars)")
+        return f"Result({r['file']!r}, {r['status']}, {r.get('reason') or r.get('error')!r})"
+
+
+def _header(epoch_time: Any, header: Optional[dict]) -> Optional[dict]:
+    """FITS-like keywords for a frame: a time (ISO string or datetime) becomes DATE-OBS."""
+    h = {str(k): str(v) for k, v in (header or {}).items()}
+    if epoch_time is not None:
+        if isinstance(epoch_time, _dt.datetime):
+            if epoch_time.tzinfo is not None:
+                epoch_time = epoch_time.astimezone(_dt.timezone.utc).replace(tzinfo=None)
+            epoch_time = epoch_time.isoformat()
+        h["DATE-OBS"] = str(epoch_time)
+    return h or None
+
+
+def _tick(progress: Progress, done: int, total: Optional[int]) -> None:
+    if progress is None:
+        return
+    if hasattr(progress, "update"):  # a tqdm bar
+        progress.update(1)
+    else:
+        progress(done, total)
+
+
+class Solver:
+    """A solver built once and reused: the catalog, the distance table of each frame size
+    (built on first use, cached on disk) and the GPU context.
+
+    ``camera``: a camera file (TOML, as ``--camera``) or its text; or ``fov_deg``: the
+    horizontal field of view in degrees (square pixels, centred, no distortion, size from
+    each image), or a ``(low, high)`` range to search. ``catalog``: a file ``gpustar catalog
+    import`` made (default: the built-in Hipparcos-2, Hp <= 8). ``backend``: "auto", "gpu"
+    or "cpu", as ``--backend``.
+
+    ``**options`` are the command line's, with ``_`` for ``-``: ``fov_tolerance``, ``fit``
+    ("none", "scale", "distortion"), ``mag_limit``, ``epoch``, ``centroid`` ("ml", "cog"),
+    ``method`` ("vote", "radial", "triangle"), ``detect_filter`` ("none", "binomial"),
+    ``sigma``, ``vote_stars``, ``pair_tol_px``, ``scale_tol``, ``match_radius_px``,
+    ``max_false_prob``, ``retry`` (False = ``--no-retry``), ``double_stars``,
+    ``double_star_px``, ``cache`` (False = ``--no-cache``), ``hint`` ("RA,DEC[,R]" or
+    "header[,R]"), ``streaks`` (True = ``--streaks``) with ``station`` ("LAT,LON,HEIGHT_M"),
+    ``astrometry``, ``dut1``, ``streak_sigma``; ``threads`` (CPU solving threads of
+    :meth:`solve_many`), ``batch_size`` (frames per GPU batch, 32). Values out of the command
+    line's ranges raise :class:`ConfigError` with its message.
+
+    A Solver may be shared between threads: solving releases the GIL, CPU solves run in
+    parallel, and GPU batches take turns on the one context.
+    """
+
+    def __init__(self, camera: Optional[PathLike] = None, fov_deg: Union[float, Tuple[float, float], None] = None,
+                 catalog: Optional[PathLike] = None, backend: str = "auto", **options: Any):
+        if camera is not None and not isinstance(camera, str):
+            camera = os.fspath(camera)
+        self._batch_size = int(options.get("batch_size") or 32)
+        self._inner = _gpustar.Solver(camera, fov_deg, None if catalog is None else os.fspath(catalog),
+                                      backend, options or None)
+
+    @property
+    def backend(self) -> str:
+        """The records' ``backend`` field: "cpu" or "gpu: <adapter>"."""
+        return self._inner.backend
+
+    def prepare(self, width: int, height: int) -> None:
+        """Build the distance table for frames of this size now (else on the first solve)."""
+        self._inner.prepare(int(width), int(height))
+
+    def solve(self, image: np.ndarray, *, name: str = "image", epoch: Optional[float] = None,
+              time: Any = None, header: Optional[dict] = None) -> Result:
+        """Solve one frame: a 2-D numpy array (height, width) of uint8, uint16 or float32.
+
+        C-contiguous arrays are read in place; other strides are gathered. uint8 and uint16
+        values are taken as they are (as 8- and 16-bit PNGs); float32 values are scaled from
+        their range as a BITPIX -32 FITS file's. ``name`` is the record's ``file``;
+        ``epoch`` (Julian year) moves the catalog stars by proper motion; ``time`` (ISO UTC
+        string or datetime) and ``header`` (FITS keywords: EXPTIME, station, ...) serve
+        streaks. A bad array raises :class:`InputError`; a frame that cannot be solved is a
+        result with status "unsolved" (or "error" when its size has no solver, as a file).
+        """
+        return Result(self._inner.solve(image, name, epoch, _header(time, header)))
+
+    def solve_many(self, images: Iterable[np.ndarray], *, names: Optional[_Seq[str]] = None,
+                   epochs: Optional[_Seq[Optional[float]]] = None, progress: Progress = None,
+                   batch_size: Optional[int] = None) -> Iterator[Result]:
+        """Solve frames in batches (one GPU submission per batch of one size; on the CPU,
+        ``threads`` frames at once): an iterator of results in input order.
+
+        ``images`` may be a list or a generator (read one batch ahead); ``names`` the records'
+        ``file`` fields (default "image_00000", ...); ``epochs`` each frame's epoch (Julian
+        year, or None), as ``solve``'s ``epoch``. A bad array in a batch gives that frame
+        an error record rather than losing the others. ``progress`` is called as
+        ``progress(done, total)`` (total None for a generator), or ``progress.update(1)`` when
+        it has ``update`` (a tqdm bar).
+        """
+        size = int(batch_size or self._batch_size)
+        total = len(images) if hasattr(images, "__len__") else None  # type: ignore[arg-type]
+        it = iter(images)
+        done = 0
+        while True:
+            chunk = []
+            for im in it:
+                chunk.append(im)
+                if len(chunk) == size:
+                    break
+            if not chunk:
+                return
+            chunk_names = [names[done + i] if names is not None else f"image_{done + i:05d}"
+                           for i in range(len(chunk))]
+            chunk_epochs = None if epochs is None else [epochs[done + i] for i in range(len(chunk))]
+            for line in self._inner.solve_many(chunk, chunk_names, chunk_epochs):
+                done += 1
+                _tick(progress, done, total)
+                yield Result(line)
+
+    def solve_centroids(self, xy: np.ndarray, image_size: Tuple[int, int],
+                        fluxes: Optional[np.ndarray] = None, *, name: str = "centroids",
+                        epoch: Optional[float] = None) -> Result:
+        """Identify stars you detected: ``xy`` an (N, 2) array of (x, y) pixel positions (x =
+        column, y = row, (0, 0) the centre of the top-left pixel) in an image of
+        ``image_size`` = (width, height); ``fluxes`` their brightness (any linear unit; None:
+        ``xy`` is brightest first). The result is the record of a frame with those
+        detections."""
+        xy = np.asarray(xy, dtype=np.float64)
+        if xy.ndim != 2 or xy.shape[1] != 2:
+            raise InputError(f"xy has shape {xy.shape}: give an (N, 2) array of x, y")
+        f = None if fluxes is None else np.ascontiguousarray(fluxes, dtype=np.float64)
+        w, h = (int(v) for v in image_size)
+        return Result(self._inner.solve_centroids(np.ascontiguousarray(xy[:, 0]),
+                                                  np.ascontiguousarray(xy[:, 1]), w, h, f, name,
+                                                  epoch))
+
+
+class Sequence:
+    """A sequence of frames of one camera head, fed frame by frame in time order (as
+    ``--sequence`` takes a directory): moving particles are rejected over frames and the
+    attitude is tracked from frame to frame. Records carry ``sequence_mode`` and
+    ``particles``. Give each frame's ``time`` (ISO UTC or datetime), or
+    ``frame_interval_s`` for frames without one."""
+
+    def __init__(self, solver: Solver, frame_interval_s: Optional[float] = None, name: str = "sequence"):
+        self._inner = _gpustar.Sequence(solver._inner, frame_interval_s)
+        self._name = name
+        self._count = 0
+
+    def add(self, image: np.ndarray, time: Any = None, *, header: Optional[dict] = None) -> Result:
+        """The next frame's result."""
+        name = f"{self._name}/frame_{self._count:05d}"
+        self._count += 1
+        return Result(self._inner.add(image, name, _header(time, header)))
+
+
+class Batch:
+    """An iterator of the results of a ``gpustar batch`` run, in input order; ``total`` is the
+    number of inputs this run solves (after ``shard`` and ``resume``). Leaving the loop
+    early stops the run after the frames in flight."""
+
+    def __init__(self, run: Any, progress: Progress):
+        self._run = run
+        self._progress = progress
+        self._done = 0
+        self.total: int = run.total
+
+    def __iter__(self) -> "Batch":
+        return self
+
+    def __next__(self) -> Result:
+        line = self._run.next_record()
+        if line is None:
+            raise StopIteration
+        self._done += 1
+        _tick(self._progress, self._done, self.total)
+        return Result(line)
+
+    def __len__(self) -> int:
+        return self.total
+
+    def close(self) -> None:
+        """Start no new input (the run ends after the frames in flight)."""
+        self._run.stop()
+
+
+def batch(directory: PathLike, camera: Optional[PathLike] = None,
+          fov_deg: Union[float, Tuple[float, float], None] = None, catalog: Optional[PathLike] = None,
+          backend: str = "auto", *, output: Optional[PathLike] = None, resume: bool = False,
+          retry_errors: bool = False, shard: Optional[str] = None, recursive: bool = False,
+          sequence: bool = False, frame_interval_s: Optional[float] = None,
+          progress: Progress = None, **options: Any) -> Batch:
+    """``gpustar batch DIRECTORY``: every image file of the directory (sorted by path),
+    decoded and solved on worker threads (or the GPU in batches), as an iterator of results
+    in input order. ``output`` also writes the JSON Lines file, which ``resume`` continues
+    (and ``retry_errors`` retries the error records of); ``shard`` = "K/N" takes one shard;
+    ``sequence`` solves each directory as a sequence. ``progress`` as in
+    :meth:`Solver.solve_many`; other options as :class:`Solver`'s.
+    """
+    run = _gpustar.start_batch(
+        os.fspath(directory), None if camera is None else os.fspath(camera), fov_deg,
+        None if catalog is None else os.fspath(catalog), backend,
+        None if output is None else os.fspath(output), resume, retry_errors, shard, recursive,
+        sequence, frame_interval_s, options or None)
+    return Batch(run, progress)
+
+
+def simulate(n: int = 1, size: Tuple[int, int] = (1024, 1024), fov_deg: float = 18.0, seed: int = 1,
+             *, mag_limit: Optional[float] = None, bits: int = 8, false_stars: Optional[int] = None,
+             catalog: Optional[PathLike] = None) -> list:
+    """``gpustar simulate``'s frames (its defaults: 1024x1024, 18 degrees, Hp <= 6, 8 bits, 3
+    false stars): a list of (image, truth) with image a (height, width) uint8 array (uint16
+    for ``bits=16``) and truth the frame's line of truth.jsonl (attitude, the catalog stars on
+    the frame with their positions, false stars)."""
+    w, h = (int(v) for v in size)
+    out = []
+    for raw, truth in _gpustar.simulate(int(n), (w, h), float(fov_deg), int(seed), mag_limit, int(bits),
+                                        false_stars, None if catalog is None else os.fspath(catalog)):
+        image = np.frombuffer(raw, dtype=np.uint16).reshape(h, w)
+        if bits == 8:
+            image = image.astype(np.uint8)
+        out.append((image, json.loads(truth)))
+    return out
+
+
+def calibrate(directory: PathLike, camera: PathLike, *, fov_tolerance: Optional[float] = None,
+              recursive: bool = False, catalog: Optional[PathLike] = None, fit_k2: bool = True,
+              fixed_centre: bool = False) -> dict:
+    """``gpustar calibrate``: fit the camera (fx, fy, cx, cy, k1, k2) to every solvable frame
+    of the directory, starting from a camera file (``fit_k2=False`` = ``--no-k2``,
+    ``fixed_centre=True`` = ``--fixed-centre``). Returns ``camera_file`` (the TOML
+    text to save), ``camera`` (the fitted values), ``sigmas`` (their 1-sigma),
+    ``rms_before_px``, ``rms_after_px``, ``stars_used``, ``stars_rejected``, ``frames`` and
+    ``records`` (the frames' results with the fitted camera)."""
+    d = _gpustar.calibrate(os.fspath(directory), os.fspath(camera), fov_tolerance, recursive,
+                           None if catalog is None else os.fspath(catalog), fit_k2, fixed_centre)
+    d["records"] = [Result(line) for line in d["records"]]
+    return d

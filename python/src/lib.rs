@@ -1,0 +1,1021 @@
+//! gpustar's Python bindings: a thin layer over the gpustar crate's library. Options become
+//! the library's `Settings` and `Solvers` (as the command line's options do), numpy arrays
+//! become `Frame`s through `Frame::from_samples`, and every record is the library's `Record`,
+//! handed to Python as its JSON line (`Record::to_json_line`), so that `to_dict()` is the
+//! command line's record exactly. The pure-Python part (python/gpustar/) wraps these.
+
+use gpustar::batch::{self, RunOptions};
+use gpustar::io::array::Samples;
+use gpustar::io::inputs::{self, Shard};
+use gpustar::io::output::{self, Format, RecordWriter};
+use gpustar::pipeline::{Backend, BackendChoice, CameraSource, Decoded, GpuRunner, Solvers};
+use gpustar::sequence::{Detected, SequenceOptions, Sequencer};
+use gpustar::solve::detect::Detection;
+use gpustar::streaks::{StreakOptions, StreakSettings};
+use gpustar::{Camera, Catalog, Frame, Record, Settings};
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyTypeError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict, PyList};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+create_exception!(_gpustar, Error, PyException, "Every error gpustar raises.");
+create_exception!(
+    _gpustar,
+    InputError,
+    Error,
+    "An input cannot be used: an array, an image file, a directory of inputs."
+);
+create_exception!(
+    _gpustar,
+    CatalogError,
+    Error,
+    "The star catalog or its distance table."
+);
+create_exception!(
+    _gpustar,
+    ConfigError,
+    Error,
+    "A camera model or an option out of its range."
+);
+create_exception!(
+    _gpustar,
+    OutputError,
+    Error,
+    "An output file gpustar refuses to write or resume."
+);
+create_exception!(
+    _gpustar,
+    GpuError,
+    Error,
+    "The GPU: no adapter, a kernel that does not build, a lost device."
+);
+create_exception!(
+    _gpustar,
+    IoError,
+    Error,
+    "Reading or writing a file failed."
+);
+
+/// The library's error as the Python exception of its kind, with the command line's message.
+fn py_err(e: gpustar::Error) -> PyErr {
+    let m = e.to_string();
+    match e {
+        gpustar::Error::Input(_) => InputError::new_err(m),
+        gpustar::Error::Catalog(_) => CatalogError::new_err(m),
+        gpustar::Error::Config(_) => ConfigError::new_err(m),
+        gpustar::Error::Output(_) => OutputError::new_err(m),
+        gpustar::Error::Gpu(_) => GpuError::new_err(m),
+        _ => IoError::new_err(m),
+    }
+}
+
+fn config(m: impl Into<String>) -> PyErr {
+    ConfigError::new_err(m.into())
+}
+
+/// Everything a `Solver` or a `batch` run is built from, read from keyword options.
+struct Built {
+    solvers: Solvers,
+    backend: BackendChoice,
+    threads: usize,
+    batch_size: usize,
+}
+
+/// The options' names, for the message that refuses any other.
+const OPTIONS: &[&str] = &[
+    "fov_tolerance",
+    "fit",
+    "mag_limit",
+    "epoch",
+    "centroid",
+    "method",
+    "detect_filter",
+    "sigma",
+    "vote_stars",
+    "pair_tol_px",
+    "scale_tol",
+    "match_radius_px",
+    "max_false_prob",
+    "retry",
+    "double_stars",
+    "double_star_px",
+    "cache",
+    "hint",
+    "streaks",
+    "station",
+    "astrometry",
+    "dut1",
+    "streak_sigma",
+    "threads",
+    "batch_size",
+];
+
+/// Keyword options, each taken once; the command line's ranges, with its messages.
+struct Opts<'py> {
+    dict: Option<Bound<'py, PyDict>>,
+}
+
+impl<'py> Opts<'py> {
+    fn new(dict: Option<Bound<'py, PyDict>>) -> PyResult<Opts<'py>> {
+        if let Some(d) = &dict {
+            for k in d.keys() {
+                let k: String = k.extract()?;
+                if !OPTIONS.contains(&k.as_str()) {
+                    return Err(config(format!(
+                        "unknown option {k:?}; the options are {}",
+                        OPTIONS.join(", ")
+                    )));
+                }
+            }
+        }
+        Ok(Opts { dict })
+    }
+
+    fn get<T: FromPyObjectOwned<'py>>(&self, key: &str) -> PyResult<Option<T>> {
+        let Some(d) = &self.dict else { return Ok(None) };
+        match d.get_item(key)? {
+            None => Ok(None),
+            Some(v) if v.is_none() => Ok(None),
+            Some(v) => v.extract::<T>().map(Some).map_err(|_| {
+                PyTypeError::new_err(format!(
+                    "option {key}: {} is not a {}",
+                    v.repr().map(|r| r.to_string()).unwrap_or_default(),
+                    std::any::type_name::<T>()
+                ))
+            }),
+        }
+    }
+
+    /// A number within lo..=hi (the command line's `within`).
+    fn within(&self, key: &str, lo: f64, hi: f64) -> PyResult<Option<f64>> {
+        match self.get::<f64>(key)? {
+            Some(v) if !(v.is_finite() && (lo..=hi).contains(&v)) => {
+                Err(config(format!("{key}: {v} is outside {lo} to {hi}")))
+            }
+            v => Ok(v),
+        }
+    }
+
+    fn count(&self, key: &str, lo: usize, hi: usize) -> PyResult<Option<usize>> {
+        match self.get::<usize>(key)? {
+            Some(v) if !(lo..=hi).contains(&v) => {
+                Err(config(format!("{key}: {v} is outside {lo} to {hi}")))
+            }
+            v => Ok(v),
+        }
+    }
+
+    /// One of a `clap::ValueEnum`'s names, as the command line takes them.
+    fn choice<T: clap::ValueEnum>(&self, key: &str) -> PyResult<Option<T>> {
+        match self.get::<String>(key)? {
+            None => Ok(None),
+            Some(s) => T::from_str(&s, true).map(Some).map_err(|_| {
+                let names: Vec<String> = T::value_variants()
+                    .iter()
+                    .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_string()))
+                    .collect();
+                config(format!("{key}: {s:?} is not one of {}", names.join(", ")))
+            }),
+        }
+    }
+}
+
+/// The camera source, the camera file's magnitude limit, and the scale range to search.
+type CameraChoice = (CameraSource, Option<f64>, Option<(f64, f64)>);
+
+/// The camera from `camera` (a camera file's path, or its TOML text) or `fov_deg` (a number,
+/// or a (low, high) range to search), as `--camera` and `--fov-deg` give it.
+fn camera_source(
+    camera: Option<&Bound<'_, PyAny>>,
+    fov_deg: Option<&Bound<'_, PyAny>>,
+    fov_tolerance: Option<f64>,
+) -> PyResult<CameraChoice> {
+    let tolerance = match fov_tolerance {
+        Some(t) if !(t > 0.0 && t < 0.5) => {
+            return Err(config("fov_tolerance must be between 0 and 0.5"));
+        }
+        t => t.map(|t| (1.0 - t, 1.0 + t)),
+    };
+    let fov = |x: f64| {
+        if x > 0.0 && x < 170.0 {
+            Ok(x)
+        } else {
+            Err(config(format!(
+                "field of view must be between 0 and 170 degrees, got {x}"
+            )))
+        }
+    };
+    match (camera, fov_deg) {
+        (Some(c), _) => {
+            let text: String = match c.extract::<PathBuf>() {
+                Ok(p) if !c.extract::<String>().is_ok_and(|s| s.contains('=')) => {
+                    std::fs::read_to_string(&p).map_err(|e| {
+                        py_err(gpustar::Error::Io {
+                            context: format!("cannot read {}", p.display()),
+                            error: e,
+                        })
+                    })?
+                }
+                _ => c.extract()?,
+            };
+            let (cam, mag) = Camera::from_toml(&text).map_err(py_err)?;
+            Ok((CameraSource::Fixed(cam), mag, tolerance))
+        }
+        (None, Some(f)) => {
+            if let Ok((lo, hi)) = f.extract::<(f64, f64)>() {
+                let (lo, hi) = (fov(lo)?, fov(hi)?);
+                if lo >= hi {
+                    return Err(config(format!("expected (low, high), got ({lo}, {hi})")));
+                }
+                // The camera of the middle FOV; focal lengths scale as 1 / tan(FOV / 2)
+                // (as `--fov-deg LOW..HIGH`).
+                let mid = (lo + hi) / 2.0;
+                let k = |x: f64| 1.0 / (x.to_radians() / 2.0).tan();
+                Ok((
+                    CameraSource::Fov(mid),
+                    None,
+                    Some((k(hi) / k(mid), k(lo) / k(mid))),
+                ))
+            } else {
+                Ok((CameraSource::Fov(fov(f.extract()?)?), None, tolerance))
+            }
+        }
+        (None, None) => Err(config("give the camera: camera=FILE or fov_deg=DEG")),
+    }
+}
+
+fn build(
+    camera: Option<&Bound<'_, PyAny>>,
+    fov_deg: Option<&Bound<'_, PyAny>>,
+    catalog: Option<PathBuf>,
+    backend: &str,
+    options: Option<Bound<'_, PyDict>>,
+) -> PyResult<Built> {
+    let o = Opts::new(options)?;
+    let backend = <BackendChoice as clap::ValueEnum>::from_str(backend, true)
+        .map_err(|_| config(format!("backend: {backend:?} is not one of auto, gpu, cpu")))?;
+    let (camera, camera_mag, scale_range) =
+        camera_source(camera, fov_deg, o.get::<f64>("fov_tolerance")?)?;
+    let cat = Catalog::load(catalog.as_deref()).map_err(py_err)?;
+    let mut s = Settings::default();
+    if let Some(e) = o.within("epoch", 1000.0, 3000.0)? {
+        s.epoch = e;
+    }
+    s.mag_limit = o.within("mag_limit", -2.0, 20.0)?.or(camera_mag);
+    if let Some(d) = o.choice("double_stars")? {
+        s.double_stars = d;
+    }
+    if let Some(d) = o.within("double_star_px", 0.0, 100.0)? {
+        s.double_star_px = d;
+    }
+    s.table_cache = o.get::<bool>("cache")?.unwrap_or(true);
+    if let Some(k) = o.within("sigma", 0.5, 100.0)? {
+        s.detect.k_sigma = k as f32;
+    }
+    if let Some(f) = o.get::<String>("detect_filter")? {
+        s.detect.matched_filter = match f.as_str() {
+            "none" => false,
+            "binomial" => true,
+            _ => {
+                return Err(config(format!(
+                    "detect_filter: {f:?} is not one of none, binomial"
+                )));
+            }
+        };
+    }
+    if let Some(c) = o.choice("centroid")? {
+        s.detect.centroid = c;
+    }
+    if let Some(m) = o.choice("method")? {
+        s.method = m;
+    }
+    if let Some(v) = o.count("vote_stars", 4, 200)? {
+        s.identify.vote_stars = v;
+    }
+    s.retry = o.get::<bool>("retry")?.unwrap_or(true);
+    if let Some(v) = o.within("pair_tol_px", 0.01, 5.0)? {
+        s.identify.pair_tol_px = v;
+    }
+    if let Some(v) = o.within("scale_tol", 0.0, 0.05)? {
+        s.identify.scale_tol = v;
+    }
+    if let Some(v) = o.within("match_radius_px", 0.1, 20.0)? {
+        s.refine.match_radius_px = v;
+    }
+    if let Some(v) = o.within("max_false_prob", 1e-300, 0.5)? {
+        s.refine.max_false_prob = v;
+    }
+    if let Some(f) = o.choice("fit")? {
+        s.refine.fit = f;
+    }
+    s.scale_range = scale_range;
+    let mut solvers = Solvers::new(cat, s, camera);
+    if let Some(h) = o.get::<String>("hint")? {
+        solvers = solvers.with_hints(gpustar::sky::hint::parse_hint(&h).map_err(py_err)?);
+    }
+    if o.get::<bool>("streaks")?.unwrap_or(false) {
+        let station = match o.get::<String>("station")? {
+            Some(t) => Some(gpustar::sky::station::parse_station(&t).map_err(py_err)?),
+            None => None,
+        };
+        let mut settings = StreakSettings::default();
+        if let Some(k) = o.within("streak_sigma", 0.5, 100.0)? {
+            settings.k_sigma = k as f32;
+        }
+        solvers.streaks = Some(StreakOptions {
+            settings,
+            station,
+            dut1_s: o.within("dut1", -1.0, 1.0)?,
+            astrometry: o
+                .choice("astrometry")?
+                .unwrap_or(gpustar::streaks::reduce::Astrometry::Auto),
+        });
+    } else {
+        for k in ["station", "astrometry", "dut1", "streak_sigma"] {
+            if o.get::<Bound<'_, PyAny>>(k)?.is_some() {
+                return Err(config(format!("{k} is an option of streaks=True")));
+            }
+        }
+    }
+    let threads = o
+        .count("threads", 1, 4096)?
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let batch_size = o.count("batch_size", 1, 4096)?.unwrap_or(32);
+    Ok(Built {
+        solvers,
+        backend,
+        threads,
+        batch_size,
+    })
+}
+
+/// A 2-D array of uint8, uint16 or float32 as the library's samples: read in place when it is
+/// C-contiguous, gathered row by row otherwise (any strides, negative too).
+fn frame_of(
+    image: &Bound<'_, PyAny>,
+) -> PyResult<std::result::Result<(Frame, Vec<String>), gpustar::Error>> {
+    fn take<T: numpy::Element + Copy>(
+        a: PyReadonlyArray2<'_, T>,
+        wrap: impl for<'b> Fn(&'b [T]) -> Samples<'b>,
+    ) -> gpustar::Result<(Frame, Vec<String>)> {
+        let (h, w) = (a.shape()[0], a.shape()[1]);
+        let (w32, h32) = (u32::try_from(w), u32::try_from(h));
+        let (Ok(w32), Ok(h32)) = (w32, h32) else {
+            return Err(gpustar::Error::Input(format!(
+                "the image is {w}x{h} pixels: too large"
+            )));
+        };
+        // ndarray's as_slice is Some only in row-major order (numpy's `as_slice` also takes
+        // Fortran order, whose memory is the transpose).
+        let view = a.as_array();
+        match view.as_slice() {
+            Some(s) => Frame::from_samples(w32, h32, wrap(s)),
+            None => {
+                let v: Vec<T> = view.iter().copied().collect();
+                Frame::from_samples(w32, h32, wrap(&v))
+            }
+        }
+    }
+    let refuse = |what: String| {
+        InputError::new_err(format!(
+            "{what}: gpustar takes a 2-D numpy array (height, width) of uint8, uint16 or \
+             float32"
+        ))
+    };
+    if !image.hasattr("ndim")? || !image.hasattr("dtype")? {
+        return Err(refuse(format!(
+            "got a {}",
+            image
+                .get_type()
+                .name()
+                .map(|n| n.to_string())
+                .unwrap_or_default()
+        )));
+    }
+    let ndim: usize = image.getattr("ndim")?.extract()?;
+    let dtype: String = image.getattr("dtype")?.str()?.to_string();
+    if ndim != 2 {
+        return Err(refuse(format!("the array has {ndim} dimensions")));
+    }
+    Ok(match dtype.as_str() {
+        "uint8" => take(image.extract::<PyReadonlyArray2<u8>>()?, |s| Samples::U8(s)),
+        "uint16" => take(image.extract::<PyReadonlyArray2<u16>>()?, |s| {
+            Samples::U16(s)
+        }),
+        "float32" => take(image.extract::<PyReadonlyArray2<f32>>()?, |s| {
+            Samples::F32(s)
+        }),
+        other => return Err(refuse(format!("the array's dtype is {other}"))),
+    })
+}
+
+/// An array refused for its values raises; `strict` = false makes it an error record instead
+/// (`solve_many`, where one bad frame must not lose the others' records).
+fn decoded_of(
+    image: &Bound<'_, PyAny>,
+    name: &str,
+    epoch: Option<f64>,
+    header: Option<BTreeMap<String, String>>,
+    strict: bool,
+) -> PyResult<Decoded> {
+    let frame = frame_of(image)?;
+    if strict && let Err(e) = frame {
+        return Err(py_err(e));
+    }
+    Ok(Decoded::in_memory(
+        name,
+        frame,
+        epoch,
+        header.unwrap_or_default(),
+    ))
+}
+
+/// Where a solver's kernels run.
+enum Engine {
+    Cpu,
+    /// The GPU context is used by one call at a time.
+    Gpu(Mutex<Box<GpuRunner>>),
+}
+
+/// A solver built once (catalog, distance tables, GPU context) and reused; shareable
+/// between threads.
+#[pyclass(frozen, module = "gpustar._gpustar")]
+struct Solver {
+    solvers: Arc<Solvers>,
+    engine: Engine,
+    backend: String,
+    threads: usize,
+}
+
+impl Solver {
+    fn run(&self, py: Python<'_>, frames: Vec<Decoded>) -> Vec<Record> {
+        py.detach(|| match &self.engine {
+            Engine::Cpu => gpustar::pipeline::solve_cpu_many(&self.solvers, frames, self.threads),
+            Engine::Gpu(g) => {
+                let mut g = g.lock().unwrap_or_else(|e| e.into_inner());
+                g.solve(&self.solvers, frames)
+            }
+        })
+    }
+}
+
+#[pymethods]
+impl Solver {
+    #[new]
+    #[pyo3(signature = (camera=None, fov_deg=None, catalog=None, backend="auto", options=None))]
+    fn new(
+        py: Python<'_>,
+        camera: Option<Bound<'_, PyAny>>,
+        fov_deg: Option<Bound<'_, PyAny>>,
+        catalog: Option<PathBuf>,
+        backend: &str,
+        options: Option<Bound<'_, PyDict>>,
+    ) -> PyResult<Solver> {
+        let b = build(camera.as_ref(), fov_deg.as_ref(), catalog, backend, options)?;
+        let (engine, name) = py
+            .detach(|| -> gpustar::Result<(Engine, String)> {
+                let (backend, _note) = Backend::open(b.backend)?;
+                let name = backend.name();
+                Ok(match backend {
+                    Backend::Cpu => (Engine::Cpu, name),
+                    Backend::Gpu(g) => (Engine::Gpu(Mutex::new(g)), name),
+                })
+            })
+            .map_err(py_err)?;
+        Ok(Solver {
+            solvers: Arc::new(b.solvers),
+            engine,
+            backend: name,
+            threads: b.threads,
+        })
+    }
+
+    /// The records' `backend` field: "cpu" or the GPU adapter's name.
+    #[getter]
+    fn backend(&self) -> String {
+        self.backend.clone()
+    }
+
+    /// Build the distance table for frames of this size now rather than on the first solve.
+    fn prepare(&self, py: Python<'_>, width: u32, height: u32) -> PyResult<()> {
+        let s = py.detach(|| self.solvers.get(width, height));
+        match s.as_ref() {
+            Ok(_) => Ok(()),
+            Err(e) => Err(config(e.clone())),
+        }
+    }
+
+    /// One frame: its record as a JSON line.
+    #[pyo3(signature = (image, name, epoch=None, header=None))]
+    fn solve(
+        &self,
+        py: Python<'_>,
+        image: Bound<'_, PyAny>,
+        name: &str,
+        epoch: Option<f64>,
+        header: Option<BTreeMap<String, String>>,
+    ) -> PyResult<String> {
+        let d = decoded_of(&image, name, epoch, header, true)?;
+        let mut r = self.run(py, vec![d]);
+        Ok(r.remove(0).to_json_line())
+    }
+
+    /// Frames in one call (one GPU batch per frame size): their records as JSON lines.
+    #[pyo3(signature = (images, names, epochs=None))]
+    fn solve_many(
+        &self,
+        py: Python<'_>,
+        images: Vec<Bound<'_, PyAny>>,
+        names: Vec<String>,
+        epochs: Option<Vec<Option<f64>>>,
+    ) -> PyResult<Vec<String>> {
+        let epochs = epochs.unwrap_or_else(|| vec![None; images.len()]);
+        if names.len() != images.len() || epochs.len() != images.len() {
+            return Err(InputError::new_err(format!(
+                "{} images, {} names and {} epochs: give one of each per image",
+                images.len(),
+                names.len(),
+                epochs.len()
+            )));
+        }
+        let frames = images
+            .iter()
+            .zip(&names)
+            .zip(&epochs)
+            .map(|((im, n), e)| decoded_of(im, n, *e, None, false))
+            .collect::<PyResult<Vec<_>>>()?;
+        Ok(self
+            .run(py, frames)
+            .iter()
+            .map(Record::to_json_line)
+            .collect())
+    }
+
+    /// The Rust path's time (ms) of each of `reps` solves of this image, the frame made
+    /// beforehand and no Python in between: what scripts/bench_python.py sets the per-call
+    /// cost of `solve` against.
+    fn _library_call_ms(
+        &self,
+        py: Python<'_>,
+        image: Bound<'_, PyAny>,
+        reps: usize,
+    ) -> PyResult<Vec<f64>> {
+        let (frame, _) = frame_of(&image)?.map_err(py_err)?;
+        Ok(py.detach(|| {
+            (0..reps)
+                .map(|_| {
+                    let d = Decoded::in_memory(
+                        "x",
+                        Ok((frame.clone(), Vec::new())),
+                        None,
+                        BTreeMap::new(),
+                    );
+                    let t0 = std::time::Instant::now();
+                    let r = match &self.engine {
+                        Engine::Cpu => self.solvers.solve_cpu(d),
+                        Engine::Gpu(g) => {
+                            let mut g = g.lock().unwrap_or_else(|e| e.into_inner());
+                            g.solve(&self.solvers, vec![d]).remove(0)
+                        }
+                    };
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    drop(r);
+                    ms
+                })
+                .collect()
+        }))
+    }
+
+    /// Stars the caller detected: x, y (pixels) and fluxes (or brightest first when None).
+    #[pyo3(signature = (x, y, width, height, fluxes=None, name="centroids", epoch=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn solve_centroids(
+        &self,
+        py: Python<'_>,
+        x: PyReadonlyArray1<'_, f64>,
+        y: PyReadonlyArray1<'_, f64>,
+        width: u32,
+        height: u32,
+        fluxes: Option<PyReadonlyArray1<'_, f64>>,
+        name: &str,
+        epoch: Option<f64>,
+    ) -> PyResult<String> {
+        let (x, y) = (x.as_array(), y.as_array());
+        let n = x.len();
+        let f: Vec<f64> = match &fluxes {
+            Some(f) => f.as_array().to_vec(),
+            None => (0..n).map(|i| (n - i) as f64).collect(),
+        };
+        if y.len() != n || f.len() != n {
+            return Err(InputError::new_err(format!(
+                "{n} x, {} y and {} fluxes: give one of each per star",
+                y.len(),
+                f.len()
+            )));
+        }
+        let mut stars = Vec::with_capacity(n);
+        for i in 0..n {
+            let (sx, sy, sf) = (x[i], y[i], f[i]);
+            if !(sx.is_finite() && sy.is_finite() && sf.is_finite()) {
+                return Err(InputError::new_err(format!(
+                    "star {i} has a NaN or infinite x, y or flux"
+                )));
+            }
+            stars.push(Detection {
+                x: sx,
+                y: sy,
+                flux: sf,
+                area: 1,
+                peak: 0,
+                saturated: false,
+                sigma_px: None,
+            });
+        }
+        let r = py.detach(|| {
+            self.solvers
+                .solve_detections(name, (width, height), stars, epoch)
+        });
+        Ok(r.to_json_line())
+    }
+}
+
+/// Frames of sequences fed one by one, in order (as `--sequence` takes a directory's).
+#[pyclass(module = "gpustar._gpustar")]
+struct Sequence {
+    seq: Mutex<Sequencer<'static>>,
+    solvers: Arc<Solvers>,
+    opts: SequenceOptions,
+}
+
+#[pymethods]
+impl Sequence {
+    #[new]
+    #[pyo3(signature = (solver, frame_interval_s=None))]
+    fn new(solver: &Solver, frame_interval_s: Option<f64>) -> PyResult<Sequence> {
+        if frame_interval_s.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
+            return Err(config(
+                "frame_interval_s must be a positive number of seconds",
+            ));
+        }
+        let opts = SequenceOptions {
+            frame_interval_s,
+            ..SequenceOptions::default()
+        };
+        Ok(Sequence {
+            seq: Mutex::new(Sequencer::shared(solver.solvers.clone(), opts)),
+            solvers: solver.solvers.clone(),
+            opts,
+        })
+    }
+
+    /// The next frame's record as a JSON line; `name`'s directory part names its sequence.
+    #[pyo3(signature = (image, name, header=None))]
+    fn add(
+        &self,
+        py: Python<'_>,
+        image: Bound<'_, PyAny>,
+        name: &str,
+        header: Option<BTreeMap<String, String>>,
+    ) -> PyResult<String> {
+        let d = decoded_of(&image, name, None, header, true)?;
+        let r = py.detach(|| {
+            let detected: Detected = self.solvers.detect_cpu(d, self.opts.detect_stars);
+            let mut s = self.seq.lock().unwrap_or_else(|e| e.into_inner());
+            s.next(detected)
+        });
+        Ok(r.to_json_line())
+    }
+}
+
+/// A `batch` run on a thread of its own, its records handed over in input order.
+#[pyclass(module = "gpustar._gpustar")]
+struct BatchRun {
+    records: crossbeam_channel::Receiver<String>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<gpustar::Result<batch::RunSummary>>>,
+    total: usize,
+}
+
+#[pymethods]
+impl BatchRun {
+    /// Inputs this run solves (after shard and resume).
+    #[getter]
+    fn total(&self) -> usize {
+        self.total
+    }
+
+    /// The next record as a JSON line, or None when the run is over (then its error, if any,
+    /// is raised).
+    fn next_record(&mut self, py: Python<'_>) -> PyResult<Option<String>> {
+        let rx = self.records.clone();
+        match py.detach(move || rx.recv()) {
+            Ok(line) => Ok(Some(line)),
+            Err(_) => {
+                if let Some(t) = self.thread.take() {
+                    let summary = py
+                        .detach(|| t.join())
+                        .map_err(|_| Error::new_err("the batch run's thread panicked"))?
+                        .map_err(py_err)?;
+                    if let Some(e) = summary.write_error {
+                        return Err(OutputError::new_err(e));
+                    }
+                }
+                Ok(None)
+            }
+        }
+    }
+
+    /// Start no new input; the run ends after those in flight.
+    fn stop(&self) {
+        self.stop.store(true, Ordering::SeqCst);
+    }
+}
+
+impl Drop for BatchRun {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(t) = self.thread.take() {
+            // Drain so that the writer is never blocked on a full channel.
+            while self.records.recv().is_ok() {}
+            let _ = t.join();
+        }
+    }
+}
+
+/// Start `gpustar batch DIRECTORY` with these options.
+#[pyfunction]
+#[pyo3(signature = (directory, camera=None, fov_deg=None, catalog=None, backend="auto",
+    output=None, resume=false, retry_errors=false, shard=None, recursive=false, sequence=false,
+    frame_interval_s=None, options=None))]
+#[allow(clippy::too_many_arguments)]
+fn start_batch(
+    py: Python<'_>,
+    directory: PathBuf,
+    camera: Option<Bound<'_, PyAny>>,
+    fov_deg: Option<Bound<'_, PyAny>>,
+    catalog: Option<PathBuf>,
+    backend: &str,
+    output: Option<PathBuf>,
+    resume: bool,
+    retry_errors: bool,
+    shard: Option<String>,
+    recursive: bool,
+    sequence: bool,
+    frame_interval_s: Option<f64>,
+    options: Option<Bound<'_, PyDict>>,
+) -> PyResult<BatchRun> {
+    if (resume || retry_errors) && output.is_none() {
+        return Err(config(
+            "resume needs output=FILE: the records of an earlier run",
+        ));
+    }
+    if retry_errors && !resume {
+        return Err(config("retry_errors goes with resume=True"));
+    }
+    let b = build(camera.as_ref(), fov_deg.as_ref(), catalog, backend, options)?;
+    if sequence && b.solvers.streaks.is_some() {
+        return Err(config(
+            "sequence and streaks do not go together yet: run the sequences and the streak \
+             frames separately",
+        ));
+    }
+    let shard: Option<Shard> = match shard {
+        Some(s) => Some(s.parse().map_err(config)?),
+        None => None,
+    };
+    let mut list = inputs::list(&directory, recursive).map_err(py_err)?;
+    if let Some(shard) = shard {
+        // A sequence goes to one shard whole, as on the command line.
+        list.retain(|i| {
+            shard.takes(if sequence {
+                gpustar::sequence::sequence_of(&i.name)
+            } else {
+                &i.name
+            })
+        });
+    }
+    let (out, header): (Box<dyn std::io::Write + Send>, bool) = match &output {
+        Some(p) => {
+            let opened =
+                output::open_output(p, Format::Jsonl, resume, retry_errors).map_err(py_err)?;
+            list = batch::resumed_inputs(list, &opened.previous.done, sequence);
+            (Box::new(opened.file), !opened.previous.has_header)
+        }
+        None => (Box::new(std::io::sink()), true),
+    };
+    let total = list.iter().filter(|i| !i.replay).count();
+    let (mut backend, _) = py.detach(|| Backend::open(b.backend)).map_err(py_err)?;
+    let opts = RunOptions {
+        threads: b.threads,
+        batch_size: b.batch_size,
+        flush_every: std::time::Duration::from_millis(250),
+        sequence: sequence.then(|| SequenceOptions {
+            frame_interval_s,
+            ..SequenceOptions::default()
+        }),
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let (tx, rx) = crossbeam_channel::bounded::<String>(4 * b.batch_size.max(b.threads));
+    let solvers = b.solvers;
+    let stop2 = stop.clone();
+    let thread = std::thread::spawn(move || {
+        let mut writer = RecordWriter::new(out, Format::Jsonl, header);
+        batch::run(
+            list,
+            &solvers,
+            &mut backend,
+            &mut writer,
+            opts,
+            &stop2,
+            |r, _| {
+                // A closed receiver (the iterator dropped) has set the stop flag.
+                let _ = tx.send(r.to_json_line());
+            },
+        )
+    });
+    Ok(BatchRun {
+        records: rx,
+        stop,
+        thread: Some(thread),
+        total,
+    })
+}
+
+/// Synthetic frames and their truths (`gpustar simulate`'s model): (pixels as native-endian
+/// u16 row-major bytes, truth as JSON) per frame.
+#[pyfunction]
+#[pyo3(signature = (n, size, fov_deg, seed, mag_limit=None, bits=16, false_stars=None, catalog=None))]
+#[allow(clippy::too_many_arguments)]
+fn simulate(
+    py: Python<'_>,
+    n: usize,
+    size: (u32, u32),
+    fov_deg: f64,
+    seed: u64,
+    mag_limit: Option<f64>,
+    bits: u8,
+    false_stars: Option<usize>,
+    catalog: Option<PathBuf>,
+) -> PyResult<Vec<(Py<PyBytes>, String)>> {
+    use gpustar::simulate::{SimSettings, render};
+    if bits != 8 && bits != 16 {
+        return Err(config(format!("bits: {bits}; 8 or 16")));
+    }
+    if !(fov_deg > 0.0 && fov_deg < 170.0) {
+        return Err(config(format!(
+            "field of view must be between 0 and 170 degrees, got {fov_deg}"
+        )));
+    }
+    if size.0 < 16 || size.1 < 16 || size.0 > 32768 || size.1 > 32768 {
+        return Err(config(format!(
+            "size {}x{}: 16 to 32768 a side",
+            size.0, size.1
+        )));
+    }
+    let cat = Catalog::load(catalog.as_deref()).map_err(py_err)?;
+    let mut s = SimSettings {
+        width: size.0,
+        height: size.1,
+        fov_x_deg: fov_deg,
+        frames: n,
+        seed,
+        bits,
+        ..SimSettings::default()
+    };
+    if let Some(m) = mag_limit {
+        s.mag_limit = m;
+    }
+    if let Some(f) = false_stars {
+        s.false_stars = f;
+    }
+    let frames = py
+        .detach(|| {
+            (0..n)
+                .map(|i| {
+                    let (pixels, truth) = render(&cat, &s, i)?;
+                    let t = serde_json::to_string(&truth)
+                        .map_err(|e| gpustar::Error::Output(format!("truth: {e}")))?;
+                    let bytes: Vec<u8> = pixels.iter().flat_map(|p| p.to_ne_bytes()).collect();
+                    Ok((bytes, t))
+                })
+                .collect::<gpustar::Result<Vec<_>>>()
+        })
+        .map_err(py_err)?;
+    Ok(frames
+        .into_iter()
+        .map(|(b, t)| (PyBytes::new(py, &b).unbind(), t))
+        .collect())
+}
+
+/// `gpustar calibrate`: fit the camera to the solvable frames of a directory. Returns the
+/// camera file's text, the fitted parameters with their 1σ, and the residuals.
+#[pyfunction]
+#[pyo3(signature = (directory, camera, fov_tolerance=None, recursive=false, catalog=None, fit_k2=true, fixed_centre=false))]
+#[allow(clippy::too_many_arguments)]
+fn calibrate(
+    py: Python<'_>,
+    directory: PathBuf,
+    camera: PathBuf,
+    fov_tolerance: Option<f64>,
+    recursive: bool,
+    catalog: Option<PathBuf>,
+    fit_k2: bool,
+    fixed_centre: bool,
+) -> PyResult<Py<PyDict>> {
+    use gpustar::calibrate::{self as cal, FitOptions};
+    let inputs: Vec<(PathBuf, String)> = inputs::list(&directory, recursive)
+        .map_err(py_err)?
+        .into_iter()
+        .map(|i| (i.path, i.name))
+        .collect();
+    if inputs.is_empty() {
+        return Err(InputError::new_err(format!(
+            "{}: no image files to calibrate with",
+            directory.display()
+        )));
+    }
+    let (start, mag) = Camera::from_toml_file(&camera).map_err(py_err)?;
+    let cat = Catalog::load(catalog.as_deref()).map_err(py_err)?;
+    let settings = Settings {
+        mag_limit: mag,
+        ..Settings::default()
+    };
+    let opts = FitOptions {
+        fit_k2,
+        fit_principal_point: !fixed_centre,
+        ..FitOptions::default()
+    };
+    let found = py
+        .detach(|| {
+            cal::calibrate(
+                &start,
+                &cat,
+                settings,
+                &inputs,
+                fov_tolerance,
+                opts,
+                &mut |_| {},
+            )
+        })
+        .map_err(py_err)?;
+    let fit = &found.fit;
+    let d = PyDict::new(py);
+    d.set_item(
+        "camera_file",
+        cal::camera_file(fit, &directory.display().to_string(), mag),
+    )?;
+    let k = &fit.camera;
+    let values = PyDict::new(py);
+    for (name, v) in [
+        ("fx", k.fx),
+        ("fy", k.fy),
+        ("cx", k.cx),
+        ("cy", k.cy),
+        ("k1", k.k1),
+        ("k2", k.k2),
+    ] {
+        values.set_item(name, v)?;
+    }
+    d.set_item("camera", values)?;
+    let sig = PyDict::new(py);
+    for (n, s) in fit.fitted.iter().zip(&fit.sigmas) {
+        sig.set_item(*n, *s)?;
+    }
+    d.set_item("sigmas", sig)?;
+    d.set_item("rms_before_px", found.first.rms_before_px)?;
+    d.set_item("rms_after_px", fit.rms_after_px)?;
+    d.set_item("stars_used", fit.stars_used)?;
+    d.set_item("stars_rejected", fit.stars_rejected)?;
+    d.set_item("frames", fit.rotations.len())?;
+    let records = PyList::empty(py);
+    for r in &found.after {
+        records.append(r.to_json_line())?;
+    }
+    d.set_item("records", records)?;
+    Ok(d.unbind())
+}
+
+#[pymodule]
+fn _gpustar(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("Error", py.get_type::<Error>())?;
+    m.add("InputError", py.get_type::<InputError>())?;
+    m.add("CatalogError", py.get_type::<CatalogError>())?;
+    m.add("ConfigError", py.get_type::<ConfigError>())?;
+    m.add("OutputError", py.get_type::<OutputError>())?;
+    m.add("GpuError", py.get_type::<GpuError>())?;
+    m.add("IoError", py.get_type::<IoError>())?;
+    m.add_class::<Solver>()?;
+    m.add_class::<Sequence>()?;
+    m.add_class::<BatchRun>()?;
+    m.add_function(wrap_pyfunction!(start_batch, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
