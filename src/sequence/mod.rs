@@ -210,8 +210,13 @@ impl<'a> Sequencer<'a> {
             .collect();
         let flux: Vec<f64> = dets.iter().map(|d| d.flux).collect();
         let judged = self.judge(t, &camera, &px, &dirs, &flux);
-        for (p, dec) in px.iter().zip(&judged.decision) {
-            tracing::trace!("{}: detection ({:.2}, {:.2}): {dec:?}", d.name, p.0, p.1);
+        for ((p, dec), fl) in px.iter().zip(&judged.decision).zip(&flux) {
+            tracing::trace!(
+                "{}: detection ({:.2}, {:.2}) flux {fl:.0}: {dec:?}",
+                d.name,
+                p.0,
+                p.1
+            );
         }
         let st = self.state.as_mut().expect("a state");
         let chain = st.chain.as_ref().map(|c| (c.id, c.c));

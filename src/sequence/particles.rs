@@ -44,6 +44,12 @@ pub struct ParticleSettings {
     /// a star merged with a passing particle is not the star, and its offset centroid must not
     /// count as a step.
     pub flux_ratio: f64,
+    /// ... widened near the detection limit, where a component's sum rises and falls with the
+    /// pixels that clear the threshold (defocused particles most: a third of those within twice
+    /// the faintest flux change by more than 2× from one frame to the next): the bound on
+    /// |ln(flux ratio)| is ln(`flux_ratio`) + this × (faintest flux of the two frames) / (the
+    /// fainter of the two fluxes).
+    pub faint_flux_widening: f64,
 }
 
 impl Default for ParticleSettings {
@@ -60,6 +66,7 @@ impl Default for ParticleSettings {
             star_miss_prob: 2e-3,
             bright_factor: 3.0,
             flux_ratio: 2.0,
+            faint_flux_widening: 1.5,
         }
     }
 }
@@ -150,7 +157,17 @@ impl Tracker {
         let mut owner: Vec<Option<usize>> = vec![None; n];
         let mut taken = vec![false; self.tracks.len()];
         let dist = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).hypot(a.1 - b.1);
-        let alike = |tr: &Track, j: usize| (flux[j] / tr.flux).ln().abs() <= s.flux_ratio.ln();
+        // The detection limit: the fainter frame's faintest detection.
+        let limit = flux
+            .iter()
+            .copied()
+            .chain(self.faintest)
+            .reduce(f64::min)
+            .unwrap_or(0.0);
+        let alike = |tr: &Track, j: usize| {
+            let tol = s.flux_ratio.ln() + s.faint_flux_widening * limit / flux[j].min(tr.flux);
+            (flux[j] / tr.flux).ln().abs() <= tol
+        };
         // Where each track's last point is in this frame had it stood still.
         let still: Vec<Option<(f64, f64)>> =
             self.tracks.iter().map(|tr| to_px(&tr.last.0)).collect();
@@ -395,6 +412,53 @@ mod tests {
         assert!(step_llr(0.3, 1.5, 0.3) < -5.0);
         assert!(step_llr(3.0, 1.5, 0.3) > 20.0);
         assert!(step_llr(0.75, 1.5, 0.3) < 0.0);
+    }
+
+    /// Faint particles near the detection limit whose flux swings 3× from frame to frame (a
+    /// component's sum near the threshold) are still followed and called particles, while a
+    /// bright star whose flux triples (merged with a particle) is not continued by it.
+    #[test]
+    fn faint_particles_are_followed_through_flux_swings() {
+        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
+        let speed_px = (10.0f64 / 60.0).to_radians() / camera.ifov_rad();
+        let mut tracker = Tracker::new(camera.clone(), ParticleSettings::default());
+        let mut last = None;
+        for f in 0..5 {
+            let c = Matrix3::identity();
+            let mut px = vec![(300.0, 300.0), (600.0, 500.0)];
+            let mut flux = vec![1e5, if f == 3 { 3e5 } else { 1e5 }];
+            for p in 0..6 {
+                px.push((100.0 + 120.0 * p as f64 + speed_px * f as f64, 800.0));
+                flux.push(if (f + p) % 2 == 0 { 100.0 } else { 300.0 });
+            }
+            let dirs: Vec<_> = px
+                .iter()
+                .map(|&(x, y)| camera.pixel_to_vector(x, y))
+                .collect();
+            let seen = Seen {
+                px: &px,
+                dirs: &dirs,
+                flux: &flux,
+            };
+            let j = tracker.add(f, f as f64, &c, last.as_ref(), &seen, 0.1);
+            last = Some(c);
+            if f >= 1 {
+                assert!(
+                    j.decision[2..].iter().all(|d| *d == Decision::Particle),
+                    "frame {f}: {j:?}"
+                );
+            }
+            if f >= 2 {
+                assert!(j.velocity[2].is_some(), "frame {f}: {j:?}");
+            }
+            if f == 1 || f == 2 {
+                assert_eq!(j.decision[..2], [Decision::Star; 2], "frame {f}");
+            }
+            if f == 3 {
+                // The tripled star starts a track of its own: undecided, not a star's step.
+                assert_eq!(j.decision[1], Decision::Undecided, "{j:?}");
+            }
+        }
     }
 
     /// Stars standing still and particles moving at 10′/s through a turning reference: after
