@@ -52,6 +52,13 @@ pub(crate) fn calibrate_cmd(
                 "gpustar: the principal point is only known to {sd_px:.1} px from these frames: \
                  kept where the camera file puts it"
             ),
+            Step::CentreMoved {
+                sd_px,
+                shift_sigmas,
+            } => eprintln!(
+                "gpustar: the principal point is only known to {sd_px:.1} px from these frames, \
+                 but {shift_sigmas:.0}σ from where the camera file puts it: fitted"
+            ),
         },
     )?;
     let fit = &found.fit;
