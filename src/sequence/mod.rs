@@ -218,6 +218,7 @@ impl<'a> Sequencer<'a> {
                 p.1
             );
         }
+        let dets = &weighed_for_pulls(dets, &judged.pulled);
         let st = self.state.as_mut().expect("a state");
         let chain = st.chain.as_ref().map(|c| (c.id, c.c));
         // Identification of everything not judged a particle.
@@ -477,6 +478,24 @@ fn with_all_detections(
         }
         _ => Outcome::Solved(r, refs),
     }
+}
+
+/// The detections with each pulled star's 1σ widened by its pull (in quadrature): a star
+/// merged with a passing particle keeps its identity but its biased centroid weighs in the
+/// attitude as what it is, not as its photon noise says (a 1.3 px pull at a PSF fit's 0.1 px
+/// would otherwise count as much as any other star). Centres of gravity carry no 1σ (the fit
+/// is unweighted) and are left as they are.
+fn weighed_for_pulls(dets: &[Detection], pulled: &[Option<f64>]) -> Vec<Detection> {
+    dets.iter()
+        .zip(pulled)
+        .map(|(d, p)| match (d.sigma_px, p) {
+            (Some(s), Some(p)) => Detection {
+                sigma_px: Some(s.hypot(*p)),
+                ..*d
+            },
+            _ => *d,
+        })
+        .collect()
 }
 
 /// Mid-exposure from the header's times, else the start alone (DATE-BEG or DATE-OBS).

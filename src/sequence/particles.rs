@@ -108,6 +108,11 @@ pub struct Judged {
     /// Velocity against the stars of each particle, in this frame's pixels per second (None
     /// for the others, and for particles seen once).
     pub velocity: Vec<Option<(f64, f64)>>,
+    /// How far (pixels) a detection lies from where a star stood, when further than the noise
+    /// allows: a star merged with a passing particle (its centroid pulled toward it, or a new
+    /// detection where the star's track was not continued). Its position is biased by about
+    /// this much, whatever its centroid's own 1σ says.
+    pub pulled: Vec<Option<f64>>,
 }
 
 /// The tracks of one chain of frames whose motion is known.
@@ -236,6 +241,25 @@ impl Tracker {
             }
         }
         assign(&mut cand, &mut taken, &mut owner);
+        // Stars pulled by a passing particle: a star's track continued by a step beyond
+        // PULLED_SIGMAS of the noise, or not continued at all with an unclaimed detection
+        // within the gate of where it stood.
+        let pulled: Vec<Option<f64>> = (0..n)
+            .map(|j| match owner[j] {
+                Some(k) => still[k]
+                    .filter(|_| self.tracks[k].decision == Decision::Star)
+                    .map(|p| dist(p, px[j]))
+                    .filter(|&d| d > PULLED_SIGMAS * sigma),
+                None => self
+                    .tracks
+                    .iter()
+                    .enumerate()
+                    .filter(|(k, tr)| !taken[*k] && tr.decision == Decision::Star)
+                    .filter_map(|(k, _)| still[k].map(|p| dist(p, px[j])))
+                    .filter(|&d| d <= s.static_gate_px)
+                    .reduce(f64::min),
+            })
+            .collect();
         // The steps: evidence for the tracks not yet decided.
         let (ln_a, ln_b) = (
             ((1.0 - s.beta) / s.alpha).ln(),
@@ -311,7 +335,11 @@ impl Tracker {
                     .flatten()
             })
             .collect();
-        Judged { decision, velocity }
+        Judged {
+            decision,
+            velocity,
+            pulled,
+        }
     }
 
     /// A track's velocity against the stars in the pixels of the frame `c` (pixels per second),
@@ -329,6 +357,10 @@ impl Tracker {
         Some(((p1.0 - p0.0) / dt, (p1.1 - p0.1) / dt))
     }
 }
+
+/// A star's step longer than this many σ (per axis) of the noise is a pull, not noise: a
+/// Rayleigh step goes beyond 4σ once in 3,000.
+pub const PULLED_SIGMAS: f64 = 4.0;
 
 /// Is (x, y) inside the frame by `margin` pixels?
 fn inside(camera: &Camera, x: f64, y: f64, margin: f64) -> bool {
@@ -457,6 +489,47 @@ mod tests {
             if f == 3 {
                 // The tripled star starts a track of its own: undecided, not a star's step.
                 assert_eq!(j.decision[1], Decision::Undecided, "{j:?}");
+            }
+        }
+    }
+
+    /// A star whose centroid a passing particle pulls 1.5 px is still the star's track, and
+    /// its pull is told; one whose flux triples starts a track of its own where the star
+    /// stood, told as a pull of that distance; the other stars are not pulled.
+    #[test]
+    fn stars_pulled_by_a_particle_are_told() {
+        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
+        let mut tracker = Tracker::new(camera.clone(), ParticleSettings::default());
+        let mut last = None;
+        for f in 0..4 {
+            let c = Matrix3::identity();
+            let mut px: Vec<(f64, f64)> = (0..8)
+                .map(|i| (100.0 + 100.0 * i as f64, 300.0 + 50.0 * (i % 3) as f64))
+                .collect();
+            let mut flux = vec![1e4; px.len()];
+            if f == 3 {
+                px[0].0 += 1.5;
+                px[1].1 += 0.8;
+                flux[1] *= 3.0;
+            }
+            let dirs: Vec<_> = px
+                .iter()
+                .map(|&(x, y)| camera.pixel_to_vector(x, y))
+                .collect();
+            let seen = Seen {
+                px: &px,
+                dirs: &dirs,
+                flux: &flux,
+            };
+            let j = tracker.add(f, f as f64, &c, last.as_ref(), &seen, 0.1);
+            last = Some(c);
+            if f < 3 {
+                assert!(j.pulled.iter().all(|p| p.is_none()), "frame {f}: {j:?}");
+            } else {
+                assert!((j.pulled[0].unwrap() - 1.5).abs() < 1e-6, "{j:?}");
+                assert!((j.pulled[1].unwrap() - 0.8).abs() < 1e-6, "{j:?}");
+                assert!(j.pulled[2..].iter().all(|p| p.is_none()), "{j:?}");
+                assert_eq!(j.decision[0], Decision::Star, "{j:?}");
             }
         }
     }
