@@ -483,14 +483,20 @@ fn with_all_detections(
 /// The detections with each pulled star's 1σ widened by its pull (in quadrature): a star
 /// merged with a passing particle keeps its identity but its biased centroid weighs in the
 /// attitude as what it is, not as its photon noise says (a 1.3 px pull at a PSF fit's 0.1 px
-/// would otherwise count as much as any other star). Centres of gravity carry no 1σ (the fit
-/// is unweighted) and are left as they are.
+/// would otherwise count as much as any other star). A centre of gravity among PSF fits (a
+/// blend the fit did not settle on) gets the pull as its 1σ; where every detection is a
+/// centre of gravity the fit is unweighted and they are left as they are.
 fn weighed_for_pulls(dets: &[Detection], pulled: &[Option<f64>]) -> Vec<Detection> {
+    let weighted = dets.iter().any(|d| d.sigma_px.is_some());
     dets.iter()
         .zip(pulled)
         .map(|(d, p)| match (d.sigma_px, p) {
             (Some(s), Some(p)) => Detection {
                 sigma_px: Some(s.hypot(*p)),
+                ..*d
+            },
+            (None, Some(p)) if weighted => Detection {
+                sigma_px: Some(*p),
                 ..*d
             },
             _ => *d,

@@ -47,8 +47,9 @@ pub struct ParticleSettings {
     /// ... widened near the detection limit, where a component's sum rises and falls with the
     /// pixels that clear the threshold (defocused particles most: a third of those within twice
     /// the faintest flux change by more than 2× from one frame to the next): the bound on
-    /// |ln(flux ratio)| is ln(`flux_ratio`) + this × (faintest flux of the two frames) / (the
-    /// fainter of the two fluxes).
+    /// |ln(flux ratio)| is ln(`flux_ratio`) + this × q², q = (faintest flux of the two frames)
+    /// / (the fainter of the two fluxes). Squared, so that a star a few times the limit merged
+    /// with a particle as bright is still refused (at q = 1/5 the bound is 2.25×).
     pub faint_flux_widening: f64,
 }
 
@@ -66,7 +67,7 @@ impl Default for ParticleSettings {
             star_miss_prob: 2e-3,
             bright_factor: 3.0,
             flux_ratio: 2.0,
-            faint_flux_widening: 1.5,
+            faint_flux_widening: 3.0,
         }
     }
 }
@@ -162,15 +163,19 @@ impl Tracker {
         let mut owner: Vec<Option<usize>> = vec![None; n];
         let mut taken = vec![false; self.tracks.len()];
         let dist = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).hypot(a.1 - b.1);
-        // The detection limit: the fainter frame's faintest detection.
+        // The detection limit: the faintest detection of this frame or the previous one (the
+        // brighter of the two).
         let limit = flux
             .iter()
             .copied()
-            .chain(self.faintest)
             .reduce(f64::min)
+            .into_iter()
+            .chain(self.faintest)
+            .reduce(f64::max)
             .unwrap_or(0.0);
         let alike = |tr: &Track, j: usize| {
-            let tol = s.flux_ratio.ln() + s.faint_flux_widening * limit / flux[j].min(tr.flux);
+            let near_limit = limit / flux[j].min(tr.flux);
+            let tol = s.flux_ratio.ln() + s.faint_flux_widening * near_limit * near_limit;
             (flux[j] / tr.flux).ln().abs() <= tol
         };
         // Where each track's last point is in this frame had it stood still.
