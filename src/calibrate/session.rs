@@ -17,7 +17,7 @@ pub const CENTRE_SD_PX: f64 = 1.0;
 /// it is one the frames disagree with: said, with `--fit-centre` to fit it (a lens 23 px off
 /// centre, its stars in the upper 40 % of 50° frames: 1.4 px, 19σ away; kept, fx, k1 and k2
 /// bend to make up for it and the fit's rms doubles; fitted, every attitude turns with it,
-/// as the camera frame is defined through it: on swarm-a's heads by 0.3–0.6° from the truth
+/// as the camera frame is defined through it: on swarm-a's heads by 0.33–0.71° from the truth
 /// frames, their image centres unmoved).
 pub const CENTRE_SHIFT_SIGMAS: f64 = 3.0;
 
