@@ -18,8 +18,10 @@ processes over frames) does not change the output.
 
 Model
 -----
-* Camera: pinhole, square pixels, no distortion. W = H = --size. Principal point
-  ((W-1)/2, (H-1)/2), fx = fy = (W/2)/tan(fov_x/2). Pixels: x = column, y = row, 0-based,
+* Camera: pinhole, square pixels, no distortion (unless --k1/--k2: x = cx + fx u k, y = cy + fy
+  v k with u = X/Z, v = Y/Z, k = 1 + k1 (u^2 + v^2) + k2 (u^2 + v^2)^2, nothing beyond 50 deg
+  off axis; DIR/camera_true.toml then holds the true camera). W = H = --size. Principal point
+  ((W-1)/2, (H-1)/2) (+ --centre-offset DX DY), fx = fy = (W/2)/tan(fov_x/2). Pixels: x = column, y = row, 0-based,
   centre of the top-left pixel = (0, 0); pixel (j, i) covers [j-0.5, j+0.5] x [i-0.5, i+0.5].
   Camera +X = increasing column, +Y = increasing row, +Z = boresight; R maps ICRS unit vectors
   to camera (v_cam = R v_icrs); x = cx + fx X/Z, y = cy + fy Y/Z. fov_y = 2 atan((H/2)/fy).
@@ -55,6 +57,8 @@ Model
   [mag_limit-3, mag_limit] times its own exp(N(0, 0.2)).
 * Position noise: --position-noise PX (default 0) draws each catalogue star N(0, PX) px off
   its place in x and y (the truth lists the place), as centroid errors would.
+* Blank bottom: --blank-bottom F renders no star and no false star whose centre is below
+  y = (1 - F) H - 0.5 (hidden as by a baffle; the truth lists only what is rendered).
 * Hot pixels: --hot-pixels (default 5) distinct pixels, uniform, each with 500..5000 e-
   (uniform) added to the expected charge (no PSF).
 * Detector: sky uniform 100..400 e-/px per frame (flat); expected charge = sky + sources + hot
@@ -66,6 +70,7 @@ Model
   one IDAT, filter 0, zlib, written with zlib + struct and a tEXt DATE-OBS; every PNG is
   decoded again by this script's own reader and compared pixel for pixel.
 * Truth (truth.jsonl, per frame): file (relative to DIR), ra_deg, dec_deg (boresight),
+  centre_ra_deg, centre_dec_deg (the image centre pixel's direction),
   roll_tetra3_deg (image up to celestial north, counter-clockwise, as scripts/truth_check.py),
   rotation_matrix (R), quaternion [w, x, y, z] (Hamilton, w >= 0) of R, epoch, width, height,
   fov_x_deg, fov_y_deg, mirrored (false), stars [{hip, x, y, mag (Hp), peak_snr, flux_e,
@@ -175,10 +180,27 @@ def roll_tetra3_deg(R):
 
 
 class Camera:
-    def __init__(self, width, height, fov_x_deg):
+    def __init__(self, width, height, fov_x_deg, k1=0.0, k2=0.0, centre_offset=(0.0, 0.0)):
         self.w, self.h = width, height
         self.fx = self.fy = (width / 2.0) / math.tan(math.radians(fov_x_deg) / 2.0)
-        self.cx, self.cy = (width - 1) / 2.0, (height - 1) / 2.0
+        self.cx, self.cy = (width - 1) / 2.0 + centre_offset[0], (height - 1) / 2.0 + centre_offset[1]
+        self.k1, self.k2 = k1, k2
+
+    def distortion(self, u, v):
+        """Radial factor 1 + k1 r^2 + k2 r^4 of the normalised (pinhole) coordinates u, v."""
+        r2 = u * u + v * v
+        return 1.0 + self.k1 * r2 + self.k2 * r2 * r2
+
+    def pixel_to_vector(self, x, y):
+        """Camera-frame unit vector of pixel (x, y): the distortion inverted by fixed-point
+        iteration (converges where the factor is monotonic, as here)."""
+        ud, vd = (x - self.cx) / self.fx, (y - self.cy) / self.fy
+        u, v = ud, vd
+        for _ in range(100):
+            k = self.distortion(u, v)
+            u, v = ud / k, vd / k
+        c = np.array([u, v, 1.0])
+        return c / np.linalg.norm(c)
 
     @property
     def fov_y_deg(self):
@@ -189,8 +211,14 @@ class Camera:
         c = v @ R.T
         z = c[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            x = self.cx + self.fx * c[..., 0] / z
-            y = self.cy + self.fy * c[..., 1] / z
+            u, v = c[..., 0] / z, c[..., 1] / z
+            if self.k1 or self.k2:
+                k = self.distortion(u, v)
+                # beyond 50 deg off axis the polynomial is not a lens: nothing is projected there
+                z = np.where(u * u + v * v < math.tan(math.radians(50.0)) ** 2, z, -1.0)
+                u, v = u * k, v * k
+            x = self.cx + self.fx * u
+            y = self.cy + self.fy * v
         return x, y, z
 
     def in_frame(self, x, y):
@@ -379,7 +407,7 @@ def simulate_frame(i, args):
     """Render frame i, write it, return its truth dict."""
     rng = np.random.default_rng([args.seed, 0, i])
     W = H = args.size
-    cam = Camera(W, H, args.fov_deg)
+    cam = Camera(W, H, args.fov_deg, args.k1, args.k2, args.centre_offset)
     sigma = args.psf_sigma
 
     # --- draws, in a fixed order
@@ -418,6 +446,9 @@ def simulate_frame(i, args):
     # as centroid errors would put it (the study's positional-noise sweep).
     jitter = rng.normal(0.0, args.position_noise, (2, len(x))) if args.position_noise > 0 else np.zeros((2, len(x)))
     stars = []
+    if args.blank_bottom > 0:
+        # a baffle or the Earth's limb hides the bottom of the frame: no star there
+        near = near[y[near] <= (1.0 - args.blank_bottom) * H - 0.5]
     for k in near:
         peak = render_source(signal, float(x[k] + jitter[0, k]), float(y[k] + jitter[1, k]), float(flux[k]), sigma, noise)
         if peak is None or not cam.in_frame(x[k], y[k]):
@@ -430,6 +461,8 @@ def simulate_frame(i, args):
 
     # --- false stars and hot pixels
     false_flux = flux_of(fmag) * fscat
+    if args.blank_bottom > 0:
+        false_flux = np.where(fy <= (1.0 - args.blank_bottom) * H - 0.5, false_flux, 0.0)
     false_peak = [render_source(signal, float(a), float(b), float(f), sigma, noise)
                   for a, b, f in zip(fx, fy, false_flux)]
     expected = signal + sky
@@ -461,7 +494,11 @@ def simulate_frame(i, args):
         path.write_bytes(data)
 
     ra, dec = vec_to_radec_deg(R[2])
+    # the sky direction of the image centre pixel ((W-1)/2, (H-1)/2): the boresight unless the
+    # principal point is offset (then through the distortion)
+    cra, cdec = vec_to_radec_deg(R.T @ cam.pixel_to_vector((W - 1) / 2.0, (H - 1) / 2.0))
     return {
+        "centre_ra_deg": cra, "centre_dec_deg": cdec,
         "file": name, "ra_deg": ra, "dec_deg": dec, "roll_tetra3_deg": roll_tetra3_deg(R),
         "rotation_matrix": [[float(v) for v in row] for row in R],
         "quaternion": [float(v) for v in matrix_to_quat(R)],
@@ -506,6 +543,13 @@ def main(argv=None):
     ap.add_argument("--hot-pixels", type=int, default=5)
     ap.add_argument("--position-noise", type=float, default=0.0,
                     help="draw each catalogue star N(0, PX) px off its place per axis; the truth keeps the place")
+    ap.add_argument("--k1", type=float, default=0.0, help="radial distortion (see Model; default 0)")
+    ap.add_argument("--k2", type=float, default=0.0, help="radial distortion (see Model; default 0)")
+    ap.add_argument("--centre-offset", type=float, nargs=2, default=[0.0, 0.0], metavar=("DX", "DY"),
+                    help="principal point minus the image centre, px (default 0 0)")
+    ap.add_argument("--blank-bottom", type=float, default=0.0, metavar="F",
+                    help="render no star or false star whose centre is in the bottom F of the frame "
+                         "(y > (1 - F) H - 0.5), as if hidden by a baffle (default 0)")
     ap.add_argument("--format", choices=("fits", "png"), default="fits")
     ap.add_argument("--catalog", default=str(DEFAULT_CATALOG))
     ap.add_argument("-j", "--jobs", type=int, default=1, help="worker processes (default 1)")
@@ -513,6 +557,11 @@ def main(argv=None):
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "camera.toml").write_text(f"width = {args.size}\nheight = {args.size}\nfov_x_deg = {args.fov_deg}\n")
+    if args.k1 or args.k2 or any(args.centre_offset):
+        cam = Camera(args.size, args.size, args.fov_deg, args.k1, args.k2, args.centre_offset)
+        (out / "camera_true.toml").write_text(
+            f"width = {args.size}\nheight = {args.size}\nfx_px = {cam.fx!r}\nfy_px = {cam.fy!r}\n"
+            f"cx_px = {cam.cx!r}\ncy_px = {cam.cy!r}\nk1 = {args.k1!r}\nk2 = {args.k2!r}\n")
     t0 = time.time()
     jobs = [(i, args) for i in range(args.frames)]
     init = (args.catalog, args.mag_limit, args.seed)

@@ -24,7 +24,7 @@ Model
   axis a uniform on the sphere, expressed in the camera frame (so roll occurs): the camera
   turns by +omega t about a (right hand), i.e. R(t) = Rot(a, -omega t) R0.
 * Time: t0 (frame 0 exposure start) uniform UTC instant in [2020-01-01, 2025-01-01), whole
-  milliseconds; frame interval dt uniform 0.5..2.0 s per sequence (whole ms); frame k starts
+  milliseconds; frame interval dt uniform 0.5..2.0 s (--interval) per sequence (whole ms); frame k starts
   at t0 + k dt; exposure 0.05 s. The truth attitude is R at mid-exposure. No leap second
   falls in 2020..2025, so UTC seconds are uniform here.
 * Motion smear: every source (star or particle) is rendered at n sub-steps at the midpoints of
@@ -56,13 +56,13 @@ Model
   H-0.5]) is replaced by a new one born at a uniform random position in [0, W-1] x [0, H-1]
   (at that frame's mid-exposure); the departed one is still rendered (and listed again should
   it drift back in) while its window touches the frame, then dropped.
-  Magnitude (same zero point as stars) uniform 1.5..5.0, fixed per particle; PSF FWHM =
+  Magnitude (same zero point as stars) uniform 1.5..5.0 (--particle-mag), fixed per particle; PSF FWHM =
   f x star FWHM, f uniform 1.0..3.0 per particle (out of focus), same beta.
   Motion against the stars, on the ICRS sphere: from its birth point p0 in direction d0
   (uniform in the tangent plane), n0 = p0 x d0, with tau = t - t_birth:
       theta(tau) = w tau + a_par tau^2 / 2,  phi(tau) = a_perp tau^2 / 2,
       p(tau) = cos(phi) (cos(theta) p0 + sin(theta) d0) + sin(phi) n0,
-  birth speed w uniform 6..40 arcmin/s, acceleration (a_par, a_perp) = A (cos c, sin c), A uniform
+  birth speed w uniform 6..40 arcmin/s (--particle-speed), acceleration (a_par, a_perp) = A (cos c, sin c), A uniform
   0..0.01 w per s (<= 10% of the speed per 10 s), c uniform: a great circle at constant speed
   plus a small along- and cross-track acceleration, so tracks are not perfectly linear.
   Truth vx/vy = apparent sensor velocity at mid-exposure (attitude and particle both moving,
@@ -123,6 +123,8 @@ ARCMIN = math.radians(1.0 / 60.0)
 
 # Worker globals (filled once per process).
 CAT = None
+PARTICLE_MAG = (1.5, 5.0)  # --particle-mag
+PARTICLE_SPEED = (6.0, 40.0)  # --particle-speed, arcmin/s against the stars at birth
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -312,11 +314,11 @@ class Particle:
         psi = rng.uniform(0.0, 2 * math.pi)
         self.d0 = math.cos(psi) * e1 + math.sin(psi) * e2
         self.n0 = np.cross(self.p0, self.d0)
-        self.w = rng.uniform(6.0, 40.0) * ARCMIN  # rad/s
+        self.w = rng.uniform(*PARTICLE_SPEED) * ARCMIN  # rad/s
         acc = rng.uniform(0.0, 0.01) * self.w  # rad/s^2: <= 10% of the speed per 10 s
         chi = rng.uniform(0.0, 2 * math.pi)
         self.a_par, self.a_perp = acc * math.cos(chi), acc * math.sin(chi)
-        self.mag = rng.uniform(1.5, 5.0)
+        self.mag = rng.uniform(*PARTICLE_MAG)
         self.fwhm_factor = rng.uniform(1.0, 3.0)
         self.fwhm = self.fwhm_factor * star_fwhm
         self.counted = True  # its centre is in the frame (False once it has left: replaced)
@@ -433,7 +435,7 @@ class SequenceParams:
         self.R0 = random_rotation(rng)
         self.axis = random_unit(rng)
         self.rate_deg_s = float(rng.uniform(0.05, 0.5))
-        self.interval_s = round(float(rng.uniform(0.5, 2.0)), 3)
+        self.interval_s = round(float(rng.uniform(*args.interval)), 3)
         t_lo = Time("2020-01-01T00:00:00", scale="utc")
         t_hi = Time("2025-01-01T00:00:00", scale="utc")
         t0 = t_lo + rng.uniform(0, (t_hi - t_lo).to_value(units.s)) * units.s
@@ -654,6 +656,8 @@ def _worker_init(catalog):
 
 def _run(job):
     s, args = job
+    global PARTICLE_MAG, PARTICLE_SPEED
+    PARTICLE_MAG, PARTICLE_SPEED = tuple(args.particle_mag), tuple(args.particle_speed)
     t = time.time()
     truths = simulate_sequence(s, args)
     sm = sequence_summary(truths)
@@ -675,6 +679,12 @@ def main(argv=None):
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--particle-ratio", type=float, default=1.5)
+    ap.add_argument("--particle-mag", type=float, nargs=2, default=[1.5, 5.0], metavar=("LO", "HI"),
+                    help="particle magnitudes, uniform (default 1.5 5.0)")
+    ap.add_argument("--particle-speed", type=float, nargs=2, default=[6.0, 40.0], metavar=("LO", "HI"),
+                    help="particle birth speed against the stars, arcmin/s, uniform (default 6 40)")
+    ap.add_argument("--interval", type=float, nargs=2, default=[0.5, 2.0], metavar=("LO", "HI"),
+                    help="frame interval per sequence, s, uniform (default 0.5 2.0)")
     ap.add_argument("--fov-deg", type=float, default=18.0)
     ap.add_argument("--size", type=int, default=1024)
     ap.add_argument("--catalog", default=str(DEFAULT_CATALOG))

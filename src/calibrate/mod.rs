@@ -9,7 +9,9 @@
 
 mod session;
 
-pub use session::{CENTRE_SD_PX, Calibration, Step, calibrate, camera_file};
+pub use session::{
+    CENTRE_SD_PX, CENTRE_SHIFT_SIGMAS, Calibration, Step, calibrate, camera_file, centre_step,
+};
 
 use crate::camera::Camera;
 use crate::error::{Result, fail};
@@ -39,6 +41,10 @@ pub struct FrameStars {
 pub struct FitOptions {
     /// Fit cx, cy (only with 3 or more usable frames; otherwise they stay as given).
     pub fit_principal_point: bool,
+    /// A principal point the frames fix only to more than [`CENTRE_SD_PX`] is kept as given
+    /// (the camera frame, and so every attitude, stays tied to it); false: fitted however
+    /// loose (`calibrate --fit-centre`).
+    pub keep_loose_centre: bool,
     pub fit_k2: bool,
     /// Reject stars whose residual exceeds this many robust per-axis sigmas; ∞ disables.
     pub outlier_sigma: f64,
@@ -50,6 +56,7 @@ impl Default for FitOptions {
     fn default() -> Self {
         FitOptions {
             fit_principal_point: true,
+            keep_loose_centre: true,
             fit_k2: true,
             outlier_sigma: 5.0,
             max_iterations: 50,

@@ -4,7 +4,7 @@
 use super::args::*;
 use super::solve::*;
 use anyhow::{Context, Result, bail};
-use gpustar::calibrate::{self, FitOptions, Step};
+use gpustar::calibrate::{self, CENTRE_SHIFT_SIGMAS, FitOptions, Step};
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::io::inputs;
@@ -48,9 +48,27 @@ pub(crate) fn calibrate_cmd(
                 },
                 records,
             ),
-            Step::CentreKept { sd_px } => eprintln!(
-                "gpustar: the principal point is only known to {sd_px:.1} px from these frames: \
-                 kept where the camera file puts it"
+            Step::CentreKept {
+                sd_px,
+                shift_sigmas,
+            } => {
+                eprintln!(
+                    "gpustar: the principal point is only known to {sd_px:.1} px from these \
+                     frames: kept where the camera file puts it"
+                );
+                if shift_sigmas > CENTRE_SHIFT_SIGMAS {
+                    eprintln!(
+                        "gpustar: the frames put it {shift_sigmas:.0}σ from there: --fit-centre \
+                         fits it (the attitudes then turn with it)"
+                    );
+                }
+            }
+            Step::CentreLoose {
+                sd_px,
+                shift_sigmas,
+            } => eprintln!(
+                "gpustar: the principal point is only known to {sd_px:.1} px from these frames, \
+                 {shift_sigmas:.0}σ from where the camera file puts it: fitted (--fit-centre)"
             ),
         },
     )?;

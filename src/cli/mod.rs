@@ -147,6 +147,11 @@ pub enum Command {
         /// Keep the principal point where the camera file puts it.
         #[arg(long)]
         fixed_centre: bool,
+        /// Fit the principal point however loosely the frames fix it (by default one known to
+        /// worse than 1 px stays where the camera file puts it). The camera frame is defined
+        /// through it: every attitude turns with it.
+        #[arg(long, conflicts_with = "fixed_centre")]
+        fit_centre: bool,
         /// Fit k1 only (k2 stays as the camera file gives it).
         #[arg(long)]
         no_k2: bool,
@@ -222,6 +227,7 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
             fov_tolerance,
             recursive,
             fixed_centre,
+            fit_centre,
             no_k2,
             output,
             catalog,
@@ -232,6 +238,7 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
             recursive,
             gpustar::calibrate::FitOptions {
                 fit_principal_point: !fixed_centre,
+                keep_loose_centre: !fit_centre,
                 fit_k2: !no_k2,
                 ..Default::default()
             },

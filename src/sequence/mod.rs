@@ -238,9 +238,15 @@ impl<'a> Sequencer<'a> {
             .collect();
         let flux: Vec<f64> = dets.iter().map(|d| d.flux).collect();
         let judged = self.judge(t, &camera, &px, &dirs, &flux);
-        for (p, dec) in px.iter().zip(&judged.decision) {
-            tracing::trace!("{}: detection ({:.2}, {:.2}): {dec:?}", d.name, p.0, p.1);
+        for ((p, dec), fl) in px.iter().zip(&judged.decision).zip(&flux) {
+            tracing::trace!(
+                "{}: detection ({:.2}, {:.2}) flux {fl:.0}: {dec:?}",
+                d.name,
+                p.0,
+                p.1
+            );
         }
+        let dets = &weighed_for_pulls(dets, &judged.pulled);
         let st = self.state.as_mut().expect("a state");
         let chain = st.chain.as_ref().map(|c| (c.id, c.c));
         // Identification of everything not judged a particle.
@@ -500,6 +506,30 @@ fn with_all_detections(
         }
         _ => Outcome::Solved(r, refs),
     }
+}
+
+/// The detections with each pulled star's 1σ widened by its pull (in quadrature): a star
+/// merged with a passing particle keeps its identity but its biased centroid weighs in the
+/// attitude as what it is, not as its photon noise says (a 1.3 px pull at a PSF fit's 0.1 px
+/// would otherwise count as much as any other star). A centre of gravity among PSF fits (a
+/// blend the fit did not settle on) gets the pull as its 1σ; where every detection is a
+/// centre of gravity the fit is unweighted and they are left as they are.
+fn weighed_for_pulls(dets: &[Detection], pulled: &[Option<f64>]) -> Vec<Detection> {
+    let weighted = dets.iter().any(|d| d.sigma_px.is_some());
+    dets.iter()
+        .zip(pulled)
+        .map(|(d, p)| match (d.sigma_px, p) {
+            (Some(s), Some(p)) => Detection {
+                sigma_px: Some(s.hypot(*p)),
+                ..*d
+            },
+            (None, Some(p)) if weighted => Detection {
+                sigma_px: Some(*p),
+                ..*d
+            },
+            _ => *d,
+        })
+        .collect()
 }
 
 /// Mid-exposure from the header's times, else the start alone (DATE-BEG or DATE-OBS).
