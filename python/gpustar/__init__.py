@@ -188,7 +188,8 @@ class Solver:
     ``max_false_prob``, ``retry`` (False = ``--no-retry``), ``double_stars``,
     ``double_star_px``, ``cache`` (False = ``--no-cache``), ``hint`` ("RA,DEC[,R]" or
     "header[,R]"), ``streaks`` (True = ``--streaks``) with ``station`` ("LAT,LON,HEIGHT_M"),
-    ``astrometry``, ``dut1``, ``streak_sigma``; ``threads`` (CPU solving threads of
+    ``astrometry``, ``dut1``, ``streak_sigma``, ``tle`` (a TLE or OMM file naming each
+    streak's object), ``tle_cross``, ``tle_along``; ``threads`` (CPU solving threads of
     :meth:`solve_many`), ``batch_size`` (frames per GPU batch, 32). Values out of the command
     line's ranges raise :class:`ConfigError` with its message.
 

@@ -111,6 +111,9 @@ const OPTIONS: &[&str] = &[
     "astrometry",
     "dut1",
     "streak_sigma",
+    "tle",
+    "tle_cross",
+    "tle_along",
     "threads",
     "batch_size",
 ];
@@ -327,6 +330,14 @@ fn build(
         if let Some(k) = o.within("streak_sigma", 0.5, 100.0)? {
             settings.k_sigma = k as f32;
         }
+        // Read before solving, as the command line does: a bad file fails the constructor.
+        let tle = match o.get::<std::path::PathBuf>("tle")? {
+            Some(p) => Some(std::sync::Arc::new(
+                gpustar::sky::tle::TleCatalog::load(&p).map_err(py_err)?,
+            )),
+            None => None,
+        };
+        let defaults = gpustar::streaks::identify::IdentifySettings::default();
         solvers.streaks = Some(StreakOptions {
             settings,
             station,
@@ -334,9 +345,26 @@ fn build(
             astrometry: o
                 .choice("astrometry")?
                 .unwrap_or(gpustar::streaks::reduce::Astrometry::Auto),
+            tle,
+            identify: gpustar::streaks::identify::IdentifySettings {
+                cross_arcsec: o
+                    .within("tle_cross", 1.0, 36_000.0)?
+                    .unwrap_or(defaults.cross_arcsec),
+                along_s: o
+                    .within("tle_along", 0.01, 600.0)?
+                    .unwrap_or(defaults.along_s),
+            },
         });
     } else {
-        for k in ["station", "astrometry", "dut1", "streak_sigma"] {
+        for k in [
+            "station",
+            "astrometry",
+            "dut1",
+            "streak_sigma",
+            "tle",
+            "tle_cross",
+            "tle_along",
+        ] {
             if o.get::<Bound<'_, PyAny>>(k)?.is_some() {
                 return Err(config(format!("{k} is an option of streaks=True")));
             }
@@ -818,6 +846,8 @@ fn start_batch(
             frame_interval_s,
             ..SequenceOptions::default()
         }),
+        // As the command line: with streaks, a directory's frames are linked into tracklets.
+        tracklets: b.solvers.streaks.is_some(),
     };
     let stop = Arc::new(AtomicBool::new(false));
     let (tx, rx) = crossbeam_channel::bounded::<String>(4 * b.batch_size.max(b.threads));
