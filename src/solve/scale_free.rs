@@ -1,0 +1,366 @@
+//! The scale-free first pass (issue 25): when the field of view is searched (`--fov-deg
+//! LOW..HIGH`, `--fov-tolerance`), quads of the frame's brightest stars are looked up once in
+//! the pattern index (`catalog::patterns`, keyed by edge ratios, which do not depend on the
+//! focal length) instead of voting at every scale step. Each catalog quad found gives a focal
+//! length (its chords against the image's) and an attitude (Wahba on its four stars); the
+//! first that refinement accepts, with the false-match test counting every quad hypothesis of
+//! the frame, is the solution. A frame it does not solve goes on to the scale walk (the vote
+//! at each scale), which stays the identifier for known scales.
+//!
+//! Frame side: the image quads' keys come from the stars' directions under the shortest and
+//! longest focal lengths of the range; the true ratios lie between (they change with the focal
+//! length only at second order in the field's angle), widened by the pair tolerance over each
+//! edge's length in pixels. Every key bin the interval touches is a query (at most
+//! [`MAX_QUERIES`] per quad: quads of short edges are too vague to look up).
+
+use super::bands::{SCALE_STEP, STAGES, scaled};
+use super::detect::Detection;
+use super::refine::{self, CameraFit};
+use super::{Outcome, Prepared, Solver};
+use crate::camera::{Camera, angle};
+use crate::catalog::patterns::{self, BINS, PatternIndex};
+use crate::cpu::pattern::Rows;
+use nalgebra::{Matrix3, Vector3};
+
+/// The brightest detections whose quads are looked up (210 quads).
+pub const PATTERN_STARS: usize = 10;
+
+/// Queries (key bins) one image quad may take; a quad whose ratios are vaguer is not looked up.
+pub const MAX_QUERIES: usize = 32;
+
+/// At most this many quad hypotheses are refined per frame (the first, in brightness order);
+/// the false-match test counts them all.
+pub const MAX_REFINED: usize = 100;
+
+/// A solver's pattern index and the band whose reference stars its quads name.
+pub struct ScaleFree {
+    pub index: PatternIndex,
+    pub band: usize,
+    /// Built now (false: read from the cache), and the seconds that took.
+    pub built: bool,
+    pub seconds: f64,
+}
+
+/// An image quad (detection indices, brightest first) and its queries: `queries[range]`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Quad {
+    pub stars: [usize; 4],
+    pub queries: std::ops::Range<usize>,
+}
+
+/// A frame's quads and the keys they look up.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Lookup {
+    pub quads: Vec<Quad>,
+    pub queries: Vec<u32>,
+}
+
+/// Every 4-subset of `n` stars in brightness order: by the sum of the places, then
+/// lexicographically.
+pub fn quad_order(n: usize) -> Vec<[usize; 4]> {
+    let mut out = Vec::new();
+    for a in 0..n {
+        for b in a + 1..n {
+            for c in b + 1..n {
+                for d in c + 1..n {
+                    out.push([a, b, c, d]);
+                }
+            }
+        }
+    }
+    out.sort_by_key(|q| (q.iter().sum::<usize>(), *q));
+    out
+}
+
+/// The image quads of the brightest [`PATTERN_STARS`] detections and their query keys, for
+/// focal-length factors `lo..hi` of `camera` and a centroid tolerance of `tol_px` per edge.
+pub fn lookup(
+    detections: &[Detection],
+    camera: &Camera,
+    (lo, hi): (f64, f64),
+    tol_px: f64,
+) -> Lookup {
+    let n = detections.len().min(PATTERN_STARS);
+    let ends = [scaled(camera, lo), scaled(camera, hi)];
+    let vectors: Vec<[Vector3<f64>; 2]> = detections[..n]
+        .iter()
+        .map(|d| ends.clone().map(|c| c.pixel_to_vector(d.x, d.y)))
+        .collect();
+    let mut out = Lookup::default();
+    for stars in quad_order(n) {
+        let mut r_lo = [f64::MAX; 5];
+        let mut r_hi = [f64::MIN; 5];
+        for e in 0..2 {
+            let r = patterns::ratios(&patterns::chords(&stars.map(|i| vectors[i][e])));
+            for i in 0..5 {
+                r_lo[i] = r_lo[i].min(r[i]);
+                r_hi[i] = r_hi[i].max(r[i]);
+            }
+        }
+        // Pixel lengths of the edges, sorted as the chords are (nearly: the order of two
+        // edges of almost equal length does not matter to their sorted values).
+        let mut px = [0.0; 6];
+        let mut k = 0;
+        for i in 0..4 {
+            for j in i + 1..4 {
+                let (a, b) = (&detections[stars[i]], &detections[stars[j]]);
+                px[k] = (a.x - b.x).hypot(a.y - b.y);
+                k += 1;
+            }
+        }
+        px.sort_by(f64::total_cmp);
+        if px[0] <= 2.0 * tol_px {
+            continue;
+        }
+        // Each ratio's bins: first, and how many.
+        let mut bins = [(0u32, 0usize); 5];
+        let mut count = 1usize;
+        for i in 0..5 {
+            let slack = r_hi[i] * tol_px * (1.0 / px[i] + 1.0 / px[5]);
+            let first = patterns::bin(r_lo[i] - slack);
+            bins[i] = (first, (patterns::bin(r_hi[i] + slack) - first) as usize + 1);
+            count *= bins[i].1;
+        }
+        if count > MAX_QUERIES {
+            continue;
+        }
+        let start = out.queries.len();
+        let mut cell = [0u32; 5];
+        for k in 0..count {
+            let mut rest = k;
+            for i in 0..5 {
+                let (first, width) = bins[i];
+                cell[i] = first + (rest % width) as u32;
+                rest /= width;
+            }
+            out.queries.push(patterns::key_of(&cell));
+        }
+        debug_assert!(cell.iter().all(|&b| b < BINS));
+        out.quads.push(Quad {
+            stars,
+            queries: start..out.queries.len(),
+        });
+    }
+    out
+}
+
+/// A quad hypothesis that passed the geometric checks: image stars `stars[i]` are reference
+/// stars `refs[i]` at focal-length factor `scale`, attitude `r`.
+#[derive(Clone, Copy, Debug)]
+pub struct Hypothesis {
+    pub stars: [usize; 4],
+    pub refs: [u32; 4],
+    pub scale: f64,
+    pub r: Matrix3<f64>,
+}
+
+/// The 24 orders of four items.
+fn permutations() -> Vec<[usize; 4]> {
+    let mut out = Vec::with_capacity(24);
+    for a in 0..4 {
+        for b in 0..4 {
+            for c in 0..4 {
+                for d in 0..4 {
+                    let p = [a, b, c, d];
+                    if (0..4).all(|i| p.contains(&i)) {
+                        out.push(p);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+
+impl Solver {
+    /// The queries of a frame for the scale-free pass; None when the solver has no pattern
+    /// index (a known scale) or the frame has too few stars.
+    pub fn scale_free_lookup(&self, detections: &[Detection]) -> Option<Lookup> {
+        self.scale_free.as_ref()?;
+        let range = self.settings.scale_range?;
+        if detections.len() < 4 {
+            return None;
+        }
+        Some(lookup(
+            detections,
+            &self.camera,
+            range,
+            self.settings.identify.pair_tol_px,
+        ))
+    }
+
+    /// The scale-free pass after the lookup (`rows[q]` answers `lookup.queries[q]`): the
+    /// quad hypotheses that pass the geometric checks, each refined in turn (the first
+    /// [`MAX_REFINED`]); the first accepted concludes as the vote's solutions do. None when
+    /// none is accepted.
+    pub fn finish_scale_free(
+        &self,
+        detections: &[Detection],
+        lookup: &Lookup,
+        rows: &[Rows],
+        epoch: Option<f64>,
+    ) -> Option<Outcome> {
+        let sf = self.scale_free.as_ref()?;
+        let (lo, hi) = self.settings.scale_range?;
+        let refs = &self.bands[sf.band].refs;
+        let perms = permutations();
+        let mut hyps: Vec<Hypothesis> = Vec::new();
+        for quad in &lookup.quads {
+            for r in &rows[quad.queries.clone()] {
+                for row in r.start as usize..(r.end as usize).min(sf.index.len()) {
+                    let ids = sf.index.quads[row];
+                    if let Some(h) =
+                        self.check_quad(detections, quad.stars, ids, refs, (lo, hi), &perms)
+                    {
+                        hyps.push(h);
+                    }
+                }
+            }
+        }
+        if hyps.is_empty() {
+            return None;
+        }
+        // Every hypothesis of the frame, as every pass it can be tried with (this one among
+        // them) multiplies the vote's: each is judged against its share of the budget.
+        let hypotheses = (hyps.len() as u64).saturating_mul(
+            STAGES
+                * self.settings.searches
+                * self.detection_stages()
+                * self.passes_for(detections.len()) as u64,
+        );
+        for h in hyps.iter().take(MAX_REFINED) {
+            let p = self.scale_free_prepared(h.scale);
+            let refs = self.bands[p.band].refs_at(epoch);
+            let Some(refined) =
+                refine::refine(h.r, detections, &refs, &p.camera, hypotheses, 4, &p.refine)
+            else {
+                continue;
+            };
+            if refined.false_match_prob <= self.settings.refine.max_false_prob {
+                return Some(self.conclude(detections, &p, (refined, hypotheses, 4), epoch));
+            }
+        }
+        None
+    }
+
+    /// The pass settings at a quad's focal length, as the scale walk's at that scale: its
+    /// band, the scale step's tolerance, the focal length fitted.
+    fn scale_free_prepared(&self, scale: f64) -> Prepared {
+        let mut s = self.settings.identify;
+        let mut rs = self.settings.refine;
+        s.scale_tol += SCALE_STEP / 2.0;
+        if rs.fit == CameraFit::None {
+            rs.fit = CameraFit::Scale;
+        }
+        Prepared {
+            camera: scaled(&self.camera, scale),
+            band: self.band_of(scale),
+            vectors: Vec::new(),
+            ranges: Vec::new(),
+            n_vote: 0,
+            k: 0,
+            triangle_stars: 0,
+            identify: s,
+            refine: rs,
+        }
+    }
+
+    /// A catalog quad against an image quad: the order of its stars whose chords best match
+    /// the image's up to scale, the focal length that matches them (within `lo..hi`), every
+    /// chord then within twice the pair tolerance, and the attitude of the four stars
+    /// (Wahba) placing each within that tolerance (which refuses a mirror image).
+    fn check_quad(
+        &self,
+        detections: &[Detection],
+        stars: [usize; 4],
+        ids: [u32; 4],
+        refs: &crate::catalog::RefCatalog,
+        (lo, hi): (f64, f64),
+        perms: &[[usize; 4]],
+    ) -> Option<Hypothesis> {
+        let cat = ids.map(|id| refs.stars[id as usize].v);
+        let at = |s: f64| {
+            let c = scaled(&self.camera, s);
+            stars.map(|i| c.pixel_to_vector(detections[i].x, detections[i].y))
+        };
+        let img1 = patterns::chords(&at(1.0));
+        // The order of the catalog stars: the closest chords up to one scale factor.
+        let mut best: Option<(f64, [usize; 4])> = None;
+        for p in perms {
+            let c: Vec<f64> = PAIRS
+                .iter()
+                .map(|&(i, j)| (cat[p[i]] - cat[p[j]]).norm())
+                .collect();
+            let k = c.iter().sum::<f64>() / img1.iter().sum::<f64>();
+            let err = (0..6)
+                .map(|e| (img1[e] * k - c[e]).abs() / c[e].max(1e-12))
+                .fold(0.0, f64::max);
+            if best.is_none_or(|(b, _)| err < b) {
+                best = Some((err, *p));
+            }
+        }
+        let (_, p) = best?;
+        let cat = p.map(|i| cat[i]);
+        let refs_in_order = p.map(|i| ids[i]);
+        let cat_chords = patterns::chords(&cat);
+        let sum_cat: f64 = cat_chords.iter().sum();
+        // Image chords shrink as the focal length grows: a few fixed-point steps.
+        let mut scale = 1.0;
+        for _ in 0..4 {
+            let sum_img: f64 = patterns::chords(&at(scale)).iter().sum();
+            scale *= sum_img / sum_cat;
+        }
+        let margin = 1.0 + SCALE_STEP;
+        if !(scale >= lo / margin && scale <= hi * margin) {
+            return None;
+        }
+        let camera = scaled(&self.camera, scale);
+        let img = at(scale);
+        let s = &self.settings.identify;
+        let img_chords = patterns::chords(&img);
+        for e in 0..6 {
+            let d = crate::catalog::table::angle_of_chord(cat_chords[e]);
+            let tol = 2.0 * s.tolerance(&camera, d);
+            let di = crate::catalog::table::angle_of_chord(img_chords[e]);
+            if (di - d).abs() > tol {
+                return None;
+            }
+        }
+        let r = super::attitude::wahba(&img, &cat)?;
+        let tol = 2.0 * s.pair_tol_px * camera.ifov_rad();
+        if (0..4).any(|i| angle(&(r * cat[i]), &img[i]) > tol) {
+            return None;
+        }
+        Some(Hypothesis {
+            stars,
+            refs: refs_in_order,
+            scale,
+            r,
+        })
+    }
+}
+
+/// The lookup on the CPU twin: rows of every query.
+pub fn rows_cpu(index: &PatternIndex, lookup: &Lookup) -> Vec<Rows> {
+    crate::cpu::pattern::pattern(&index.keys, &lookup.queries)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quads_come_brightest_first_and_once_each() {
+        let q = quad_order(6);
+        assert_eq!(q.len(), 15);
+        assert_eq!(q[0], [0, 1, 2, 3]);
+        assert_eq!(q[1], [0, 1, 2, 4]);
+        let mut sorted = q.clone();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), 15);
+        assert_eq!(permutations().len(), 24);
+    }
+}
