@@ -361,7 +361,10 @@ impl GpuRunner {
             .iter()
             .enumerate()
             .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
-            .filter_map(|(i, d)| solver.scale_free_lookup(d).map(|l| (i, l)))
+            .filter_map(|(i, d)| {
+                let rounds = scale_free::rounds_for(d.len());
+                solver.scale_free_lookup(d, 0..rounds).map(|l| (i, l))
+            })
             .collect();
         if lookups.is_empty() {
             return Ok(());
@@ -451,7 +454,7 @@ impl GpuRunner {
                 let band = &solver.bands[key.2];
                 let t = self
                     .gpu
-                    .upload_table(&band.table, band.refs.len())
+                    .upload_table(band.table(), band.refs.len())
                     .map_err(|e| format!("{e:#}"));
                 self.tables.insert(key, t);
             }
@@ -467,7 +470,7 @@ impl GpuRunner {
                     k: p.k,
                 })
                 .collect();
-            let voted = self.gpu.vote(&solver.bands[key.2].table, table, &jobs)?;
+            let voted = self.gpu.vote(solver.bands[key.2].table(), table, &jobs)?;
             for ((i, p), v) in prepared.iter().zip(voted) {
                 outcomes[*i] = solver.finish(&detections[*i], p, &v, epochs[*i]);
             }

@@ -13,7 +13,7 @@
 //! edge's length in pixels. Every key bin the interval touches is a query (at most
 //! [`MAX_QUERIES`] per quad: quads of short edges are too vague to look up).
 
-use super::bands::{SCALE_STEP, STAGES, scaled};
+use super::bands::{SCALE_STEP, scaled};
 use super::detect::Detection;
 use super::refine::{self, CameraFit};
 use super::{Outcome, Prepared, Solver};
@@ -22,8 +22,20 @@ use crate::catalog::patterns::{self, BINS, PatternIndex};
 use crate::cpu::pattern::Rows;
 use nalgebra::{Matrix3, Vector3};
 
-/// The brightest detections whose quads are looked up (210 quads).
-pub const PATTERN_STARS: usize = 10;
+/// The rounds of the pass: round r looks up the quads of the brightest `ROUND_STARS[r]`
+/// detections not looked up before (210, then 1155, 3480 and 22,560 more). False stars (satellites,
+/// glints) can outshine most real ones: on 18° frames with 25 false stars the brightest 10
+/// detections held too few real stars for a quad of the catalog's. Each round is judged
+/// against its share of the false-match budget, so a frame that solves in the first pays
+/// nothing for the others' hypotheses, and the chance that any round accepts a wrong attitude
+/// stays within the whole.
+pub const ROUND_STARS: [usize; 4] = [10, 15, 20, 30];
+
+/// The pass takes half of the false-match budget and the scale walk's passes share the other
+/// half (`Solver::passes_for`): counted as one more of the walk's thousands of passes, its
+/// share would be a few thousandths, and a frame of few stars, whose right quad matches 7 of
+/// its 10 stars, would go on to the walk (seconds) to be solved there.
+pub const SCALE_FREE_SHARE: u64 = 2;
 
 /// Queries (key bins) one image quad may take; a quad whose ratios are vaguer is not looked up.
 pub const MAX_QUERIES: usize = 32;
@@ -45,6 +57,8 @@ pub struct ScaleFree {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Quad {
     pub stars: [usize; 4],
+    /// The round it belongs to (see [`ROUND_STARS`]).
+    pub round: usize,
     pub queries: std::ops::Range<usize>,
 }
 
@@ -72,22 +86,47 @@ pub fn quad_order(n: usize) -> Vec<[usize; 4]> {
     out
 }
 
-/// The image quads of the brightest [`PATTERN_STARS`] detections and their query keys, for
+/// How many rounds a frame of `n` detections has: those that bring in a quad.
+pub fn rounds_for(n: usize) -> usize {
+    let mut before = 0;
+    ROUND_STARS
+        .iter()
+        .take_while(|&&k| {
+            let more = n.min(k) > before && n.min(k) >= 4;
+            before = k;
+            more
+        })
+        .count()
+}
+
+/// The image quads of `rounds` (see [`ROUND_STARS`]), in order, and their query keys, for
 /// focal-length factors `lo..hi` of `camera` and a centroid tolerance of `tol_px` per edge.
 pub fn lookup(
     detections: &[Detection],
     camera: &Camera,
     (lo, hi): (f64, f64),
     tol_px: f64,
+    rounds: std::ops::Range<usize>,
 ) -> Lookup {
-    let n = detections.len().min(PATTERN_STARS);
+    let n = detections.len().min(ROUND_STARS[ROUND_STARS.len() - 1]);
     let ends = [scaled(camera, lo), scaled(camera, hi)];
     let vectors: Vec<[Vector3<f64>; 2]> = detections[..n]
         .iter()
         .map(|d| ends.clone().map(|c| c.pixel_to_vector(d.x, d.y)))
         .collect();
     let mut out = Lookup::default();
-    for stars in quad_order(n) {
+    let rounds = rounds.filter(|&r| r < rounds_for(n)).flat_map(|round| {
+        let before = if round == 0 {
+            0
+        } else {
+            ROUND_STARS[round - 1]
+        };
+        quad_order(n.min(ROUND_STARS[round]))
+            .into_iter()
+            .filter(move |q| q[3] >= before)
+            .map(move |q| (round, q))
+    });
+    for (round, stars) in rounds {
         let mut r_lo = [f64::MAX; 5];
         let mut r_hi = [f64::MIN; 5];
         for e in 0..2 {
@@ -138,6 +177,7 @@ pub fn lookup(
         debug_assert!(cell.iter().all(|&b| b < BINS));
         out.quads.push(Quad {
             stars,
+            round,
             queries: start..out.queries.len(),
         });
     }
@@ -175,9 +215,13 @@ fn permutations() -> Vec<[usize; 4]> {
 const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
 
 impl Solver {
-    /// The queries of a frame for the scale-free pass; None when the solver has no pattern
-    /// index (a known scale) or the frame has too few stars.
-    pub fn scale_free_lookup(&self, detections: &[Detection]) -> Option<Lookup> {
+    /// The queries of a frame's `rounds` of the scale-free pass; None when the solver has no
+    /// pattern index (a known scale) or the frame has too few stars.
+    pub fn scale_free_lookup(
+        &self,
+        detections: &[Detection],
+        rounds: std::ops::Range<usize>,
+    ) -> Option<Lookup> {
         self.scale_free.as_ref()?;
         let range = self.settings.scale_range?;
         if detections.len() < 4 {
@@ -188,13 +232,14 @@ impl Solver {
             &self.camera,
             range,
             self.settings.identify.pair_tol_px,
+            rounds,
         ))
     }
 
-    /// The scale-free pass after the lookup (`rows[q]` answers `lookup.queries[q]`): the
-    /// quad hypotheses that pass the geometric checks, each refined in turn (the first
-    /// [`MAX_REFINED`]); the first accepted concludes as the vote's solutions do. None when
-    /// none is accepted.
+    /// The scale-free pass after the lookup (`rows[q]` answers `lookup.queries[q]`): round
+    /// by round (those the lookup holds), the quad hypotheses that pass the geometric checks, each refined in turn
+    /// (the first [`MAX_REFINED`] of a round); the first accepted concludes as the vote's
+    /// solutions do. None when none is accepted.
     pub fn finish_scale_free(
         &self,
         detections: &[Detection],
@@ -202,33 +247,64 @@ impl Solver {
         rows: &[Rows],
         epoch: Option<f64>,
     ) -> Option<Outcome> {
+        let perms = permutations();
+        let rounds = rounds_for(detections.len());
+        for round in 0..rounds {
+            let mut quads = lookup.quads.iter().filter(|q| q.round == round).peekable();
+            if quads.peek().is_none() {
+                continue;
+            }
+            if let Some(o) = self.scale_free_round(detections, quads, rows, rounds, epoch, &perms) {
+                return Some(o);
+            }
+        }
+        None
+    }
+
+    /// One round of the pass: its quads' hypotheses that pass the geometric checks, judged
+    /// against the round's share of the false-match budget.
+    fn scale_free_round<'a>(
+        &self,
+        detections: &[Detection],
+        quads: impl Iterator<Item = &'a Quad> + Clone,
+        rows: &[Rows],
+        rounds: usize,
+        epoch: Option<f64>,
+        perms: &[[usize; 4]],
+    ) -> Option<Outcome> {
         let sf = self.scale_free.as_ref()?;
         let (lo, hi) = self.settings.scale_range?;
         let refs = &self.bands[sf.band].refs;
-        let perms = permutations();
         let mut hyps: Vec<Hypothesis> = Vec::new();
-        for quad in &lookup.quads {
+        for quad in quads.clone() {
             for r in &rows[quad.queries.clone()] {
                 for row in r.start as usize..(r.end as usize).min(sf.index.len()) {
                     let ids = sf.index.quads[row];
                     if let Some(h) =
-                        self.check_quad(detections, quad.stars, ids, refs, (lo, hi), &perms)
+                        self.check_quad(detections, quad.stars, ids, refs, (lo, hi), perms)
                     {
                         hyps.push(h);
                     }
                 }
             }
         }
+        let found: u64 = quads
+            .clone()
+            .flat_map(|q| &rows[q.queries.clone()])
+            .map(|r| u64::from(r.end - r.start))
+            .sum();
+        tracing::debug!(
+            "scale-free round: {} quads, {found} patterns found, {} pass the checks",
+            quads.count(),
+            hyps.len()
+        );
         if hyps.is_empty() {
             return None;
         }
-        // Every hypothesis of the frame, as every pass it can be tried with (this one among
-        // them) multiplies the vote's: each is judged against its share of the budget.
+        // Every hypothesis of the round, times its rounds, judged against the pass's share of
+        // the budget (of each search and detection stage of the frame, as the vote's are).
         let hypotheses = (hyps.len() as u64).saturating_mul(
-            STAGES
-                * self.settings.searches
-                * self.detection_stages()
-                * self.passes_for(detections.len()) as u64,
+            rounds as u64 * SCALE_FREE_SHARE * self.settings.searches * self.detection_stages(),
         );
         for h in hyps.iter().take(MAX_REFINED) {
             let p = self.scale_free_prepared(h.scale);
@@ -238,6 +314,15 @@ impl Solver {
             else {
                 continue;
             };
+            tracing::debug!(
+                "scale-free quad {:?} = {:?} at scale {:.4}: {} matched of {} in view, P(false) {:.1e}",
+                h.stars,
+                h.refs,
+                h.scale,
+                refined.matches.len(),
+                refined.in_view,
+                refined.false_match_prob
+            );
             if refined.false_match_prob <= self.settings.refine.max_false_prob {
                 return Some(self.conclude(detections, &p, (refined, hypotheses, 4), epoch));
             }

@@ -164,9 +164,14 @@ impl Solver {
                 (lo * hi).sqrt()
             }
         };
+        // With a scale-free pass most frames never vote: the bands' tables are loaded when the
+        // first frame does (the pattern index is about a fifth of their size).
+        let lazy = settings.scale_range.is_some()
+            && settings.scale_free
+            && settings.method == crate::solve::radial::Method::Vote;
         let mut bands = edges
             .iter()
-            .map(|&e| Band::new(catalog, &camera, &settings, e, middle(e), None))
+            .map(|&e| Band::new(catalog, &camera, &settings, e, middle(e), None, lazy))
             .collect::<Result<Vec<Band>>>()?;
         // The shallow pass's band: with a known scale and the magnitude limit left to the
         // solver, when it is shallower than the automatic one by half a magnitude or more.
@@ -183,6 +188,7 @@ impl Solver {
                     (1.0, 1.0),
                     1.0,
                     Some(shallow_mag),
+                    false,
                 )
             })
             .transpose()?;
@@ -340,11 +346,18 @@ impl Solver {
     /// How many passes a frame of `n` detections can be tried with: the retries with more
     /// voting stars and with voters spread over the frame need more detections than vote
     /// (`prepare` passes them over otherwise), so they add no hypothesis to such a frame.
+    /// With the scale-free pass, which takes half the false-match budget (see
+    /// [`SCALE_FREE_SHARE`](super::scale_free::SCALE_FREE_SHARE)), the passes count twice: they
+    /// share the other half.
     pub fn passes_for(&self, n: usize) -> usize {
         let vote = self.settings.identify.vote_stars;
-        // The scale-free pass, when there is one, is one more way of trying the frame.
-        usize::from(self.scale_free.is_some())
-            + self
+        let share = if self.scale_free.is_some() {
+            super::scale_free::SCALE_FREE_SHARE as usize
+        } else {
+            1
+        };
+        share
+            * self
                 .passes
                 .iter()
                 .filter(|p| match p.kind {
@@ -359,16 +372,21 @@ impl Solver {
     /// one solves.
     pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
         let mut outcome = Outcome::Unsolved("too_few_stars");
-        if let Some(sf) = &self.scale_free
-            && let Some(lookup) = self.scale_free_lookup(&detections)
-        {
-            let rows = super::scale_free::rows_cpu(&sf.index, &lookup);
-            if let Some(o) = self.finish_scale_free(&detections, &lookup, &rows, epoch) {
-                return Solution {
-                    detections,
-                    outcome: o,
-                    epoch,
+        // The scale-free pass round by round: a round's lookup only when the ones before it
+        // did not solve (the GPU looks them all up at once; the records are the same).
+        if let Some(sf) = &self.scale_free {
+            for round in 0..super::scale_free::rounds_for(detections.len()) {
+                let Some(lookup) = self.scale_free_lookup(&detections, round..round + 1) else {
+                    break;
                 };
+                let rows = super::scale_free::rows_cpu(&sf.index, &lookup);
+                if let Some(o) = self.finish_scale_free(&detections, &lookup, &rows, epoch) {
+                    return Solution {
+                        detections,
+                        outcome: o,
+                        epoch,
+                    };
+                }
             }
         }
         for h in 0..self.passes.len() {
@@ -391,7 +409,7 @@ impl Solver {
                 }
                 _ => {
                     let voted =
-                        identify::vote_cpu(&band.table, &p.ranges, p.n_vote, band.refs.len(), p.k);
+                        identify::vote_cpu(band.table(), &p.ranges, p.n_vote, band.refs.len(), p.k);
                     self.finish(&detections, &p, &voted, epoch)
                 }
             };
@@ -641,7 +659,7 @@ impl Solver {
     ) -> Option<(Refined, u64, usize)> {
         let band = &self.bands[p.band];
         let (hyps, matched) = triangle::triangles(
-            &band.table,
+            band.table(),
             &p.ranges,
             &p.vectors[..p.triangle_stars],
             &band.refs,

@@ -60,7 +60,12 @@ fn pattern_gpu_matches_cpu() {
     for fov in [12.0, 18.0] {
         for (frame, _) in common::rendered(&sim(fov, 61), 2) {
             let dets = gpustar::solve::detect::detect(&frame, &solver.settings.detect);
-            queries.extend(solver.scale_free_lookup(&dets).unwrap().queries);
+            queries.extend(
+                solver
+                    .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
+                    .unwrap()
+                    .queries,
+            );
         }
     }
     // Keys beyond every pattern's, and the first and last keys, too.
@@ -94,7 +99,9 @@ fn unknown_fields_solve_in_the_scale_free_pass() {
         for (frame, truth) in common::rendered(&sim(fov, 62), 4) {
             frames += 1;
             let dets = gpustar::solve::detect::detect(&frame, &solver.settings.detect);
-            let lookup = solver.scale_free_lookup(&dets).unwrap();
+            let lookup = solver
+                .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
+                .unwrap();
             let rows = scale_free::rows_cpu(&sf.index, &lookup);
             let Some(Outcome::Solved(r, _)) = solver.finish_scale_free(&dets, &lookup, &rows, None)
             else {
