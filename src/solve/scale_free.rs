@@ -129,8 +129,10 @@ pub fn lookup(
     for (round, stars) in rounds {
         let mut r_lo = [f64::MAX; 5];
         let mut r_hi = [f64::MIN; 5];
-        for e in 0..2 {
-            let r = patterns::ratios(&patterns::chords(&stars.map(|i| vectors[i][e])));
+        // The ratios through the shortest and the longest focal length.
+        let ends =
+            (0..2).map(|e| patterns::ratios(&patterns::chords(&stars.map(|i| vectors[i][e]))));
+        for r in ends {
             for i in 0..5 {
                 r_lo[i] = r_lo[i].min(r[i]);
                 r_hi[i] = r_hi[i].max(r[i]);
