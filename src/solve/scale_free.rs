@@ -279,11 +279,21 @@ impl Solver {
         let refs = &self.bands[sf.band].refs;
         let mut hyps: Vec<Hypothesis> = Vec::new();
         for quad in quads.clone() {
+            // The image's chords at the camera's focal length, once a quad has a candidate.
+            let mut img1: Option<[f64; 6]> = None;
             for r in &rows[quad.queries.clone()] {
                 for row in r.start as usize..(r.end as usize).min(sf.index.len()) {
                     let ids = sf.index.quads[row];
+                    let img1 = *img1.get_or_insert_with(|| {
+                        let c = &self.camera;
+                        patterns::chords(
+                            &quad
+                                .stars
+                                .map(|i| c.pixel_to_vector(detections[i].x, detections[i].y)),
+                        )
+                    });
                     if let Some(h) =
-                        self.check_quad(detections, quad.stars, ids, refs, (lo, hi), perms)
+                        self.check_quad(detections, quad.stars, &img1, ids, refs, (lo, hi), perms)
                     {
                         hyps.push(h);
                     }
@@ -358,10 +368,12 @@ impl Solver {
     /// the image's up to scale, the focal length that matches them (within `lo..hi`), every
     /// chord then within twice the pair tolerance, and the attitude of the four stars
     /// (Wahba) placing each within that tolerance (which refuses a mirror image).
+    #[allow(clippy::too_many_arguments)]
     fn check_quad(
         &self,
         detections: &[Detection],
         stars: [usize; 4],
+        img1: &[f64; 6],
         ids: [u32; 4],
         refs: &crate::catalog::RefCatalog,
         (lo, hi): (f64, f64),
@@ -372,17 +384,26 @@ impl Solver {
             let c = scaled(&self.camera, s);
             stars.map(|i| c.pixel_to_vector(detections[i].x, detections[i].y))
         };
-        let img1 = patterns::chords(&at(1.0));
-        // The order of the catalog stars: the closest chords up to one scale factor.
+        // The catalog chords, each pair once; every order of the stars reads them.
+        let mut d = [[0.0; 4]; 4];
+        for &(i, j) in &PAIRS {
+            d[i][j] = (cat[i] - cat[j]).norm();
+            d[j][i] = d[i][j];
+        }
+        let sum_cat: f64 = PAIRS.iter().map(|&(i, j)| d[i][j]).sum();
+        // The image's chords at the camera's own focal length, and the scale that brings
+        // their sum to the catalog's.
+        let k = sum_cat / img1.iter().sum::<f64>();
+        // The order of the catalog stars: the closest chords up to that scale factor.
         let mut best: Option<(f64, [usize; 4])> = None;
         for p in perms {
-            let c: Vec<f64> = PAIRS
+            let err = PAIRS
                 .iter()
-                .map(|&(i, j)| (cat[p[i]] - cat[p[j]]).norm())
-                .collect();
-            let k = c.iter().sum::<f64>() / img1.iter().sum::<f64>();
-            let err = (0..6)
-                .map(|e| (img1[e] * k - c[e]).abs() / c[e].max(1e-12))
+                .zip(img1)
+                .map(|(&(i, j), x)| {
+                    let c = d[p[i]][p[j]];
+                    (x * k - c).abs() / c.max(1e-12)
+                })
                 .fold(0.0, f64::max);
             if best.is_none_or(|(b, _)| err < b) {
                 best = Some((err, *p));
@@ -392,10 +413,10 @@ impl Solver {
         let cat = p.map(|i| cat[i]);
         let refs_in_order = p.map(|i| ids[i]);
         let cat_chords = patterns::chords(&cat);
-        let sum_cat: f64 = cat_chords.iter().sum();
-        // Image chords shrink as the focal length grows: a few fixed-point steps.
-        let mut scale = 1.0;
-        for _ in 0..4 {
+        // Image chords shrink about as the focal length grows: from 1 / k, a few fixed-point
+        // steps.
+        let mut scale = 1.0 / k;
+        for _ in 0..3 {
             let sum_img: f64 = patterns::chords(&at(scale)).iter().sum();
             scale *= sum_img / sum_cat;
         }
