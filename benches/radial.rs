@@ -94,7 +94,7 @@ fn main() {
             let band = &solver.bands[0];
             let mb = match &band.radial {
                 Some(t) => t.bytes(),
-                None => band.table.bytes(),
+                None => band.table().bytes(),
             } as f64
                 / 1e6;
             let prepared: Vec<_> = dets.iter().filter_map(|d| solver.prepare(d, 0)).collect();
@@ -113,7 +113,7 @@ fn main() {
                     })
                 }
                 None => {
-                    let table = g.upload_table(&band.table, band.refs.len()).unwrap();
+                    let table = g.upload_table(band.table(), band.refs.len()).unwrap();
                     let jobs: Vec<VoteJob> = prepared
                         .iter()
                         .map(|p| VoteJob {
@@ -123,7 +123,7 @@ fn main() {
                         })
                         .collect();
                     median_ms(3, || {
-                        g.vote(&band.table, &table, &jobs).unwrap();
+                        g.vote(band.table(), &table, &jobs).unwrap();
                     })
                 }
             });

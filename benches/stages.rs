@@ -74,7 +74,7 @@ fn main() {
         let solver = Solver::new(&catalog, camera, solve_settings).unwrap();
         let p = detect::params(&distinct[0], &settings);
         // A known scale: one band.
-        let table = &solver.bands[0].table;
+        let table = solver.bands[0].table();
         let n_ref = solver.bands[0].refs.len();
         let jobs_of = |frames: &[&Frame]| -> Vec<VoteJob> {
             frames

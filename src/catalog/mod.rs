@@ -11,6 +11,7 @@ pub mod cells;
 pub mod formats;
 mod id;
 mod import;
+pub mod patterns;
 pub mod store;
 pub mod table;
 

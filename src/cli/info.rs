@@ -109,7 +109,7 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
                     .count()
             )?;
         }
-        let (refs, t, origin) = (&band.refs, &band.table, &band.table_origin);
+        let (refs, t, origin) = (&band.refs, band.table(), band.table_origin());
         writeln!(
             out,
             "reference stars: {} with Hp <= {}{}; double stars ({:?}, < {} px): {} removed",

@@ -3,6 +3,7 @@
 
 pub mod centroid;
 pub mod components;
+pub mod pattern;
 pub mod psf_fit;
 pub mod radial;
 pub mod select;

@@ -7,6 +7,7 @@
 //! Each kernel in `shaders/` has its CPU twin in `src/cpu/` with the same name.
 
 pub mod detect;
+pub mod pattern;
 pub mod psf_fit;
 pub mod radial;
 pub mod vote;
@@ -81,6 +82,7 @@ pub const KERNELS: &[(&str, &str, &str)] = &[
     ),
     ("psf_fit", "", include_str!("../../shaders/psf_fit.wgsl")),
     ("radial", "", include_str!("../../shaders/radial.wgsl")),
+    ("pattern", "", include_str!("../../shaders/pattern.wgsl")),
 ];
 
 /// The full WGSL source of a kernel (shared prelude + body).
@@ -141,6 +143,7 @@ struct Kernels {
     select: wgpu::ComputePipeline,
     psf_fit: wgpu::ComputePipeline,
     radial: wgpu::ComputePipeline,
+    pattern: wgpu::ComputePipeline,
 }
 
 /// The GPU context: built once, used for every batch.
@@ -262,6 +265,7 @@ impl Gpu {
             select: pipeline(&device, "select"),
             psf_fit: pipeline(&device, "psf_fit"),
             radial: pipeline(&device, "radial"),
+            pattern: pipeline(&device, "pattern"),
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             fail!(Gpu, "building the GPU kernels failed on {}: {e}", info.name);

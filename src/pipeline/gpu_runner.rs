@@ -7,13 +7,14 @@ use super::{
 use crate::cpu::centroid::Blob;
 use crate::error::{Result, error, fail};
 use crate::gpu::Gpu;
+use crate::gpu::pattern::GpuPatterns;
 use crate::gpu::radial::{GpuRadial, RadialJob};
 use crate::gpu::vote::{GpuTable, VoteJob};
 use crate::io::frame::Frame;
 use crate::record::{Record, Timing};
 use crate::solve::detect::{self, DetectSettings, Detection};
-use crate::solve::radial;
 use crate::solve::{Outcome, Prepared, Solution, Solver};
+use crate::solve::{radial, scale_free};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -25,6 +26,8 @@ pub struct GpuRunner {
     pub(crate) tables: HashMap<(u32, u32, usize), std::result::Result<GpuTable, String>>,
     /// The bands' radial features (`--method radial`), uploaded like the tables.
     pub(crate) radial: HashMap<(u32, u32, usize), std::result::Result<GpuRadial, String>>,
+    /// The pattern index keys of the scale-free pass, by frame size.
+    pub(crate) patterns: HashMap<(u32, u32), std::result::Result<GpuPatterns, String>>,
     /// Set once the GPU failed: the rest of the run is on the CPU.
     pub(crate) failed: bool,
 }
@@ -35,6 +38,7 @@ impl GpuRunner {
             gpu,
             tables: HashMap::new(),
             radial: HashMap::new(),
+            patterns: HashMap::new(),
             failed: false,
         }
     }
@@ -294,6 +298,7 @@ impl GpuRunner {
             global.solver()
         };
         if let Some(solver) = &global_solver {
+            self.scale_free_pass(solver, &detections, epochs, &mut outcomes)?;
             self.vote_passes(solver, &detections, epochs, &mut outcomes)?;
         }
         let mut solutions: Vec<Solution> = detections
@@ -337,6 +342,57 @@ impl GpuRunner {
             detect_ms,
             t1.elapsed().as_secs_f64() * 1e3,
         ))
+    }
+
+    /// The scale-free first pass (when the scale is searched) for the frames not solved yet:
+    /// every frame's quad keys looked up in one submission, then each frame's hypotheses
+    /// refined on the CPU, as `Solver::identify` does before its passes.
+    fn scale_free_pass(
+        &mut self,
+        solver: &Solver,
+        detections: &[Vec<Detection>],
+        epochs: &[Option<f64>],
+        outcomes: &mut [Outcome],
+    ) -> Result<()> {
+        let Some(sf) = &solver.scale_free else {
+            return Ok(());
+        };
+        let lookups: Vec<(usize, scale_free::Lookup)> = detections
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
+            .filter_map(|(i, d)| {
+                let rounds = scale_free::rounds_for(d.len());
+                solver.scale_free_lookup(d, 0..rounds).map(|l| (i, l))
+            })
+            .collect();
+        if lookups.is_empty() {
+            return Ok(());
+        }
+        let key = (solver.camera.width, solver.camera.height);
+        let index = self.patterns.entry(key).or_insert_with(|| {
+            self.gpu
+                .upload_patterns(&sf.index)
+                .map_err(|e| format!("{e:#}"))
+        });
+        let index = match index {
+            Ok(t) => t,
+            Err(e) => fail!(Gpu, "{e}"),
+        };
+        let queries: Vec<u32> = lookups
+            .iter()
+            .flat_map(|(_, l)| l.queries.iter().copied())
+            .collect();
+        let rows = self.gpu.pattern(index, &queries)?;
+        let mut at = 0;
+        for (i, l) in &lookups {
+            let own = &rows[at..at + l.queries.len()];
+            at += l.queries.len();
+            if let Some(o) = solver.finish_scale_free(&detections[*i], l, own, epochs[*i]) {
+                outcomes[*i] = o;
+            }
+        }
+        Ok(())
     }
 
     /// The passes of lost-in-space identification for the frames not solved yet: for each
@@ -398,7 +454,7 @@ impl GpuRunner {
                 let band = &solver.bands[key.2];
                 let t = self
                     .gpu
-                    .upload_table(&band.table, band.refs.len())
+                    .upload_table(band.table(), band.refs.len())
                     .map_err(|e| format!("{e:#}"));
                 self.tables.insert(key, t);
             }
@@ -414,7 +470,7 @@ impl GpuRunner {
                     k: p.k,
                 })
                 .collect();
-            let voted = self.gpu.vote(&solver.bands[key.2].table, table, &jobs)?;
+            let voted = self.gpu.vote(solver.bands[key.2].table(), table, &jobs)?;
             for ((i, p), v) in prepared.iter().zip(voted) {
                 outcomes[*i] = solver.finish(&detections[*i], p, &v, epochs[*i]);
             }

@@ -9,7 +9,7 @@ use crate::catalog::table::{self, PairTable, TableOrigin};
 use crate::catalog::{Catalog, RefCatalog, Selection};
 use crate::error::Result;
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// Widest ratio of focal lengths one band of a scale search covers. A band's reference stars
 /// are those for its middle field (about [`AUTO_STARS_IN_VIEW`](super::AUTO_STARS_IN_VIEW) in view there, from 27 to 60
@@ -36,8 +36,12 @@ pub struct Band {
     pub lo: f64,
     pub hi: f64,
     pub refs: Arc<RefCatalog>,
-    pub table: PairTable,
-    pub table_origin: TableOrigin,
+    /// The distance table and how it was obtained: loaded when the band is made, or (with a
+    /// scale-free pass, which solves most frames without it) when first asked for.
+    table: OnceLock<(PairTable, TableOrigin)>,
+    /// What the table is made from: the catalog's content hash, the largest separation, and
+    /// whether the cache is used.
+    table_from: (u64, f64, bool),
     /// The reference stars' radial features (`--method radial`), from `table`.
     pub radial: Option<crate::solve::radial::RadialTable>,
     /// `refs` moved to the epochs of frames that carry their own date, by day.
@@ -54,6 +58,7 @@ impl Band {
         (lo, hi): (f64, f64),
         middle: f64,
         mag_limit: Option<f64>,
+        lazy: bool,
     ) -> Result<Band> {
         let middle = scaled(camera, middle);
         let selection = Selection {
@@ -66,17 +71,22 @@ impl Band {
         };
         let refs = RefCatalog::select(catalog, selection)?;
         check_table_size(&refs, scaled(camera, lo).diagonal_rad())?;
-        let (table, table_origin) = table::load_or_build(
-            &refs,
+        let table_from = (
             catalog.content_hash,
             scaled(camera, lo).diagonal_rad(),
             settings.table_cache,
         );
-        let radial = (settings.method == crate::solve::radial::Method::Radial).then(|| {
+        let table = OnceLock::new();
+        let radial = settings.method == crate::solve::radial::Method::Radial;
+        if !lazy || radial {
+            let _ = table.set(load_table(&refs, table_from));
+        }
+        let radial = radial.then(|| {
             let s = &settings.identify;
+            let table = &table.get().expect("loaded above").0;
             crate::solve::radial::RadialTable::load_or_build(
                 &refs,
-                &table,
+                table,
                 table::cache_key(&refs, catalog.content_hash, table.max_sep_rad),
                 s.pair_tol_px * middle.ifov_rad(),
                 s.scale_tol,
@@ -89,10 +99,25 @@ impl Band {
             hi,
             refs: Arc::new(refs),
             table,
-            table_origin,
+            table_from,
             radial,
             epochs: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// The distance table (loaded or built now if it was not yet).
+    pub fn table(&self) -> &PairTable {
+        &self.loaded().0
+    }
+
+    /// How the distance table was obtained (loading it now if it was not yet).
+    pub fn table_origin(&self) -> &TableOrigin {
+        &self.loaded().1
+    }
+
+    fn loaded(&self) -> &(PairTable, TableOrigin) {
+        self.table
+            .get_or_init(|| load_table(&self.refs, self.table_from))
     }
 
     /// The reference stars at a frame's own epoch (`refs` when it has none, or the same).
@@ -115,6 +140,13 @@ impl Band {
             .or_insert_with(|| Arc::new(self.refs.at_epoch(day_epoch(day))))
             .clone()
     }
+}
+
+fn load_table(
+    refs: &RefCatalog,
+    (hash, max_sep, cache): (u64, f64, bool),
+) -> (PairTable, TableOrigin) {
+    table::load_or_build(refs, hash, max_sep, cache)
 }
 
 /// The most pairs a lost-in-space distance table may be expected to hold: 500 million rows

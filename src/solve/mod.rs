@@ -13,6 +13,7 @@ mod mag_limit;
 pub mod radial;
 pub mod refine;
 mod report;
+pub mod scale_free;
 mod solver;
 pub mod triangle;
 

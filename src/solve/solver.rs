@@ -17,7 +17,7 @@ use super::mag_limit::{FULL_SKY_SR, SHALLOW_STARS_IN_VIEW, auto_mag_limit_in, ma
 use super::refine::{self, RefineSettings, Refined};
 use super::triangle;
 use crate::camera::Camera;
-use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
+use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection, patterns};
 use crate::error::Result;
 use crate::io::frame::Frame;
 use nalgebra::Vector3;
@@ -44,6 +44,9 @@ pub struct Settings {
     /// When the scale is uncertain: the range of the true focal length relative to the
     /// camera's, (lower, upper). The solver tries scales across it.
     pub scale_range: Option<(f64, f64)>,
+    /// When the scale is searched, look the frame's star quads up in a pattern index first
+    /// (`scale_free.rs`); the scale walk then takes only the frames that does not solve.
+    pub scale_free: bool,
     /// Frames that do not solve are tried again: with more voting stars
     /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`](super::SPREAD_CELLS)), then
     /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
@@ -73,6 +76,7 @@ impl Default for Settings {
             refine: RefineSettings::default(),
             table_cache: true,
             scale_range: None,
+            scale_free: true,
             retry: true,
             detect_retry: true,
             method: crate::solve::radial::Method::Vote,
@@ -99,6 +103,8 @@ pub struct Solver {
     deeper: Option<Deeper>,
     /// The band of the shallow pass, when there is one (the last of `bands`).
     pub shallow_band: Option<usize>,
+    /// When the scale is searched: the pattern index of the scale-free first pass.
+    pub scale_free: Option<super::scale_free::ScaleFree>,
 }
 
 /// A frame's input to the vote.
@@ -158,9 +164,14 @@ impl Solver {
                 (lo * hi).sqrt()
             }
         };
+        // With a scale-free pass most frames never vote: the bands' tables are loaded when the
+        // first frame does (the pattern index is about a fifth of their size).
+        let lazy = settings.scale_range.is_some()
+            && settings.scale_free
+            && settings.method == crate::solve::radial::Method::Vote;
         let mut bands = edges
             .iter()
-            .map(|&e| Band::new(catalog, &camera, &settings, e, middle(e), None))
+            .map(|&e| Band::new(catalog, &camera, &settings, e, middle(e), None, lazy))
             .collect::<Result<Vec<Band>>>()?;
         // The shallow pass's band: with a known scale and the magnitude limit left to the
         // solver, when it is shallower than the automatic one by half a magnitude or more.
@@ -177,6 +188,7 @@ impl Solver {
                     (1.0, 1.0),
                     1.0,
                     Some(shallow_mag),
+                    false,
                 )
             })
             .transpose()?;
@@ -227,7 +239,33 @@ impl Solver {
             );
         }
         let shallow_band = (bands.len() > main_bands).then_some(main_bands);
+        let scale_free = match settings.scale_range {
+            Some(range)
+                if settings.scale_free && settings.method == crate::solve::radial::Method::Vote =>
+            {
+                // The quads name the stars of the narrowest field's band, the deepest.
+                let band = main_bands - 1;
+                let levels = patterns::levels_for(
+                    short_side(&camera, range.1),
+                    short_side(&camera, range.0),
+                );
+                let (index, built, seconds) = patterns::load_or_build(
+                    &bands[band].refs,
+                    catalog.content_hash,
+                    &levels,
+                    settings.table_cache,
+                );
+                Some(super::scale_free::ScaleFree {
+                    index,
+                    band,
+                    built,
+                    seconds,
+                })
+            }
+            _ => None,
+        };
         Ok(Solver {
+            scale_free,
             camera,
             settings,
             shallow_band,
@@ -308,22 +346,49 @@ impl Solver {
     /// How many passes a frame of `n` detections can be tried with: the retries with more
     /// voting stars and with voters spread over the frame need more detections than vote
     /// (`prepare` passes them over otherwise), so they add no hypothesis to such a frame.
+    /// With the scale-free pass, which takes half the false-match budget (see
+    /// [`SCALE_FREE_SHARE`](super::scale_free::SCALE_FREE_SHARE)), the passes count twice: they
+    /// share the other half.
     pub fn passes_for(&self, n: usize) -> usize {
         let vote = self.settings.identify.vote_stars;
-        self.passes
-            .iter()
-            .filter(|p| match p.kind {
-                PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
-                PassKind::Spread => n > vote,
-                _ => true,
-            })
-            .count()
+        let share = if self.scale_free.is_some() {
+            super::scale_free::SCALE_FREE_SHARE as usize
+        } else {
+            1
+        };
+        share
+            * self
+                .passes
+                .iter()
+                .filter(|p| match p.kind {
+                    PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
+                    PassKind::Spread => n > vote,
+                    _ => true,
+                })
+                .count()
     }
 
     /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
     /// one solves.
     pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
         let mut outcome = Outcome::Unsolved("too_few_stars");
+        // The scale-free pass round by round: a round's lookup only when the ones before it
+        // did not solve (the GPU looks them all up at once; the records are the same).
+        if let Some(sf) = &self.scale_free {
+            for round in 0..super::scale_free::rounds_for(detections.len()) {
+                let Some(lookup) = self.scale_free_lookup(&detections, round..round + 1) else {
+                    break;
+                };
+                let rows = super::scale_free::rows_cpu(&sf.index, &lookup);
+                if let Some(o) = self.finish_scale_free(&detections, &lookup, &rows, epoch) {
+                    return Solution {
+                        detections,
+                        outcome: o,
+                        epoch,
+                    };
+                }
+            }
+        }
         for h in 0..self.passes.len() {
             let Some(p) = self.prepare(&detections, h) else {
                 continue;
@@ -344,7 +409,7 @@ impl Solver {
                 }
                 _ => {
                     let voted =
-                        identify::vote_cpu(&band.table, &p.ranges, p.n_vote, band.refs.len(), p.k);
+                        identify::vote_cpu(band.table(), &p.ranges, p.n_vote, band.refs.len(), p.k);
                     self.finish(&detections, &p, &voted, epoch)
                 }
             };
@@ -430,7 +495,7 @@ impl Solver {
 
     /// An accepted solution, refined again against the deeper selection its field calls for
     /// (or from the shallow band against the main one).
-    fn conclude(
+    pub(crate) fn conclude(
         &self,
         detections: &[Detection],
         p: &Prepared,
@@ -594,7 +659,7 @@ impl Solver {
     ) -> Option<(Refined, u64, usize)> {
         let band = &self.bands[p.band];
         let (hyps, matched) = triangle::triangles(
-            &band.table,
+            band.table(),
             &p.ranges,
             &p.vectors[..p.triangle_stars],
             &band.refs,
@@ -703,4 +768,11 @@ impl Solver {
             scale,
         )
     }
+}
+
+/// The angle the shorter side of `camera`'s frame spans at focal-length factor `scale`.
+fn short_side(camera: &Camera, scale: f64) -> f64 {
+    let half =
+        (camera.width as f64 / (2.0 * camera.fx)).min(camera.height as f64 / (2.0 * camera.fy));
+    2.0 * (half / scale).atan()
 }

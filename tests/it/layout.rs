@@ -2,9 +2,11 @@
 //! features), and every host↔WGSL struct has the same field offsets and size on both sides.
 
 use gpustar::cpu::centroid::Blob;
+use gpustar::cpu::pattern::Rows;
 use gpustar::cpu::streak_filter::StreakParams;
 use gpustar::cpu::threshold::{DetectParams, TileStats};
 use gpustar::gpu::detect::{BatchParams, DetectUniform, StreakUniform};
+use gpustar::gpu::pattern::PatternUniform;
 use gpustar::gpu::psf_fit::{FitOut, PsfUniform};
 use gpustar::gpu::radial::RadialUniform;
 use gpustar::gpu::vote::{RowSpan, VoteUniform};
@@ -121,6 +123,15 @@ fn host_and_wgsl_structs_have_the_same_layout() {
         RadialUniform,
         [images, stars, refs, words]
     );
+
+    let pattern = module("pattern");
+    assert_layout!(
+        pattern,
+        "PatternUniform",
+        PatternUniform,
+        [queries, keys, pad0, pad1]
+    );
+    assert_layout!(pattern, "Rows", Rows, [start, end]);
 
     let vote = module("vote");
     assert_layout!(

@@ -25,6 +25,7 @@ mod gpu_pipeline;
 mod hint;
 mod layout;
 mod noise;
+mod pattern;
 mod psf_fit;
 mod radial;
 mod real;

@@ -69,6 +69,8 @@ fn the_wide_retry_searches_the_scale_on_its_own_grid() {
         mag_limit: Some(6.0),
         table_cache: false,
         scale_range: Some((0.975, 1.025)),
+        // The walk's own retry is what is tested here.
+        scale_free: false,
         ..Settings::default()
     };
     let believed = Camera::from_fov(1024, 1024, 18.0 * 1.007).unwrap();

@@ -25,7 +25,7 @@ fn gpu_selects_like_cpu_on_ranges_at_row_keys_padding_and_few_candidates() {
         return;
     };
     let solver = common::solver(10.0, (512, 512));
-    let t = &solver.bands[0].table;
+    let t = solver.bands[0].table();
     let k = |r: usize| t.keys[r];
     // Ranges whose ends are exactly row keys (inclusive ends), empty ranges, the top of the
     // key space, and the first row.

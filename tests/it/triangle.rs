@@ -43,7 +43,7 @@ fn confirmed_triangles_find_the_true_stars_among_false_ones() {
             ids.push(id);
         }
         let ranges = pair_ranges(&vectors, cam, &s);
-        let (tris, matched) = triangles(&band.table, &ranges, &vectors, &band.refs);
+        let (tris, matched) = triangles(band.table(), &ranges, &vectors, &band.refs);
         assert!(matched >= tris.len() as u64);
         for t in &tris {
             for (a, b) in [(0, 1), (0, 2), (1, 2)] {
@@ -67,7 +67,7 @@ fn confirmed_triangles_find_the_true_stars_among_false_ones() {
             .iter()
             .map(|v| Vector3::new(-v.x, v.y, v.z))
             .collect();
-        let (tris_m, _) = triangles(&band.table, &ranges, &mirrored, &band.refs);
+        let (tris_m, _) = triangles(band.table(), &ranges, &mirrored, &band.refs);
         assert!(!tris_m.iter().any(truth), "a mirrored triangle matched");
     }
     assert_eq!(

@@ -167,7 +167,7 @@ fn gpu_votes_equal_cpu_when_table_and_counters_are_split() {
     // A binding for the counters of 4 voting stars (a window), and a 60th of the table.
     let refs = band.refs.len() as u64;
     g.limits.max_storage_buffer_binding_size = 4 * refs * 4;
-    let table = g.upload_table(&band.table, band.refs.len()).unwrap();
+    let table = g.upload_table(band.table(), band.refs.len()).unwrap();
     assert!(table.slices() > 4, "{} slices", table.slices());
     let jobs = vote_jobs(&solver, &common::sim_frames(3, size, 18.0, 8, 22));
     assert_eq!(jobs.len(), 3);

@@ -206,13 +206,14 @@ pub fn assert_votes_equal(
 ) {
     let band = &solver.bands[0];
     let n_ref = band.refs.len();
-    let table = g.upload_table(&band.table, n_ref).unwrap();
-    let (results, votes) = g.vote_inspect(&band.table, &table, jobs).unwrap();
+    let table = g.upload_table(band.table(), n_ref).unwrap();
+    let (results, votes) = g.vote_inspect(band.table(), &table, jobs).unwrap();
     for (f, job) in jobs.iter().enumerate() {
-        let (cpu_votes, hyp) = gpustar::cpu::vote::vote(&band.table, &job.ranges, job.stars, n_ref);
+        let (cpu_votes, hyp) =
+            gpustar::cpu::vote::vote(band.table(), &job.ranges, job.stars, n_ref);
         assert!(cpu_votes == votes[f], "job {f}: vote counters differ");
         let cpu =
-            gpustar::solve::identify::vote_cpu(&band.table, &job.ranges, job.stars, n_ref, job.k);
+            gpustar::solve::identify::vote_cpu(band.table(), &job.ranges, job.stars, n_ref, job.k);
         assert_eq!(results[f].hypotheses, hyp, "job {f}: hypotheses");
         assert_eq!(results[f].k, cpu.k);
         assert!(

@@ -1,0 +1,474 @@
+//! The scale-free first pass (issue 25): when the field of view is searched (`--fov-deg
+//! LOW..HIGH`, `--fov-tolerance`), quads of the frame's brightest stars are looked up once in
+//! the pattern index (`catalog::patterns`, keyed by edge ratios, which do not depend on the
+//! focal length) instead of voting at every scale step. Each catalog quad found gives a focal
+//! length (its chords against the image's) and an attitude (Wahba on its four stars); the
+//! first that refinement accepts, with the false-match test counting every quad hypothesis of
+//! the frame, is the solution. A frame it does not solve goes on to the scale walk (the vote
+//! at each scale), which stays the identifier for known scales.
+//!
+//! Frame side: the image quads' keys come from the stars' directions under the shortest and
+//! longest focal lengths of the range; the true ratios lie between (they change with the focal
+//! length only at second order in the field's angle), widened by the pair tolerance over each
+//! edge's length in pixels. Every key bin the interval touches is a query (at most
+//! [`MAX_QUERIES`] per quad: quads of short edges are too vague to look up).
+
+use super::bands::{SCALE_STEP, scaled};
+use super::detect::Detection;
+use super::refine::{self, CameraFit};
+use super::{Outcome, Prepared, Solver};
+use crate::camera::{Camera, angle};
+use crate::catalog::patterns::{self, BINS, PatternIndex};
+use crate::cpu::pattern::Rows;
+use nalgebra::{Matrix3, Vector3};
+
+/// The rounds of the pass: round r looks up the quads of the brightest `ROUND_STARS[r]`
+/// detections not looked up before (210, then 1155, 3480 and 22,560 more). False stars (satellites,
+/// glints) can outshine most real ones: on 18° frames with 25 false stars the brightest 10
+/// detections held too few real stars for a quad of the catalog's. Each round is judged
+/// against its share of the false-match budget, so a frame that solves in the first pays
+/// nothing for the others' hypotheses, and the chance that any round accepts a wrong attitude
+/// stays within the whole.
+pub const ROUND_STARS: [usize; 4] = [10, 15, 20, 30];
+
+/// The pass takes half of the false-match budget and the scale walk's passes share the other
+/// half (`Solver::passes_for`): counted as one more of the walk's thousands of passes, its
+/// share would be a few thousandths, and a frame of few stars, whose right quad matches 7 of
+/// its 10 stars, would go on to the walk (seconds) to be solved there.
+pub const SCALE_FREE_SHARE: u64 = 2;
+
+/// Queries (key bins) one image quad may take; a quad whose ratios are vaguer is not looked up.
+pub const MAX_QUERIES: usize = 32;
+
+/// At most this many quad hypotheses are refined per frame (the first, in brightness order);
+/// the false-match test counts them all.
+pub const MAX_REFINED: usize = 100;
+
+/// A solver's pattern index and the band whose reference stars its quads name.
+pub struct ScaleFree {
+    pub index: PatternIndex,
+    pub band: usize,
+    /// Built now (false: read from the cache), and the seconds that took.
+    pub built: bool,
+    pub seconds: f64,
+}
+
+/// An image quad (detection indices, brightest first) and its queries: `queries[range]`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Quad {
+    pub stars: [usize; 4],
+    /// The round it belongs to (see [`ROUND_STARS`]).
+    pub round: usize,
+    pub queries: std::ops::Range<usize>,
+}
+
+/// A frame's quads and the keys they look up.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Lookup {
+    pub quads: Vec<Quad>,
+    pub queries: Vec<u32>,
+}
+
+/// Every 4-subset of `n` stars in brightness order: by the sum of the places, then
+/// lexicographically.
+pub fn quad_order(n: usize) -> Vec<[usize; 4]> {
+    let mut out = Vec::new();
+    for a in 0..n {
+        for b in a + 1..n {
+            for c in b + 1..n {
+                for d in c + 1..n {
+                    out.push([a, b, c, d]);
+                }
+            }
+        }
+    }
+    out.sort_by_key(|q| (q.iter().sum::<usize>(), *q));
+    out
+}
+
+/// How many rounds a frame of `n` detections has: those that bring in a quad.
+pub fn rounds_for(n: usize) -> usize {
+    let mut before = 0;
+    ROUND_STARS
+        .iter()
+        .take_while(|&&k| {
+            let more = n.min(k) > before && n.min(k) >= 4;
+            before = k;
+            more
+        })
+        .count()
+}
+
+/// The image quads of `rounds` (see [`ROUND_STARS`]), in order, and their query keys, for
+/// focal-length factors `lo..hi` of `camera` and a centroid tolerance of `tol_px` per edge.
+pub fn lookup(
+    detections: &[Detection],
+    camera: &Camera,
+    (lo, hi): (f64, f64),
+    tol_px: f64,
+    rounds: std::ops::Range<usize>,
+) -> Lookup {
+    let n = detections.len().min(ROUND_STARS[ROUND_STARS.len() - 1]);
+    let ends = [scaled(camera, lo), scaled(camera, hi)];
+    let vectors: Vec<[Vector3<f64>; 2]> = detections[..n]
+        .iter()
+        .map(|d| ends.clone().map(|c| c.pixel_to_vector(d.x, d.y)))
+        .collect();
+    let mut out = Lookup::default();
+    let rounds = rounds.filter(|&r| r < rounds_for(n)).flat_map(|round| {
+        let before = if round == 0 {
+            0
+        } else {
+            ROUND_STARS[round - 1]
+        };
+        quad_order(n.min(ROUND_STARS[round]))
+            .into_iter()
+            .filter(move |q| q[3] >= before)
+            .map(move |q| (round, q))
+    });
+    for (round, stars) in rounds {
+        let mut r_lo = [f64::MAX; 5];
+        let mut r_hi = [f64::MIN; 5];
+        // The ratios through the shortest and the longest focal length.
+        let ends =
+            (0..2).map(|e| patterns::ratios(&patterns::chords(&stars.map(|i| vectors[i][e]))));
+        for r in ends {
+            for i in 0..5 {
+                r_lo[i] = r_lo[i].min(r[i]);
+                r_hi[i] = r_hi[i].max(r[i]);
+            }
+        }
+        // Pixel lengths of the edges, sorted as the chords are (nearly: the order of two
+        // edges of almost equal length does not matter to their sorted values).
+        let mut px = [0.0; 6];
+        let mut k = 0;
+        for i in 0..4 {
+            for j in i + 1..4 {
+                let (a, b) = (&detections[stars[i]], &detections[stars[j]]);
+                px[k] = (a.x - b.x).hypot(a.y - b.y);
+                k += 1;
+            }
+        }
+        px.sort_by(f64::total_cmp);
+        if px[0] <= 2.0 * tol_px {
+            continue;
+        }
+        // Each ratio's bins: first, and how many.
+        let mut bins = [(0u32, 0usize); 5];
+        let mut count = 1usize;
+        for i in 0..5 {
+            let slack = r_hi[i] * tol_px * (1.0 / px[i] + 1.0 / px[5]);
+            let first = patterns::bin(r_lo[i] - slack);
+            bins[i] = (first, (patterns::bin(r_hi[i] + slack) - first) as usize + 1);
+            count *= bins[i].1;
+        }
+        if count > MAX_QUERIES {
+            continue;
+        }
+        let start = out.queries.len();
+        let mut cell = [0u32; 5];
+        for k in 0..count {
+            let mut rest = k;
+            for i in 0..5 {
+                let (first, width) = bins[i];
+                cell[i] = first + (rest % width) as u32;
+                rest /= width;
+            }
+            out.queries.push(patterns::key_of(&cell));
+        }
+        debug_assert!(cell.iter().all(|&b| b < BINS));
+        out.quads.push(Quad {
+            stars,
+            round,
+            queries: start..out.queries.len(),
+        });
+    }
+    out
+}
+
+/// A quad hypothesis that passed the geometric checks: image stars `stars[i]` are reference
+/// stars `refs[i]` at focal-length factor `scale`, attitude `r`.
+#[derive(Clone, Copy, Debug)]
+pub struct Hypothesis {
+    pub stars: [usize; 4],
+    pub refs: [u32; 4],
+    pub scale: f64,
+    pub r: Matrix3<f64>,
+}
+
+/// The 24 orders of four items.
+fn permutations() -> Vec<[usize; 4]> {
+    let mut out = Vec::with_capacity(24);
+    for a in 0..4 {
+        for b in 0..4 {
+            for c in 0..4 {
+                for d in 0..4 {
+                    let p = [a, b, c, d];
+                    if (0..4).all(|i| p.contains(&i)) {
+                        out.push(p);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+
+impl Solver {
+    /// The queries of a frame's `rounds` of the scale-free pass; None when the solver has no
+    /// pattern index (a known scale) or the frame has too few stars.
+    pub fn scale_free_lookup(
+        &self,
+        detections: &[Detection],
+        rounds: std::ops::Range<usize>,
+    ) -> Option<Lookup> {
+        self.scale_free.as_ref()?;
+        let range = self.settings.scale_range?;
+        if detections.len() < 4 {
+            return None;
+        }
+        Some(lookup(
+            detections,
+            &self.camera,
+            range,
+            self.settings.identify.pair_tol_px,
+            rounds,
+        ))
+    }
+
+    /// The scale-free pass after the lookup (`rows[q]` answers `lookup.queries[q]`): round
+    /// by round (those the lookup holds), the quad hypotheses that pass the geometric checks, each refined in turn
+    /// (the first [`MAX_REFINED`] of a round); the first accepted concludes as the vote's
+    /// solutions do. None when none is accepted.
+    pub fn finish_scale_free(
+        &self,
+        detections: &[Detection],
+        lookup: &Lookup,
+        rows: &[Rows],
+        epoch: Option<f64>,
+    ) -> Option<Outcome> {
+        let perms = permutations();
+        let rounds = rounds_for(detections.len());
+        for round in 0..rounds {
+            let mut quads = lookup.quads.iter().filter(|q| q.round == round).peekable();
+            if quads.peek().is_none() {
+                continue;
+            }
+            if let Some(o) = self.scale_free_round(detections, quads, rows, rounds, epoch, &perms) {
+                return Some(o);
+            }
+        }
+        None
+    }
+
+    /// One round of the pass: its quads' hypotheses that pass the geometric checks, judged
+    /// against the round's share of the false-match budget.
+    fn scale_free_round<'a>(
+        &self,
+        detections: &[Detection],
+        quads: impl Iterator<Item = &'a Quad> + Clone,
+        rows: &[Rows],
+        rounds: usize,
+        epoch: Option<f64>,
+        perms: &[[usize; 4]],
+    ) -> Option<Outcome> {
+        let sf = self.scale_free.as_ref()?;
+        let (lo, hi) = self.settings.scale_range?;
+        let refs = &self.bands[sf.band].refs;
+        let mut hyps: Vec<Hypothesis> = Vec::new();
+        for quad in quads.clone() {
+            // The image's chords at the camera's focal length, once a quad has a candidate.
+            let mut img1: Option<[f64; 6]> = None;
+            for r in &rows[quad.queries.clone()] {
+                for row in r.start as usize..(r.end as usize).min(sf.index.len()) {
+                    let ids = sf.index.quads[row];
+                    let img1 = *img1.get_or_insert_with(|| {
+                        let c = &self.camera;
+                        patterns::chords(
+                            &quad
+                                .stars
+                                .map(|i| c.pixel_to_vector(detections[i].x, detections[i].y)),
+                        )
+                    });
+                    if let Some(h) =
+                        self.check_quad(detections, quad.stars, &img1, ids, refs, (lo, hi), perms)
+                    {
+                        hyps.push(h);
+                    }
+                }
+            }
+        }
+        let found: u64 = quads
+            .clone()
+            .flat_map(|q| &rows[q.queries.clone()])
+            .map(|r| u64::from(r.end - r.start))
+            .sum();
+        tracing::debug!(
+            "scale-free round: {} quads, {found} patterns found, {} pass the checks",
+            quads.count(),
+            hyps.len()
+        );
+        if hyps.is_empty() {
+            return None;
+        }
+        // Every hypothesis of the round, times its rounds, judged against the pass's share of
+        // the budget (of each search and detection stage of the frame, as the vote's are).
+        let hypotheses = (hyps.len() as u64).saturating_mul(
+            rounds as u64 * SCALE_FREE_SHARE * self.settings.searches * self.detection_stages(),
+        );
+        for h in hyps.iter().take(MAX_REFINED) {
+            let p = self.scale_free_prepared(h.scale);
+            let refs = self.bands[p.band].refs_at(epoch);
+            let Some(refined) =
+                refine::refine(h.r, detections, &refs, &p.camera, hypotheses, 4, &p.refine)
+            else {
+                continue;
+            };
+            tracing::debug!(
+                "scale-free quad {:?} = {:?} at scale {:.4}: {} matched of {} in view, P(false) {:.1e}",
+                h.stars,
+                h.refs,
+                h.scale,
+                refined.matches.len(),
+                refined.in_view,
+                refined.false_match_prob
+            );
+            if refined.false_match_prob <= self.settings.refine.max_false_prob {
+                return Some(self.conclude(detections, &p, (refined, hypotheses, 4), epoch));
+            }
+        }
+        None
+    }
+
+    /// The pass settings at a quad's focal length, as the scale walk's at that scale: its
+    /// band, the scale step's tolerance, the focal length fitted.
+    fn scale_free_prepared(&self, scale: f64) -> Prepared {
+        let mut s = self.settings.identify;
+        let mut rs = self.settings.refine;
+        s.scale_tol += SCALE_STEP / 2.0;
+        if rs.fit == CameraFit::None {
+            rs.fit = CameraFit::Scale;
+        }
+        Prepared {
+            camera: scaled(&self.camera, scale),
+            band: self.band_of(scale),
+            vectors: Vec::new(),
+            ranges: Vec::new(),
+            n_vote: 0,
+            k: 0,
+            triangle_stars: 0,
+            identify: s,
+            refine: rs,
+        }
+    }
+
+    /// A catalog quad against an image quad: the order of its stars whose chords best match
+    /// the image's up to scale, the focal length that matches them (within `lo..hi`), every
+    /// chord then within twice the pair tolerance, and the attitude of the four stars
+    /// (Wahba) placing each within that tolerance (which refuses a mirror image).
+    #[allow(clippy::too_many_arguments)]
+    fn check_quad(
+        &self,
+        detections: &[Detection],
+        stars: [usize; 4],
+        img1: &[f64; 6],
+        ids: [u32; 4],
+        refs: &crate::catalog::RefCatalog,
+        (lo, hi): (f64, f64),
+        perms: &[[usize; 4]],
+    ) -> Option<Hypothesis> {
+        let cat = ids.map(|id| refs.stars[id as usize].v);
+        let at = |s: f64| {
+            let c = scaled(&self.camera, s);
+            stars.map(|i| c.pixel_to_vector(detections[i].x, detections[i].y))
+        };
+        // The catalog chords, each pair once; every order of the stars reads them.
+        let mut d = [[0.0; 4]; 4];
+        for &(i, j) in &PAIRS {
+            d[i][j] = (cat[i] - cat[j]).norm();
+            d[j][i] = d[i][j];
+        }
+        let sum_cat: f64 = PAIRS.iter().map(|&(i, j)| d[i][j]).sum();
+        // The image's chords at the camera's own focal length, and the scale that brings
+        // their sum to the catalog's.
+        let k = sum_cat / img1.iter().sum::<f64>();
+        // The order of the catalog stars: the closest chords up to that scale factor.
+        let mut best: Option<(f64, [usize; 4])> = None;
+        for p in perms {
+            let err = PAIRS
+                .iter()
+                .zip(img1)
+                .map(|(&(i, j), x)| {
+                    let c = d[p[i]][p[j]];
+                    (x * k - c).abs() / c.max(1e-12)
+                })
+                .fold(0.0, f64::max);
+            if best.is_none_or(|(b, _)| err < b) {
+                best = Some((err, *p));
+            }
+        }
+        let (_, p) = best?;
+        let cat = p.map(|i| cat[i]);
+        let refs_in_order = p.map(|i| ids[i]);
+        let cat_chords = patterns::chords(&cat);
+        // Image chords shrink about as the focal length grows: from 1 / k, a few fixed-point
+        // steps.
+        let mut scale = 1.0 / k;
+        for _ in 0..3 {
+            let sum_img: f64 = patterns::chords(&at(scale)).iter().sum();
+            scale *= sum_img / sum_cat;
+        }
+        let margin = 1.0 + SCALE_STEP;
+        if !(scale >= lo / margin && scale <= hi * margin) {
+            return None;
+        }
+        let camera = scaled(&self.camera, scale);
+        let img = at(scale);
+        let s = &self.settings.identify;
+        let img_chords = patterns::chords(&img);
+        for e in 0..6 {
+            let d = crate::catalog::table::angle_of_chord(cat_chords[e]);
+            let tol = 2.0 * s.tolerance(&camera, d);
+            let di = crate::catalog::table::angle_of_chord(img_chords[e]);
+            if (di - d).abs() > tol {
+                return None;
+            }
+        }
+        let r = super::attitude::wahba(&img, &cat)?;
+        let tol = 2.0 * s.pair_tol_px * camera.ifov_rad();
+        if (0..4).any(|i| angle(&(r * cat[i]), &img[i]) > tol) {
+            return None;
+        }
+        Some(Hypothesis {
+            stars,
+            refs: refs_in_order,
+            scale,
+            r,
+        })
+    }
+}
+
+/// The lookup on the CPU twin: rows of every query.
+pub fn rows_cpu(index: &PatternIndex, lookup: &Lookup) -> Vec<Rows> {
+    crate::cpu::pattern::pattern(&index.keys, &lookup.queries)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quads_come_brightest_first_and_once_each() {
+        let q = quad_order(6);
+        assert_eq!(q.len(), 15);
+        assert_eq!(q[0], [0, 1, 2, 3]);
+        assert_eq!(q[1], [0, 1, 2, 4]);
+        let mut sorted = q.clone();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), 15);
+        assert_eq!(permutations().len(), 24);
+    }
+}

@@ -1,0 +1,172 @@
+//! Stage `pattern` (the scale-free first pass's lookup): the kernel's rows equal the CPU twin's
+//! exactly; frames of a field of view the solver is not told (12° and 18° with `--fov-deg
+//! 10..20`) solve in the scale-free pass, each within 60″ of the truth with its field fitted,
+//! the same on both backends. Catalog stars to magnitude 6.5 (one band: its tables build in
+//! seconds), one solver shared by the tests.
+
+use crate::common;
+
+use gpustar::camera::Camera;
+use gpustar::catalog::Catalog;
+use gpustar::pipeline::{Backend, CameraSource, GpuRunner, Pipeline};
+use gpustar::simulate::SimSettings;
+use gpustar::solve::scale_free;
+use gpustar::solve::{Outcome, Settings, Solver};
+
+/// Focal lengths scale as 1 / tan(FOV / 2).
+fn focal(fov_deg: f64) -> f64 {
+    1.0 / (fov_deg.to_radians() / 2.0).tan()
+}
+
+/// What `--fov-deg 10..20 --mag-limit 6.5` sets for 1024² frames: the camera of 15°, the
+/// focal lengths of 20° to 10° relative to it.
+fn settings() -> Settings {
+    Settings {
+        scale_range: Some((focal(20.0) / focal(15.0), focal(10.0) / focal(15.0))),
+        mag_limit: Some(6.5),
+        table_cache: false,
+        ..Settings::default()
+    }
+}
+
+static SOLVER: std::sync::LazyLock<Solver> = std::sync::LazyLock::new(|| {
+    let camera = Camera::from_fov(1024, 1024, 15.0).unwrap();
+    Solver::new(&Catalog::builtin(), camera, settings()).unwrap()
+});
+
+/// Frames showing stars to magnitude 7 (fainter than the catalog's selection).
+fn sim(fov: f64, seed: u64) -> SimSettings {
+    SimSettings {
+        width: 1024,
+        height: 1024,
+        fov_x_deg: fov,
+        mag_limit: 7.0,
+        seed,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn pattern_gpu_matches_cpu() {
+    let Some(gpu) = common::gpu("pattern_gpu_matches_cpu") else {
+        return;
+    };
+    let solver = &*SOLVER;
+    let sf = solver
+        .scale_free
+        .as_ref()
+        .expect("a scale search has a pattern index");
+    let mut queries = Vec::new();
+    for fov in [12.0, 18.0] {
+        for (frame, _) in common::rendered(&sim(fov, 61), 2) {
+            let dets = gpustar::solve::detect::detect(&frame, &solver.settings.detect);
+            queries.extend(
+                solver
+                    .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
+                    .unwrap()
+                    .queries,
+            );
+        }
+    }
+    // Keys beyond every pattern's, and the first and last keys, too.
+    queries.extend([
+        0,
+        u32::MAX,
+        sf.index.keys[0],
+        *sf.index.keys.last().unwrap(),
+    ]);
+    let table = gpu.upload_patterns(&sf.index).unwrap();
+    let on_gpu = gpu.pattern(&table, &queries).unwrap();
+    let on_cpu = gpustar::cpu::pattern::pattern(&sf.index.keys, &queries);
+    assert_eq!(on_gpu, on_cpu);
+    let found: u32 = on_cpu.iter().map(|r| r.end - r.start).sum();
+    println!(
+        "pattern GPU = CPU: {} queries, {found} patterns found, index of {} patterns ({} MiB)",
+        queries.len(),
+        sf.index.len(),
+        sf.index.bytes() >> 20
+    );
+    assert!(found > 0 && on_cpu.iter().all(|r| r.start <= r.end));
+}
+
+#[test]
+fn unknown_fields_solve_in_the_scale_free_pass() {
+    let solver = &*SOLVER;
+    let sf = solver.scale_free.as_ref().unwrap();
+    let mut solved = 0;
+    let mut frames = 0;
+    for fov in [12.0, 18.0] {
+        for (frame, truth) in common::rendered(&sim(fov, 62), 4) {
+            frames += 1;
+            let dets = gpustar::solve::detect::detect(&frame, &solver.settings.detect);
+            let lookup = solver
+                .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
+                .unwrap();
+            let rows = scale_free::rows_cpu(&sf.index, &lookup);
+            let Some(Outcome::Solved(r, _)) = solver.finish_scale_free(&dets, &lookup, &rows, None)
+            else {
+                continue;
+            };
+            let err = gpustar::solve::attitude::attitude_error(
+                &r.r,
+                &nalgebra::Matrix3::from_fn(|i, j| truth.rotation_matrix[i][j]),
+            );
+            assert!(
+                err.to_degrees() * 3600.0 < 60.0,
+                "{fov}°: {err} rad from the truth"
+            );
+            let fitted = r.camera.fov_x_deg();
+            assert!(
+                (fitted - fov).abs() < 0.01 * fov,
+                "{fov}°: fitted {fitted}°"
+            );
+            assert!(r.hypotheses >= 1 && r.fixed == 4);
+            solved += 1;
+        }
+    }
+    println!("scale-free pass: {solved} of {frames} frames solved");
+    assert_eq!(solved, frames, "{solved} of {frames} solved");
+}
+
+#[test]
+fn unknown_fields_give_the_same_records_on_both_backends() {
+    let Some(g) = common::gpu("unknown_fields_give_the_same_records_on_both_backends") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let mut files = Vec::new();
+    for fov in [12.0, 18.0] {
+        for (k, (f, _)) in common::rendered(&sim(fov, 63), 2).iter().enumerate() {
+            let name = format!("f{fov}_{k}.png");
+            let path = tmp.path().join(&name);
+            let px: Vec<u8> = f.pixels.iter().map(|&p| p as u8).collect();
+            image::GrayImage::from_raw(f.width, f.height, px)
+                .unwrap()
+                .save(&path)
+                .unwrap();
+            files.push((path, name));
+        }
+    }
+    let pipeline = |backend| {
+        Pipeline::new(
+            Catalog::builtin(),
+            settings(),
+            CameraSource::Fov(15.0),
+            backend,
+        )
+    };
+    let on_gpu = pipeline(Backend::Gpu(Box::new(GpuRunner::new(g)))).process_batch(&files);
+    let on_cpu = pipeline(Backend::Cpu).process_batch(&files);
+    let mut solved = 0;
+    for (a, b) in on_gpu.into_iter().zip(on_cpu) {
+        let value = |mut r: gpustar::record::Record| {
+            r.timing_ms = Default::default();
+            r.backend.clear();
+            serde_json::from_str::<serde_json::Value>(&r.to_json_line()).unwrap()
+        };
+        let (a, b) = (value(a), value(b));
+        solved += usize::from(a["status"] == "solved");
+        common::assert_records_match(&a, &b);
+    }
+    assert_eq!(solved, 4, "{solved} of 4 solved");
+}
