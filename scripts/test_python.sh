@@ -16,5 +16,8 @@ MATURIN_PEP517_ARGS="--profile dev" "$venv/bin/pip" install -q "./python[test]"
 echo "test_python.sh: built and installed the package in $(($(date +%s) - start)) s"
 # The CLI whose records the tests compare with (built by `cargo test`).
 export GPUSTAR_BIN="${GPUSTAR_BIN:-$CARGO_TARGET_DIR/debug/gpustar}"
-cd python
-"$venv/bin/python" -m pytest -q tests
+# From the tests' own folder: run from python/, `import gpustar` would find the source folder
+# (without the compiled part) before the installed package.
+cd python/tests
+"$venv/bin/python" -c 'import gpustar, sys; print("test_python.sh: testing", gpustar.__file__)'
+"$venv/bin/python" -m pytest -q .
