@@ -9,6 +9,7 @@
 //! width beyond a bright streak's end and inside a faint one's. Pixels far off the model
 //! (stars on the track, cosmic rays) are left out after a first fit and the fit is redone.
 
+use super::chain::{self, Chain};
 use super::segments::Segment;
 use nalgebra::{SMatrix, SVector};
 
@@ -42,6 +43,9 @@ pub struct StreakFit {
     /// (fixed patterns, compression, diffuse light). Infinite where the neighbours leave the
     /// frame.
     pub local_snr: f64,
+    /// What point sources make of the along-track profile: a chain of stars, or light that
+    /// stars cannot make ([`chain`](super::chain)).
+    pub chain: Chain,
     /// Direction of the line (unit) and its angle from the frame's axes (degrees, 0–45).
     pub dir: (f64, f64),
     pub axis_angle_deg: f64,
@@ -449,7 +453,7 @@ impl Model {
             t += 4.0;
         }
         let axis = s.abs().min(c.abs()).asin().to_degrees();
-        let (modulation, local_snr) = self.profile_stats(q, v0, v1, d);
+        let (modulation, local_snr, chain) = self.profile_stats(q, v0, v1, d);
         Some(StreakFit {
             ends: [self.point(q, sc, v0), self.point(q, sc, v1)],
             edge,
@@ -470,14 +474,21 @@ impl Model {
             },
             modulation,
             local_snr,
+            chain,
             dir: (c, s),
             axis_angle_deg: axis,
         })
     }
 
-    /// [`StreakFit::modulation`] and [`StreakFit::local_snr`] of the track between t = v0
-    /// and v1.
-    fn profile_stats(&self, q: &P, v0: f64, v1: f64, d: &dyn Fn(u32, u32) -> f64) -> (f64, f64) {
+    /// [`StreakFit::modulation`], [`StreakFit::local_snr`] and [`StreakFit::chain`] of the
+    /// track between t = v0 and v1.
+    fn profile_stats(
+        &self,
+        q: &P,
+        v0: f64,
+        v1: f64,
+        d: &dyn Fn(u32, u32) -> f64,
+    ) -> (f64, f64, Chain) {
         let sg = q[5];
         let (s, c) = q[1].sin_cos();
         let (w, h) = (self.w as f64 - 1.0, self.h as f64 - 1.0);
@@ -560,8 +571,9 @@ impl Model {
         } else {
             f64::INFINITY
         };
+        let no_chain = chain::assess(&[], 0.0, sg);
         if on.len() < 8 {
-            return (0.0, local_snr);
+            return (0.0, local_snr, no_chain);
         }
         let median = |v: &mut Vec<f64>| {
             let m = v.len() / 2;
@@ -573,12 +585,20 @@ impl Model {
             let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
             1.4826 * median(&mut dev)
         };
+        // The whole track in 1 px steps, a PSF's reach beyond the ends included, for the
+        // point-source model; its noise is the scatter of the profile beside the track.
+        let track: Vec<f64> = (0..)
+            .map(|k| v0 - 2.0 * sg + k as f64)
+            .take_while(|&t| t <= v1 + 2.0 * sg)
+            .map(|t| profile(t, 0.0).unwrap_or(f64::NAN))
+            .collect();
+        let chain = chain::assess(&track, mad(&off), sg);
         let level = median(&mut on.clone());
         if level <= 0.0 {
-            return (f64::INFINITY, local_snr);
+            return (f64::INFINITY, local_snr, chain);
         }
         let excess = (mad(&on).powi(2) - mad(&off).powi(2)).max(0.0).sqrt();
-        (excess / level, local_snr)
+        (excess / level, local_snr, chain)
     }
 }
 

@@ -10,6 +10,7 @@
 //! out → [`reduce`] with [`sky`] (RA/Dec, times, station, Az/El) → [`export`] with [`formats`]
 //! (CCSDS TDM, IOD).
 
+pub mod chain;
 pub mod export;
 pub mod fit;
 pub mod formats;
@@ -47,12 +48,6 @@ pub struct StreakSettings {
     pub min_sigma_px: f64,
     /// Widest profile (Gaussian σ, pixels): a fit this wide has found no line but a patch.
     pub max_sigma_px: f64,
-    /// Largest share of a track's clear 4 px bins that may fall short of the fit (chains of
-    /// stars have gaps between the stars, streaks none).
-    pub max_gap_fraction: f64,
-    /// Largest modulation of the along-track profile (its excess scatter over the mean): a
-    /// chain of stars rises and falls from star to star, a streak stays level.
-    pub max_modulation: f64,
 }
 
 impl Default for StreakSettings {
@@ -65,8 +60,6 @@ impl Default for StreakSettings {
             max_sigma_px: 8.0,
             max_fit_rms_px: 1.0,
             min_local_snr: 5.0,
-            max_gap_fraction: 0.25,
-            max_modulation: 0.3,
         }
     }
 }
@@ -155,7 +148,12 @@ pub fn measure(
         };
         match accept(&f, frame, s) {
             Ok(()) => {
-                tracing::debug!("streak {:?}: local snr {:.1}", f.ends, f.local_snr);
+                tracing::debug!(
+                    "streak {:?}: local snr {:.1}, {:?}",
+                    f.ends,
+                    f.local_snr,
+                    f.chain
+                );
                 Some(f)
             }
             Err(why) => {
@@ -224,14 +222,18 @@ fn accept(f: &StreakFit, frame: &Frame, s: &StreakSettings) -> Result<(), String
             f.fit_rms_px
         ));
     }
-    if f.gap_fraction > s.max_gap_fraction {
+    // Gaps and modulation alone say nothing: a tumbling object's streak has both. A chain of
+    // stars is point sources with nothing between them.
+    if f.chain.is_chain {
         return Err(format!(
-            "gaps in {:.0} % of the track",
+            "a chain of {} point sources ({:.0} % of the light, {:.2} left, background between {:.0} % of them; modulation {:.2}, gaps {:.0} %)",
+            f.chain.peaks,
+            100.0 * f.chain.explained,
+            f.chain.excess,
+            100.0 * f.chain.dips,
+            f.modulation,
             100.0 * f.gap_fraction
         ));
-    }
-    if f.modulation > s.max_modulation {
-        return Err(format!("modulation {:.2} along the track", f.modulation));
     }
     // Along a frame axis: a defective column or row is narrow; a bleed trail holds saturated
     // pixels.
@@ -260,16 +262,33 @@ fn same_line(a: &StreakFit, b: &StreakFit) -> bool {
     cos > 2f64.to_radians().cos() && across < 3.0 && distance_to(a, m.0, m.1) < 3.0
 }
 
-/// Do two fits lie on one line with their tracks overlapping or less than 10 px apart?
+/// Do two fits lie on one line with their tracks overlapping or less than 10 px apart, or
+/// are they two pieces of one broken streak: as wide, each on the other's line, and apart by
+/// less than 1.5 times their lengths together? A tumbling object goes dark for part of an
+/// exposure (in a shadowed face's turn, or an eclipse): its streak breaks into pieces whose
+/// gaps can be as long as the pieces.
 fn continues(a: &StreakFit, b: &StreakFit) -> bool {
     let cos = (a.dir.0 * b.dir.0 + a.dir.1 * b.dir.1).abs();
-    let near = |f: &StreakFit, (x, y): (f64, f64)| {
+    let near = |f: &StreakFit, (x, y): (f64, f64), tol: f64| {
         let (x0, y0) = f.ends[0];
-        (-(x - x0) * f.dir.1 + (y - y0) * f.dir.0).abs() < 3.0
+        (-(x - x0) * f.dir.1 + (y - y0) * f.dir.0).abs() < tol
     };
-    cos > 2f64.to_radians().cos()
-        && b.ends.iter().all(|&e| near(a, e))
-        && b.ends.iter().any(|&(x, y)| distance_to(a, x, y) < 10.0)
+    if cos <= 2f64.to_radians().cos() || !b.ends.iter().all(|&e| near(a, e, 3.0)) {
+        return false;
+    }
+    if b.ends.iter().any(|&(x, y)| distance_to(a, x, y) < 10.0) {
+        return true;
+    }
+    let gap = b
+        .ends
+        .iter()
+        .map(|&(x, y)| distance_to(a, x, y))
+        .fold(f64::MAX, f64::min);
+    let (wa, wb) = (a.sigma_px, b.sigma_px);
+    cos > 1f64.to_radians().cos()
+        && a.ends.iter().all(|&e| near(b, e, 3.0))
+        && wa.max(wb) < 1.5 * wa.min(wb)
+        && gap < 1.5 * (length(a) + length(b))
 }
 
 /// The segment from the farther apart of two collinear fits' ends to the other.
