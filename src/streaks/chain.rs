@@ -7,7 +7,12 @@
 //! a chain when they explain it to within the noise; whatever light they leave (a level
 //! between flashes, a lit stretch between two gaps, light rising and falling more slowly
 //! than the PSF) is light a chain of stars cannot have. Catalog stars at the peaks' places
-//! (when the frame solved) are the other half of the test: [`at_catalog_stars`].
+//! (when the frame solved) are the other half of the test: [`off_catalog_chains`].
+
+use super::distance_to;
+use super::fit::StreakFit;
+use crate::solve::refine::stars_in_view;
+use crate::solve::{Outcome, Solution};
 
 /// What the point-source model makes of a track's along-track profile.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,7 +34,7 @@ pub struct Chain {
 }
 
 /// Peaks closer than this many FWHM are one star's (two stars this close are one blob).
-const MIN_SEPARATION_FWHM: f64 = 1.3;
+const MIN_SEPARATION_FWHM: f64 = 1.0;
 /// A peak stands this many noise sigmas of the profile above the background.
 const PEAK_SIGMAS: f64 = 4.0;
 // The thresholds sit between what independently simulated chains of stars and tumbling
@@ -96,7 +101,7 @@ pub fn assess(profile: &[f64], noise: f64, sigma: f64) -> Chain {
     // Gaussian (stars have wings): the best of a few widths and Moffat exponents, from steep
     // (a Gaussian) to the wings of a Moffat β = 2.
     let mut best: Option<Chain> = None;
-    for f in [0.7, 0.85, 1.0, 1.2] {
+    for f in [0.6, 0.7, 0.85, 1.0, 1.2] {
         for beta in [0.0, 4.0, 3.0, 2.5, 2.0] {
             let c = explain(profile, &peaks, noise, f * FWHM_PER_SIGMA * sigma, beta);
             if best.is_none_or(|b| c.excess < b.excess) {
@@ -121,6 +126,41 @@ fn point(d: f64, fwhm: f64, beta: f64) -> f64 {
         let alpha = 0.5 * fwhm / (2f64.powf(1.0 / beta) - 1.0).sqrt();
         (1.0 + (d / alpha).powi(2)).powf(-beta)
     }
+}
+
+/// The streaks of a frame less those that are chains of catalog stars: when the frame solved,
+/// a track on which catalog stars lie (within 2 px, or 1.5σ of a wide one) as many as 60 % of
+/// its profile's peaks, at least two, is those stars. A streak crossing a star or two has
+/// many more peaks (its level's, a PSF width apart) than stars on it.
+pub fn off_catalog_chains(found: &[StreakFit], sol: &Solution) -> Vec<StreakFit> {
+    let Outcome::Solved(r, refs) = &sol.outcome else {
+        return found.to_vec();
+    };
+    let stars: Vec<(f64, f64)> = stars_in_view(&r.r, refs, &r.camera)
+        .into_iter()
+        .map(|(_, x, y)| (x, y))
+        .collect();
+    found
+        .iter()
+        .filter(|f| {
+            let chain = catalog_chain(f, &stars);
+            if chain {
+                tracing::debug!("streak {:?}: a chain of catalog stars", f.ends);
+            }
+            !chain
+        })
+        .copied()
+        .collect()
+}
+
+/// Do catalog stars at `stars` (pixels) make the track's peaks?
+fn catalog_chain(f: &StreakFit, stars: &[(f64, f64)]) -> bool {
+    let reach = (1.5 * f.sigma_px).max(2.0);
+    let on = stars
+        .iter()
+        .filter(|&&(x, y)| distance_to(f, x, y) <= reach)
+        .count();
+    f.chain.peaks >= 2 && on >= 2 && on as f64 >= 0.6 * f.chain.peaks as f64
 }
 
 /// Point sources of the given FWHM and β at `peaks`, amplitudes by non-negative least squares
@@ -232,6 +272,47 @@ mod tests {
         });
         let c = assess(&p, 1.0, 1.2);
         assert!(c.is_chain, "{c:?}");
+    }
+
+    #[test]
+    fn a_track_whose_peaks_are_catalog_stars_is_a_chain_of_them() {
+        let chain = |peaks| Chain {
+            peaks,
+            explained: 0.5,
+            excess: 0.5,
+            dips: 0.0,
+            is_chain: false,
+        };
+        let fit = |peaks| StreakFit {
+            ends: [(10.0, 10.0), (110.0, 10.0)],
+            edge: [false, false],
+            sigma_px: 1.2,
+            amplitude: 50.0,
+            noise: 5.0,
+            flux: 1e4,
+            snr: 100.0,
+            fit_rms_px: 0.2,
+            gap_fraction: 0.0,
+            modulation: 0.5,
+            local_snr: 50.0,
+            chain: chain(peaks),
+            dir: (1.0, 0.0),
+            axis_angle_deg: 0.0,
+        };
+        // Five catalog stars on the track (one 1.5 px off it), one far from it.
+        let stars = [
+            (12.0, 10.5),
+            (35.0, 9.0),
+            (60.0, 10.0),
+            (85.0, 11.5),
+            (108.0, 10.0),
+            (60.0, 40.0),
+        ];
+        assert!(catalog_chain(&fit(6), &stars));
+        // A streak of 30 peaks that crosses those five stars is still a streak.
+        assert!(!catalog_chain(&fit(30), &stars));
+        // One star on a track is no chain.
+        assert!(!catalog_chain(&fit(2), &stars[..1]));
     }
 
     #[test]
