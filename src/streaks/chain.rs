@@ -17,18 +17,19 @@ use crate::solve::{Outcome, Solution};
 /// What the point-source model makes of a track's along-track profile.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Chain {
-    /// Peaks the model places (maxima at least 4 noise sigmas high, 1.3 FWHM apart).
+    /// Peaks the model places (maxima at least 4 noise sigmas high, a FWHM apart).
     pub peaks: usize,
     /// Share of the profile's light (its positive part) the point sources explain.
     pub explained: f64,
     /// RMS of what they leave, less the noise, over the median peak's height.
     pub excess: f64,
-    /// Share of neighbouring peaks with background between them: the profile between the two
-    /// falls to 60 % of the lower one or less (light that stays up between peaks is a lit
-    /// track, not two stars).
+    /// Share of neighbouring peaks (of those at least half the median's height) with
+    /// background between them: the profile between the two falls to 60 % of the lower one or
+    /// less, and by 3 noise sigmas or more (light that stays up between peaks is a lit track,
+    /// not two stars).
     pub dips: f64,
-    /// Point sources explain the profile: at least two peaks, background between 70 % of
-    /// neighbouring peaks, ≥ 78 % of the light explained, and no more than 35 % of a peak's
+    /// Point sources explain the profile: at least two peaks, background between 40 % of
+    /// neighbouring peaks, ≥ 80 % of the light explained, and no more than 35 % of a peak's
     /// height left beyond the noise.
     pub is_chain: bool,
 }
@@ -38,13 +39,17 @@ const MIN_SEPARATION_FWHM: f64 = 1.0;
 /// A peak stands this many noise sigmas of the profile above the background.
 const PEAK_SIGMAS: f64 = 4.0;
 // The thresholds sit between what independently simulated chains of stars and tumbling
-// objects' streaks gave (scripts/sim_streaks.py --glints --hard-negatives, seed 11, 100
-// frames: chains explained 84-98 % with background between 75-100 % of their peaks; streaks
-// with that much background between their peaks (flashes, deep periodic light curves) 54-68 %).
-const MIN_EXPLAINED: f64 = 0.78;
+// objects' streaks gave (scripts/sim_streaks.py --glints --hard-negatives, seeds 11 and 7,
+// 400 frames, 396 chains and 539 streak candidates): chains 80-98 % explained, with background
+// between 43-100 % of their neighbouring peaks (the densest, 1.6 FWHM apart, dip least);
+// streaks with background between 40 % or more of their peaks (flashes, deep periodic light
+// curves) at most 77 % explained, and streaks explained up to 93 % (a level tiled by peaks a
+// FWHM apart) with background between few of them.
+const MIN_EXPLAINED: f64 = 0.8;
 const MAX_EXCESS: f64 = 0.35;
 const MAX_DIP: f64 = 0.6;
-const MIN_DIPS: f64 = 0.7;
+const DIP_SIGMAS: f64 = 3.0;
+const MIN_DIPS: f64 = 0.4;
 const FWHM_PER_SIGMA: f64 = 2.354_820_045;
 
 /// Assess `profile` (the track's along-track profile in 1 px steps, NaN where unknown; the
@@ -89,31 +94,51 @@ pub fn assess(profile: &[f64], noise: f64, sigma: f64) -> Chain {
         };
     }
     peaks.sort_unstable();
-    let dipping = peaks
-        .windows(2)
-        .filter(|w| {
-            let low = (w[0] + 1..w[1]).map(p).fold(f64::MAX, f64::min);
-            low <= MAX_DIP * p(w[0]).min(p(w[1]))
-        })
-        .count();
-    let dips = dipping as f64 / (peaks.len() - 1) as f64;
     // The PSF along the track need not be the fitted width across it (an elongated PSF), nor
     // Gaussian (stars have wings): the best of a few widths and Moffat exponents, from steep
     // (a Gaussian) to the wings of a Moffat β = 2.
-    let mut best: Option<Chain> = None;
+    let mut best: Option<(Chain, Vec<f64>)> = None;
     for f in [0.6, 0.7, 0.85, 1.0, 1.2] {
         for beta in [0.0, 4.0, 3.0, 2.5, 2.0] {
             let c = explain(profile, &peaks, noise, f * FWHM_PER_SIGMA * sigma, beta);
-            if best.is_none_or(|b| c.excess < b.excess) {
+            if best.as_ref().is_none_or(|b| c.0.excess < b.0.excess) {
                 best = Some(c);
             }
         }
     }
-    best.map_or(none, |b| Chain {
+    let Some((b, model)) = best else {
+        return none;
+    };
+    // Background between neighbours, among the peaks at least half the median's height (a
+    // chain's faint extra maxima, noise in a star's wings or between stars, are not stars).
+    let mut heights: Vec<f64> = peaks.iter().map(|&k| p(k)).collect();
+    heights.sort_by(f64::total_cmp);
+    let tall: Vec<usize> = peaks
+        .iter()
+        .copied()
+        .filter(|&k| p(k) >= 0.5 * heights[heights.len() / 2])
+        .collect();
+    let dipping = tall
+        .windows(2)
+        .filter(|w| {
+            let (at, low) = (w[0] + 1..w[1])
+                .map(|i| (i, p(i)))
+                .fold((w[0], f64::MAX), |m, v| if v.1 < m.1 { v } else { m });
+            let lower = p(w[0]).min(p(w[1]));
+            // Deep, deeper than the noise can dig between two maxima of a faint level, and no
+            // higher than the two stars' wings make it: a level between flashes is not
+            // background.
+            low <= MAX_DIP * lower
+                && lower - low >= DIP_SIGMAS * noise
+                && low - model[at] <= DIP_SIGMAS * noise + 0.15 * lower
+        })
+        .count();
+    let dips = dipping as f64 / (tall.len().max(2) - 1) as f64;
+    Chain {
         dips,
         is_chain: b.is_chain && dips >= MIN_DIPS,
         ..b
-    })
+    }
 }
 
 /// A point source's profile of FWHM `fwhm` at distance `d`: a Gaussian for β = 0, else a
@@ -164,9 +189,15 @@ fn catalog_chain(f: &StreakFit, stars: &[(f64, f64)]) -> bool {
 }
 
 /// Point sources of the given FWHM and β at `peaks`, amplitudes by non-negative least squares
-/// (coordinate descent: the peaks are 1.3 FWHM apart, so they overlap little), and how well
+/// (coordinate descent: the peaks are a FWHM apart, so they overlap little), and how well
 /// they explain the profile.
-fn explain(profile: &[f64], peaks: &[usize], noise: f64, fwhm: f64, beta: f64) -> Chain {
+fn explain(
+    profile: &[f64],
+    peaks: &[usize],
+    noise: f64,
+    fwhm: f64,
+    beta: f64,
+) -> (Chain, Vec<f64>) {
     let n = profile.len();
     // Out to where the profile falls below 1 % of its peak.
     let reach = (fwhm
@@ -216,13 +247,14 @@ fn explain(profile: &[f64], peaks: &[usize], noise: f64, fwhm: f64, beta: f64) -
     let rms = (r2 / m.max(1) as f64).sqrt();
     let excess = (rms * rms - noise * noise).max(0.0).sqrt() / height;
     let explained = if light > 0.0 { modelled / light } else { 0.0 };
-    Chain {
+    let c = Chain {
         peaks: peaks.len(),
         explained,
         excess,
         dips: 0.0,
         is_chain: explained >= MIN_EXPLAINED && excess <= MAX_EXCESS,
-    }
+    };
+    (c, model)
 }
 
 #[cfg(test)]
