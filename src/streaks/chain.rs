@@ -35,7 +35,7 @@ pub struct Chain {
 }
 
 /// Peaks closer than this many FWHM are one star's (two stars this close are one blob).
-const MIN_SEPARATION_FWHM: f64 = 1.0;
+const MIN_SEPARATION_FWHM: f64 = 1.3;
 /// A peak stands this many noise sigmas of the profile above the background.
 const PEAK_SIGMAS: f64 = 4.0;
 // The thresholds sit between what independently simulated chains of stars and tumbling
@@ -46,7 +46,7 @@ const PEAK_SIGMAS: f64 = 4.0;
 // curves) at most 77 % explained, and streaks explained up to 93 % (a level tiled by peaks a
 // FWHM apart) with background between few of them.
 const MIN_EXPLAINED: f64 = 0.8;
-const MAX_EXCESS: f64 = 0.35;
+const MAX_EXCESS: f64 = 0.22;
 const MAX_DIP: f64 = 0.6;
 const DIP_SIGMAS: f64 = 3.0;
 const MIN_DIPS: f64 = 0.4;

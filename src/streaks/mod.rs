@@ -36,6 +36,9 @@ pub struct StreakSettings {
     /// Smallest matched-filter SNR reported (a 40 px streak of peak SNR 3 per pixel has about
     /// 30; the false lines of fixed-pattern noise that pass the other tests, 10 to 12).
     pub min_snr: f64,
+    /// Shortest track that may be broken or modulated (a tumbling object's): shorter ones
+    /// must be steady, since the point-source test ([`chain`]) has too little track to go on.
+    pub min_tumbling_px: f64,
     /// Smallest [`StreakFit::local_snr`]: the track must stand above the same filter run
     /// beside it (fixed-pattern noise, compression blocks and diffuse light make lines of
     /// single-pixel SNR 20–30 that stand 2–4 there; independently simulated streaks 9 and up).
@@ -60,6 +63,7 @@ impl Default for StreakSettings {
             max_sigma_px: 8.0,
             max_fit_rms_px: 1.0,
             min_local_snr: 5.0,
+            min_tumbling_px: 80.0,
         }
     }
 }
@@ -82,6 +86,12 @@ pub struct StreakOptions {
     pub dut1_s: Option<f64>,
     pub astrometry: reduce::Astrometry,
 }
+
+/// On tracks shorter than [`StreakSettings::min_tumbling_px`]: the largest share of the
+/// clear 4 px bins that may fall short of the fit, and the largest modulation of the
+/// along-track profile (its excess scatter over its level; a steady streak's is about 0).
+const MAX_GAP_FRACTION_SHORT: f64 = 0.25;
+const MAX_MODULATION_SHORT: f64 = 0.3;
 
 /// Lines closer to a frame axis than this (degrees) are suspects: bad columns and rows, and
 /// charge bleeding from saturated stars, run exactly along the axes.
@@ -189,6 +199,13 @@ pub fn measure(
             }
         }
     }
+    out.retain(|f| match steady_if_short(f, s) {
+        Ok(()) => true,
+        Err(why) => {
+            tracing::debug!("streak candidate {:?}: {why}", f.ends);
+            false
+        }
+    });
     out.sort_by(|a, b| {
         b.snr
             .total_cmp(&a.snr)
@@ -222,8 +239,8 @@ fn accept(f: &StreakFit, frame: &Frame, s: &StreakSettings) -> Result<(), String
             f.fit_rms_px
         ));
     }
-    // Gaps and modulation alone say nothing: a tumbling object's streak has both. A chain of
-    // stars is point sources with nothing between them.
+    // Gaps and modulation alone say nothing: a tumbling object's streak has both, and a chain
+    // of stars is point sources with nothing between them (short tracks: `steady_if_short`).
     if f.chain.is_chain {
         return Err(format!(
             "a chain of {} point sources ({:.0} % of the light, {:.2} left, background between {:.0} % of them; modulation {:.2}, gaps {:.0} %)",
@@ -239,6 +256,31 @@ fn accept(f: &StreakFit, frame: &Frame, s: &StreakSettings) -> Result<(), String
     // pixels.
     if f.axis_angle_deg < AXIS_DEG && (f.sigma_px < 0.7 || touches_saturation(f, frame)) {
         return Err("a defective or bleeding column or row".into());
+    }
+    Ok(())
+}
+
+/// A short track has too little profile to tell a tumbling object from a chain of stars
+/// (pairs of stars, comatic stars in a frame's corner, fixed-pattern noise in real frames
+/// pass the point-source test there): a streak shorter than
+/// [`StreakSettings::min_tumbling_px`] must be steady and unbroken. Asked of whole streaks,
+/// after the pieces of broken ones are joined.
+fn steady_if_short(f: &StreakFit, s: &StreakSettings) -> Result<(), String> {
+    let len = length(f);
+    if len >= s.min_tumbling_px {
+        return Ok(());
+    }
+    if f.gap_fraction > MAX_GAP_FRACTION_SHORT {
+        return Err(format!(
+            "gaps in {:.0} % of a {len:.0} px track",
+            100.0 * f.gap_fraction
+        ));
+    }
+    if f.modulation > MAX_MODULATION_SHORT {
+        return Err(format!(
+            "modulation {:.2} along a {len:.0} px track",
+            f.modulation
+        ));
     }
     Ok(())
 }
