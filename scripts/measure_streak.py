@@ -2,7 +2,7 @@
 """Independent measurement of one streak in a FITS frame (numpy/scipy/astropy only).
 
 Usage:
-    python3 scripts/measure_streak.py FRAME.fits X0,Y0,X1,Y1 [--bins 24] [--json OUT]
+    python3 scripts/measure_streak.py FRAME.fits X0,Y0,X1,Y1 [--knot-px 4] [--mask X,Y,R] [--json OUT]
 
 X0,Y0,X1,Y1 is a rough guess of the ends (0-based pixel centres, x = column), e.g. read off a
 display; a few pixels off is fine. The streak is modelled as an object moving uniformly along

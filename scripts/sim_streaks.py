@@ -7,7 +7,7 @@ assumptions.
 
 Usage:
     python3 scripts/sim_streaks.py --out DIR -n 300 --seed 1 [--fov-deg 12 --size 1024]
-            [--no-streak-fraction 0.2] [--defects] [-j 2]
+            [--no-streak-fraction 0.2] [--defects] [--glints] [--hard-negatives] [-j 2]
 
 Writes DIR/frame_NNNN.fits, DIR/truth.jsonl (one JSON object per frame) and DIR/camera.toml.
 Frame i depends only on (seed, i), so -j does not change the output.
@@ -54,6 +54,12 @@ Model
 * Defects (--defects, ~30% of frames, one each): hot column, saturated star with a vertical
   bleed trail, cosmic-ray track (sharp, no PSF), chain of 5-7 false point sources 6-15 px
   apart, 20 hot pixels. Listed per frame in truth "defects" (with their parameters).
+* Glints (--glints): each streak gets a light curve, one of five equally often (draw_glint):
+  steady, periodic, irregular, with gaps, with flashes; rendered as uniform pieces 1 px long
+  at the light curve's mean over each. The peak SNR is the nominal level's (median 1).
+* Hard negatives (--hard-negatives, every frame): 1-3 chains of stars, a defective column
+  (hot, cold or a warm pair) with p = 0.5, hot pixels with p = 0.3 (add_hard_negatives).
+  Both options draw from their own random stream: without them a frame is as before.
 * FITS: uint16 (BITPIX 16, BZERO 32768), DATE-BEG/DATE-END/DATE-OBS (ms), EXPTIME, TIMESYS;
   station as OBSGEO-B/L/H (~80%), SITELAT/SITELONG/SITEELEV (~10%) or none (~10%); ~5% of
   frames in TT (DATE-* converted from the true UTC with astropy). A TAN WCS (CD matrix) of the

@@ -64,7 +64,7 @@ pub fn assess(profile: &[f64], noise: f64, sigma: f64) -> Chain {
         is_chain: false,
     };
     let n = profile.len();
-    if n < 3 || !(noise > 0.0) || !(sigma > 0.0) {
+    if n < 3 || noise.is_nan() || sigma.is_nan() || noise <= 0.0 || sigma <= 0.0 {
         return none;
     }
     let p = |i: usize| {
@@ -279,6 +279,9 @@ mod tests {
             .collect()
     }
 
+    /// A named along-track profile.
+    type Case = (&'static str, Box<dyn Fn(f64) -> f64>);
+
     fn star(t: f64, at: f64, h: f64, s: f64) -> f64 {
         h * (-0.5 * ((t - at) / s).powi(2)).exp()
     }
@@ -351,7 +354,7 @@ mod tests {
     fn streaks_that_rise_fall_break_and_flash_are_not() {
         let s = 1.2;
         let level = |t: f64| if (5.0..195.0).contains(&t) { 10.0 } else { 0.0 };
-        let cases: [(&str, Box<dyn Fn(f64) -> f64>); 4] = [
+        let cases: [Case; 4] = [
             ("steady", Box::new(level)),
             (
                 "periodic, 30 px, to zero",

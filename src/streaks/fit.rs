@@ -546,7 +546,7 @@ impl Model {
                     }
                 }
                 let det = jtj[0][0] * jtj[1][1] - jtj[0][1] * jtj[1][0];
-                if !(det.abs() > 1e-30) {
+                if det.is_nan() || det.abs() <= 1e-30 {
                     return None;
                 }
                 let d_te = (jtj[1][1] * jtr[0] - jtj[0][1] * jtr[1]) / det;
