@@ -183,10 +183,7 @@ pub fn measure(
         let Some(f) = found else { continue };
         // One streak is one fit: pieces that were not joined (a defect crossing the track
         // splits it) can lie on the same line; such a pair is fitted again as one.
-        match out
-            .iter()
-            .position(|g| same_line(g, &f) || continues(g, &f))
-        {
+        match out.iter().position(|g| same_line(g, &f) || touches(g, &f)) {
             None => out.push(f),
             Some(k) => {
                 let whole = try_fit(&span(&out[k], &f));
@@ -196,6 +193,35 @@ pub fn measure(
                     out[k]
                 };
                 out[k] = whole.unwrap_or(longer);
+            }
+        }
+    }
+    // Pieces of a broken streak, farther apart or met in an order that left them apart:
+    // joined where the fit of the whole holds, in passes until none is left (three pieces
+    // can come in any order). A short piece's direction is the less sure, so the longer
+    // piece's line decides; a piece inside the longer one's track that does not fit with it
+    // is a part of it, else both are kept.
+    let mut joined = true;
+    while joined {
+        joined = false;
+        'pairs: for i in 0..out.len() {
+            for j in i + 1..out.len() {
+                let (long, short) = if length(&out[i]) >= length(&out[j]) {
+                    (i, j)
+                } else {
+                    (j, i)
+                };
+                if !broken_pieces(&out[long], &out[short]) {
+                    continue;
+                }
+                match try_fit(&span(&out[long], &out[short])) {
+                    Some(whole) => out[long] = whole,
+                    None if within(&out[long], &out[short]) => {}
+                    None => continue,
+                }
+                out.remove(short);
+                joined = true;
+                break 'pairs;
             }
         }
     }
@@ -304,22 +330,33 @@ fn same_line(a: &StreakFit, b: &StreakFit) -> bool {
     cos > 2f64.to_radians().cos() && across < 3.0 && distance_to(a, m.0, m.1) < 3.0
 }
 
-/// Do two fits lie on one line with their tracks overlapping or less than 10 px apart, or
-/// are they two pieces of one broken streak: as wide, each on the other's line, and apart by
-/// less than 1.5 times their lengths together? A tumbling object goes dark for part of an
+/// Do both ends of `b` lie within 3 px of `a`'s segment?
+fn within(a: &StreakFit, b: &StreakFit) -> bool {
+    b.ends.iter().all(|&(x, y)| distance_to(a, x, y) < 3.0)
+}
+
+/// Is (x, y) within `tol` of the line of `f`?
+fn near_line(f: &StreakFit, (x, y): (f64, f64), tol: f64) -> bool {
+    let (x0, y0) = f.ends[0];
+    (-(x - x0) * f.dir.1 + (y - y0) * f.dir.0).abs() < tol
+}
+
+/// Do two fits lie on one line with their tracks overlapping or less than 10 px apart?
+fn touches(a: &StreakFit, b: &StreakFit) -> bool {
+    let cos = (a.dir.0 * b.dir.0 + a.dir.1 * b.dir.1).abs();
+    cos > 2f64.to_radians().cos()
+        && b.ends.iter().all(|&e| near_line(a, e, 3.0))
+        && b.ends.iter().any(|&(x, y)| distance_to(a, x, y) < 10.0)
+}
+
+/// Are two fits pieces of one broken streak: as wide, `b` on `a`'s line (within 2° and 3 px),
+/// and apart by less than 1.5 times their lengths together (or overlapping)? A tumbling object goes dark for part of an
 /// exposure (in a shadowed face's turn, or an eclipse): its streak breaks into pieces whose
 /// gaps can be as long as the pieces.
-fn continues(a: &StreakFit, b: &StreakFit) -> bool {
+fn broken_pieces(a: &StreakFit, b: &StreakFit) -> bool {
     let cos = (a.dir.0 * b.dir.0 + a.dir.1 * b.dir.1).abs();
-    let near = |f: &StreakFit, (x, y): (f64, f64), tol: f64| {
-        let (x0, y0) = f.ends[0];
-        (-(x - x0) * f.dir.1 + (y - y0) * f.dir.0).abs() < tol
-    };
-    if cos <= 2f64.to_radians().cos() || !b.ends.iter().all(|&e| near(a, e, 3.0)) {
+    if cos <= 2f64.to_radians().cos() || !b.ends.iter().all(|&e| near_line(a, e, 3.0)) {
         return false;
-    }
-    if b.ends.iter().any(|&(x, y)| distance_to(a, x, y) < 10.0) {
-        return true;
     }
     let gap = b
         .ends
@@ -327,10 +364,7 @@ fn continues(a: &StreakFit, b: &StreakFit) -> bool {
         .map(|&(x, y)| distance_to(a, x, y))
         .fold(f64::MAX, f64::min);
     let (wa, wb) = (a.sigma_px, b.sigma_px);
-    cos > 1f64.to_radians().cos()
-        && a.ends.iter().all(|&e| near(b, e, 3.0))
-        && wa.max(wb) < 1.5 * wa.min(wb)
-        && gap < 1.5 * (length(a) + length(b))
+    wa.max(wb) < 1.5 * wa.min(wb) && gap < 1.5 * (length(a) + length(b))
 }
 
 /// The segment from the farther apart of two collinear fits' ends to the other.
