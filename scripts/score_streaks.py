@@ -180,6 +180,29 @@ def rotation_error_arcsec(r_rec, r_true):
     return math.degrees(math.acos(max(-1.0, min(1.0, c)))) * 3600.0
 
 
+def false_cause(ends, defects):
+    """What a false record streak lies on: a chain of stars (two or more of its points within
+    3 px of the segment), a defective column (both ends within 3 px of it), else None."""
+    if ends is None:
+        return None
+    a, b = ends
+    d = b - a
+    l2 = max(float(d @ d), 1e-12)
+
+    def dist(p):
+        p = np.asarray(p, float)
+        t = min(max(float((p - a) @ d) / l2, 0.0), 1.0)
+        return float(np.linalg.norm(p - a - t * d))
+    for df in defects:
+        if df["type"] in ("star_chain", "false_chain"):
+            if sum(dist(p) <= 3.0 for p in df["points"]) >= 2:
+                return df["type"]
+        elif "x" in df and df["type"] in ("hot_column", "cold_column", "warm_pair", "bleed"):
+            if abs(a[0] - df["x"]) <= 3.0 and abs(b[0] - df["x"]) <= 3.0:
+                return df["type"]
+    return None
+
+
 def score(truth, records, args):
     recs = {}
     for r in records:
@@ -217,7 +240,8 @@ def score(truth, records, args):
                 comp_tab[si][li][0] += int(found)
             row = {"file": name, "truth_index": i, "peak_snr": ts["peak_snr"],
                    "visible_length_px": ts["visible_length_px"], "edge": [ts["edge0"], ts["edge1"]],
-                   "matched": found, "record_index": pairs.get(i)}
+                   "matched": found, "record_index": pairs.get(i),
+                   "glint": (ts.get("glint") or {}).get("kind")}
             if found:
                 rs = rstreaks[pairs[i]]
                 ends = rec_ends(rs)
@@ -271,7 +295,9 @@ def score(truth, records, args):
                 false_streaks.append({"file": name, "record_index": j, "frame_has_streaks": bool(tstreaks),
                                       "along_truth_streak": j in along,
                                       "defects": [d["type"] for d in t.get("defects", [])],
-                                      "length_px": rstreaks[j].get("length_px"), "snr": rstreaks[j].get("snr")})
+                                      "length_px": rstreaks[j].get("length_px"), "snr": rstreaks[j].get("snr"),
+                                      "lies_on": "truth streak" if j in along
+                                      else false_cause(rec_ends(rstreaks[j]), t.get("defects", []))})
 
         # star identification: a match is right when a truth star of the same id lies within tol
         tstars = {star_key(s): (s["x"], s["y"]) for s in t.get("stars", [])}
@@ -338,6 +364,11 @@ def score(truth, records, args):
         "completeness_edge": comp(lambda r: r["edge"][0] or r["edge"][1]),
         "completeness_inside": comp(lambda r: not (r["edge"][0] or r["edge"][1])),
         "completeness_table": table,
+        # --glints: by the object's light curve (steady, periodic, irregular, gaps, flashes)
+        "completeness_by_glint": {k: {"all": comp(lambda r, k=k: r["glint"] == k),
+                                      "long_bright": comp(lambda r, k=k: r["glint"] == k and r["visible_length_px"] >= 100
+                                                          and r["peak_snr"] >= 5)}
+                                  for k in sorted({r["glint"] for r in per_streak if r["glint"]})},
         "false_streaks": {
             "total": len(false_streaks),
             "along_truth_streak": sum(f["along_truth_streak"] for f in false_streaks),
@@ -346,6 +377,7 @@ def score(truth, records, args):
             "frames_without_streaks_with_false": sum(1 for x in nostreak["n_false_streaks"] if x > 0),
             "by_defect_on_frames_without_streaks": dict(defect_tab),
             "by_defect_all_frames": dict(false_by_defect_all),
+            "lies_on": dict(Counter(str(f["lies_on"]) for f in false_streaks)),
             "list": false_streaks,
         },
         "end_error_px": stats(end_err),
@@ -402,6 +434,11 @@ def print_summary(s):
         p("  frames without streaks, by defect: " + ", ".join(
             f"{k} {v['frames_with_false']}/{v['frames']} ({v['false_streaks']} false)"
             for k, v in sorted(f["by_defect_on_frames_without_streaks"].items())))
+    if s["completeness_by_glint"]:
+        p("  by light curve (all; >=100 px & SNR >=5): " + ", ".join(
+            f"{k} {pct(v['all'])}; {pct(v['long_bright'])}" for k, v in s["completeness_by_glint"].items()))
+    if f["lies_on"]:
+        p("  false streaks lie on: " + ", ".join(f"{k} {v}" for k, v in sorted(f["lies_on"].items())))
     if f["by_defect_all_frames"]:
         p("  all false streaks by frame defect: " + ", ".join(f"{k} {v}" for k, v in sorted(f["by_defect_all_frames"].items())))
     p(f"end error (inside ends): {fmt_stats(s['end_error_px'])}")

@@ -7,7 +7,7 @@ assumptions.
 
 Usage:
     python3 scripts/sim_streaks.py --out DIR -n 300 --seed 1 [--fov-deg 12 --size 1024]
-            [--no-streak-fraction 0.2] [--defects] [-j 2]
+            [--no-streak-fraction 0.2] [--defects] [--glints] [--hard-negatives] [-j 2]
 
 Writes DIR/frame_NNNN.fits, DIR/truth.jsonl (one JSON object per frame) and DIR/camera.toml.
 Frame i depends only on (seed, i), so -j does not change the output.
@@ -54,6 +54,12 @@ Model
 * Defects (--defects, ~30% of frames, one each): hot column, saturated star with a vertical
   bleed trail, cosmic-ray track (sharp, no PSF), chain of 5-7 false point sources 6-15 px
   apart, 20 hot pixels. Listed per frame in truth "defects" (with their parameters).
+* Glints (--glints): each streak gets a light curve, one of five equally often (draw_glint):
+  steady, periodic, irregular, with gaps, with flashes; rendered as uniform pieces 1 px long
+  at the light curve's mean over each. The peak SNR is the nominal level's (median 1).
+* Hard negatives (--hard-negatives, every frame): 1-3 chains of stars, a defective column
+  (hot, cold or a warm pair) with p = 0.5, hot pixels with p = 0.3 (add_hard_negatives).
+  Both options draw from their own random stream: without them a frame is as before.
 * FITS: uint16 (BITPIX 16, BZERO 32768), DATE-BEG/DATE-END/DATE-OBS (ms), EXPTIME, TIMESYS;
   station as OBSGEO-B/L/H (~80%), SITELAT/SITELONG/SITEELEV (~10%) or none (~10%); ~5% of
   frames in TT (DATE-* converted from the true UTC with astropy). A TAN WCS (CD matrix) of the
@@ -91,6 +97,8 @@ SUB_OFF = (np.arange(SUB) + 0.5) / SUB - 0.5  # sub-sample offsets from the pixe
 INSIDE_MARGIN = 3.0  # an inside end is at least this far from the border (pixel centres)
 MIN_VISIBLE = 20.0  # px: shorter visible parts are re-drawn (not a streak anyone could see)
 EPOCH_CAT_JYEAR = 1991.25
+PIECE_PX = 1.0  # a modulated trail is rendered as uniform pieces this long
+GLINT_KINDS = ["steady", "periodic", "irregular", "gaps", "flashes"]
 
 # Worker globals (filled once per process; fork shares them copy-on-write).
 CAT = None
@@ -220,8 +228,23 @@ def streak_peak_factor(theta, alpha):
     return float(line_profile(np.abs(ox * nx + oy * ny), alpha).mean())
 
 
-def render_streak(img, p0, p1, density, alpha):
-    """Add the image of an object moving uniformly from p0 to p1 (line density e-/px)."""
+def render_streak(img, p0, p1, density, alpha, brightness=None):
+    """Add the image of an object moving uniformly from p0 to p1 (line density e-/px).
+
+    brightness: optional function of the distance along the track from p0 (px, numpy array)
+    giving the object's relative brightness there (a tumbling object's light curve, a glint,
+    a gap where it is dark); the trail is then the sum of pieces at most PIECE_PX long, each
+    the exact integral of a uniform piece at the mean brightness over it (from 8 samples)."""
+    if brightness is not None:
+        p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+        L = float(np.linalg.norm(p1 - p0))
+        n = max(int(math.ceil(L / PIECE_PX)), 1)
+        edges = np.linspace(0.0, L, n + 1)
+        for a, b in zip(edges[:-1], edges[1:]):
+            m = float(np.mean(brightness(a + (np.arange(8) + 0.5) / 8 * (b - a))))
+            if m > 0:
+                render_streak(img, p0 + (p1 - p0) * (a / L), p0 + (p1 - p0) * (b / L), density * m, alpha)
+        return
     h, w = img.shape
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     L = float(np.linalg.norm(p1 - p0))
@@ -344,6 +367,135 @@ def draw_geometry(rng, w, h, n_parallel=1, spacing=0.0):
     raise RuntimeError("could not place a streak")
 
 
+# ----------------------------------------------------------------------------- glints
+
+def draw_glint(rng, L, kind=None):
+    """A tumbling object's light along a track of length L (px from the exposure start's end).
+
+    Returns (truth dict, brightness function of the distance along the track, or None for a
+    steady object). The brightness is relative to the streak's nominal level (its peak SNR):
+    * periodic: 1 + m sin(2 pi s / P + phi), depth m 0.3..1, period P log-uniform 12..300 px
+      (a spinning body's light curve; at m = 1 it falls to 0 once a period);
+    * irregular: exp of smoothed Gaussian noise (correlation length 4..60 px, 0.3..0.8 in ln),
+      scaled to median 1 (an irregular tumbler);
+    * gaps: steady, dark on 1..3 intervals of 4..20 % of the track each (at least 10 px), all
+      between 15 % and 85 % of it (eclipses, a shadowed face; both ends lit);
+    * flashes: steady at 1 with 2..8 glints of 2..8 times that, Gaussian in time, sigma
+      0.3..4 px along the track (specular glints, many shorter than the PSF).
+    """
+    kind = kind or GLINT_KINDS[int(rng.integers(len(GLINT_KINDS)))]
+    if kind == "steady":
+        return {"kind": kind}, None
+    if kind == "periodic":
+        m = float(rng.uniform(0.3, 1.0))
+        period = math.exp(rng.uniform(math.log(12.0), math.log(300.0)))
+        phi = float(rng.uniform(0, 2 * math.pi))
+        return ({"kind": kind, "depth": round(m, 3), "period_px": round(period, 2), "phase": round(phi, 3)},
+                lambda x: 1.0 + m * np.sin(2 * math.pi * x / period + phi))
+    if kind == "irregular":
+        ell = float(rng.uniform(4.0, 60.0))
+        sd = float(rng.uniform(0.3, 0.8))
+        n = int(math.ceil(L)) + 1
+        k = np.arange(-int(3 * ell), int(3 * ell) + 1)
+        ker = np.exp(-0.5 * (k / ell) ** 2)
+        g = np.convolve(rng.normal(size=n + 2 * len(k)), ker, mode="same")[len(k):len(k) + n]
+        g = (g - g.mean()) / max(g.std(), 1e-9) * sd
+        b = np.exp(g)
+        b /= np.median(b)
+        grid = np.arange(n, dtype=float)
+        return ({"kind": kind, "corr_px": round(ell, 2), "sigma_ln": round(sd, 3)},
+                lambda x: np.interp(x, grid, b))
+    if kind == "gaps":
+        gaps = []
+        for _ in range(int(rng.integers(1, 4))):
+            for _try in range(50):
+                g = max(float(rng.uniform(0.04, 0.2)) * L, 10.0)
+                a = float(rng.uniform(0.15 * L, 0.85 * L - g))
+                if a >= 0.15 * L and all(a > e + 4 or a + g < b - 4 for b, e in gaps):
+                    gaps.append((a, a + g))
+                    break
+        gaps.sort()
+        iv = np.array(gaps) if gaps else np.zeros((0, 2))
+
+        def bright(x):
+            x = np.asarray(x, float)
+            dark = np.zeros(x.shape, bool)
+            for a, b in iv:
+                dark |= (x >= a) & (x < b)
+            return np.where(dark, 0.0, 1.0)
+        return {"kind": kind, "gaps_px": [[round(a, 2), round(b, 2)] for a, b in gaps]}, bright
+    if kind == "flashes":
+        k = int(rng.integers(2, 9))
+        at = rng.uniform(0.05 * L, 0.95 * L, k)
+        amp = rng.uniform(2.0, 8.0, k)
+        wid = rng.uniform(0.3, 4.0, k)
+        return ({"kind": kind, "at_px": [round(float(v), 2) for v in at], "amp": [round(float(v), 2) for v in amp],
+                 "sigma_px": [round(float(v), 2) for v in wid]},
+                lambda x: 1.0 + sum(a * np.exp(-0.5 * ((np.asarray(x, float) - c) / w) ** 2)
+                                    for c, a, w in zip(at, amp, wid)))
+    raise ValueError(f"unknown glint kind {kind}")
+
+
+# ----------------------------------------------------------------------------- hard negatives
+
+def add_hard_negatives(rng, signal, post, W, H, alpha, centred_peak, sigma_at):
+    """Things that are not streaks, on every frame (--hard-negatives): 1..3 chains of stars,
+    a defective column with p = 0.5, 20 hot pixels with p = 0.3. Returns their truth.
+
+    Chains: 4..14 point sources along a line (jitter 0.3 px across it), spaced 5..25 px
+    (dense chains, 5..9 px, overlap in their wings), each with its own peak SNR (a chain's
+    brightness drawn 5..40, each star 0.5..1.5 times it): as close to a flashing streak as
+    point sources get. Columns: a hot column (+50..2000 ADU) over 60 px to the whole height,
+    or a cold one (-50..-300 ADU), or a 2-pixel-wide warm pair (+30..300 ADU)."""
+    out = []
+    for _ in range(int(rng.integers(1, 4))):
+        m = int(rng.integers(4, 15))
+        sp = float(rng.uniform(5.0, 9.0)) if rng.random() < 0.4 else float(rng.uniform(9.0, 25.0))
+        th = rng.uniform(0, 2 * math.pi)
+        ext = (m - 1) * sp
+        if ext > min(W, H) - 60:
+            m = int((min(W, H) - 60) // sp) + 1
+            ext = (m - 1) * sp
+        cx = float(rng.uniform(20 + ext / 2, W - 20 - ext / 2))
+        cy = float(rng.uniform(20 + ext / 2, H - 20 - ext / 2))
+        x0, y0 = cx - ext / 2 * math.cos(th), cy - ext / 2 * math.sin(th)
+        level = float(rng.uniform(5.0, 40.0))
+        pts = []
+        for j in range(m):
+            jit = float(rng.normal(0.0, 0.3))
+            x = x0 + j * sp * math.cos(th) - jit * math.sin(th)
+            y = y0 + j * sp * math.sin(th) + jit * math.cos(th)
+            snr = level * float(rng.uniform(0.5, 1.5))
+            render_point(signal, x, y, snr * sigma_at(x, y) / centred_peak, alpha)
+            pts.append([round(x, 3), round(y, 3)])
+        out.append({"type": "star_chain", "points": pts, "spacing_px": round(sp, 2), "peak_snr": round(level, 2)})
+    if rng.random() < 0.5:
+        x = int(rng.integers(0, W))
+        if rng.random() < 0.5:
+            y0, y1 = 0, H - 1
+        else:
+            y0 = int(rng.integers(0, H - 60))
+            y1 = int(rng.integers(y0 + 60, H))
+        r = rng.random()
+        if r < 0.4:
+            kind, adu, cols = "hot_column", float(rng.uniform(50, 2000)), [x]
+        elif r < 0.7:
+            kind, adu, cols = "cold_column", -float(rng.uniform(50, 300)), [x]
+        else:
+            kind, adu, cols = "warm_pair", float(rng.uniform(30, 300)), [x, min(x + 1, W - 1)]
+        out.append({"type": kind, "x": x, "y0": y0, "y1": y1, "adu": round(adu, 1)})
+        for c in cols:
+            post.append(("add", (slice(y0, y1 + 1), c), adu))
+    if rng.random() < 0.3:
+        xs_ = rng.integers(0, W, 20)
+        ys_ = rng.integers(0, H, 20)
+        adus = rng.uniform(300, 30000, 20)
+        out.append({"type": "hot_pixels", "pixels": [[int(a), int(b)] for a, b in zip(xs_, ys_)]})
+        for a, b, c in zip(xs_, ys_, adus):
+            post.append(("add", (int(b), int(a)), float(c)))
+    return out
+
+
 # ----------------------------------------------------------------------------- frame
 
 def load_catalog(path):
@@ -393,6 +545,9 @@ def make_wcs_header(cam, R):
 
 def simulate_frame(i, args):
     rng = np.random.default_rng([args.seed, i])
+    # --glints and --hard-negatives draw from their own stream, so frames made without them
+    # are the same as before they existed.
+    rng2 = np.random.default_rng([args.seed, i, 2])
     W = H = args.size
     cam = Camera(W, H, args.fov_deg)
     R = random_rotation(rng)
@@ -471,7 +626,9 @@ def simulate_frame(i, args):
                 snr = float(rng.uniform(3.0, 25.0))
                 theta = math.atan2(p1[1] - p0[1], p1[0] - p0[0])
                 density = snr * sigma_at(*vmid) / streak_peak_factor(theta, alpha)
-                render_streak(signal, p0, p1, density, alpha)
+                glint, bright = (draw_glint(rng2, float(np.linalg.norm(p1 - p0)))
+                                 if getattr(args, "glints", False) else (None, None))
+                render_streak(signal, p0, p1, density, alpha, bright)
                 ra0, dec0 = vec_to_radec_deg(cam.pixel_to_icrs(R, *p0))
                 ra1, dec1 = vec_to_radec_deg(cam.pixel_to_icrs(R, *p1))
                 s = {"p0": [round(float(p0[0]), 4), round(float(p0[1]), 4)],
@@ -483,6 +640,8 @@ def simulate_frame(i, args):
                      "peak_snr": round(snr, 3),
                      "ra0_deg": ra0, "dec0_deg": dec0, "ra1_deg": ra1, "dec1_deg": dec1,
                      "flux_e": round(density * float(np.linalg.norm(p1 - p0)), 1)}
+                if glint is not None:
+                    s["glint"] = glint
                 if len(g) > 1:
                     s["train"] = train_id
                 streaks.append(s)
@@ -551,6 +710,9 @@ def simulate_frame(i, args):
             defects.append({"type": kind, "pixels": [[int(a), int(b)] for a, b in zip(xs_, ys_)]})
             for a, b, c in zip(xs_, ys_, adus):
                 post.append(("add", (int(b), int(a)), float(c)))
+
+    if getattr(args, "hard_negatives", False):
+        defects += add_hard_negatives(rng2, signal, post, W, H, alpha, centred_peak, sigma_at)
 
     # --- detector
     yy, xx = np.mgrid[0:H, 0:W]
@@ -655,6 +817,10 @@ def main(argv=None):
     ap.add_argument("--size", type=int, default=1024)
     ap.add_argument("--no-streak-fraction", type=float, default=0.2)
     ap.add_argument("--defects", action="store_true")
+    ap.add_argument("--glints", action="store_true",
+                    help="tumbling objects: each streak steady, periodic, irregular, with gaps or flashes (1/5 each)")
+    ap.add_argument("--hard-negatives", action="store_true",
+                    help="on every frame 1-3 chains of stars, with p = 0.5 a defective column, p = 0.3 hot pixels")
     ap.add_argument("--catalog", default=str(DEFAULT_CATALOG))
     ap.add_argument("-j", "--jobs", type=int, default=1, help="worker processes (default 1)")
     args = ap.parse_args(argv)

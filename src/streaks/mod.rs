@@ -10,6 +10,7 @@
 //! out → [`reduce`] with [`sky`] (RA/Dec, times, station, Az/El) → [`export`] with [`formats`]
 //! (CCSDS TDM, IOD).
 
+pub mod chain;
 pub mod export;
 pub mod fit;
 pub mod formats;
@@ -37,6 +38,9 @@ pub struct StreakSettings {
     /// Smallest matched-filter SNR reported (a 40 px streak of peak SNR 3 per pixel has about
     /// 30; the false lines of fixed-pattern noise that pass the other tests, 10 to 12).
     pub min_snr: f64,
+    /// Shortest track that may be broken or modulated (a tumbling object's): shorter ones
+    /// must be steady, since the point-source test ([`chain`]) has too little track to go on.
+    pub min_tumbling_px: f64,
     /// Smallest [`StreakFit::local_snr`]: the track must stand above the same filter run
     /// beside it (fixed-pattern noise, compression blocks and diffuse light make lines of
     /// single-pixel SNR 20–30 that stand 2–4 there; independently simulated streaks 9 and up).
@@ -49,12 +53,6 @@ pub struct StreakSettings {
     pub min_sigma_px: f64,
     /// Widest profile (Gaussian σ, pixels): a fit this wide has found no line but a patch.
     pub max_sigma_px: f64,
-    /// Largest share of a track's clear 4 px bins that may fall short of the fit (chains of
-    /// stars have gaps between the stars, streaks none).
-    pub max_gap_fraction: f64,
-    /// Largest modulation of the along-track profile (its excess scatter over the mean): a
-    /// chain of stars rises and falls from star to star, a streak stays level.
-    pub max_modulation: f64,
 }
 
 impl Default for StreakSettings {
@@ -67,8 +65,7 @@ impl Default for StreakSettings {
             max_sigma_px: 8.0,
             max_fit_rms_px: 1.0,
             min_local_snr: 5.0,
-            max_gap_fraction: 0.25,
-            max_modulation: 0.3,
+            min_tumbling_px: 80.0,
         }
     }
 }
@@ -94,6 +91,12 @@ pub struct StreakOptions {
     pub tle: Option<std::sync::Arc<sky::tle::TleCatalog>>,
     pub identify: identify::IdentifySettings,
 }
+
+/// On tracks shorter than [`StreakSettings::min_tumbling_px`]: the largest share of the
+/// clear 4 px bins that may fall short of the fit, and the largest modulation of the
+/// along-track profile (its excess scatter over its level; a steady streak's is about 0).
+const MAX_GAP_FRACTION_SHORT: f64 = 0.25;
+const MAX_MODULATION_SHORT: f64 = 0.3;
 
 /// Lines closer to a frame axis than this (degrees) are suspects: bad columns and rows, and
 /// charge bleeding from saturated stars, run exactly along the axes.
@@ -160,7 +163,12 @@ pub fn measure(
         };
         match accept(&f, frame, s) {
             Ok(()) => {
-                tracing::debug!("streak {:?}: local snr {:.1}", f.ends, f.local_snr);
+                tracing::debug!(
+                    "streak {:?}: local snr {:.1}, {:?}",
+                    f.ends,
+                    f.local_snr,
+                    f.chain
+                );
                 Some(f)
             }
             Err(why) => {
@@ -180,10 +188,7 @@ pub fn measure(
         let Some(f) = found else { continue };
         // One streak is one fit: pieces that were not joined (a defect crossing the track
         // splits it) can lie on the same line; such a pair is fitted again as one.
-        match out
-            .iter()
-            .position(|g| same_line(g, &f) || continues(g, &f))
-        {
+        match out.iter().position(|g| same_line(g, &f) || touches(g, &f)) {
             None => out.push(f),
             Some(k) => {
                 let whole = try_fit(&span(&out[k], &f));
@@ -196,6 +201,42 @@ pub fn measure(
             }
         }
     }
+    // Pieces of a broken streak, farther apart or met in an order that left them apart:
+    // joined where the fit of the whole holds, in passes until none is left (three pieces
+    // can come in any order). A short piece's direction is the less sure, so the longer
+    // piece's line decides; a piece inside the longer one's track that does not fit with it
+    // is a part of it, else both are kept.
+    let mut joined = true;
+    while joined {
+        joined = false;
+        'pairs: for i in 0..out.len() {
+            for j in i + 1..out.len() {
+                let (long, short) = if length(&out[i]) >= length(&out[j]) {
+                    (i, j)
+                } else {
+                    (j, i)
+                };
+                if !broken_pieces(&out[long], &out[short]) {
+                    continue;
+                }
+                match try_fit(&span(&out[long], &out[short])) {
+                    Some(whole) => out[long] = whole,
+                    None if within(&out[long], &out[short]) => {}
+                    None => continue,
+                }
+                out.remove(short);
+                joined = true;
+                break 'pairs;
+            }
+        }
+    }
+    out.retain(|f| match steady_if_short(f, s) {
+        Ok(()) => true,
+        Err(why) => {
+            tracing::debug!("streak candidate {:?}: {why}", f.ends);
+            false
+        }
+    });
     out.sort_by(|a, b| {
         b.snr
             .total_cmp(&a.snr)
@@ -229,19 +270,48 @@ fn accept(f: &StreakFit, frame: &Frame, s: &StreakSettings) -> Result<(), String
             f.fit_rms_px
         ));
     }
-    if f.gap_fraction > s.max_gap_fraction {
+    // Gaps and modulation alone say nothing: a tumbling object's streak has both, and a chain
+    // of stars is point sources with nothing between them (short tracks: `steady_if_short`).
+    if f.chain.is_chain {
         return Err(format!(
-            "gaps in {:.0} % of the track",
+            "a chain of {} point sources ({:.0} % of the light, {:.2} left, background between {:.0} % of them; modulation {:.2}, gaps {:.0} %)",
+            f.chain.peaks,
+            100.0 * f.chain.explained,
+            f.chain.excess,
+            100.0 * f.chain.dips,
+            f.modulation,
             100.0 * f.gap_fraction
         ));
-    }
-    if f.modulation > s.max_modulation {
-        return Err(format!("modulation {:.2} along the track", f.modulation));
     }
     // Along a frame axis: a defective column or row is narrow; a bleed trail holds saturated
     // pixels.
     if f.axis_angle_deg < AXIS_DEG && (f.sigma_px < 0.7 || touches_saturation(f, frame)) {
         return Err("a defective or bleeding column or row".into());
+    }
+    Ok(())
+}
+
+/// A short track has too little profile to tell a tumbling object from a chain of stars
+/// (pairs of stars, comatic stars in a frame's corner, fixed-pattern noise in real frames
+/// pass the point-source test there): a streak shorter than
+/// [`StreakSettings::min_tumbling_px`] must be steady and unbroken. Asked of whole streaks,
+/// after the pieces of broken ones are joined.
+fn steady_if_short(f: &StreakFit, s: &StreakSettings) -> Result<(), String> {
+    let len = length(f);
+    if len >= s.min_tumbling_px {
+        return Ok(());
+    }
+    if f.gap_fraction > MAX_GAP_FRACTION_SHORT {
+        return Err(format!(
+            "gaps in {:.0} % of a {len:.0} px track",
+            100.0 * f.gap_fraction
+        ));
+    }
+    if f.modulation > MAX_MODULATION_SHORT {
+        return Err(format!(
+            "modulation {:.2} along a {len:.0} px track",
+            f.modulation
+        ));
     }
     Ok(())
 }
@@ -265,16 +335,41 @@ fn same_line(a: &StreakFit, b: &StreakFit) -> bool {
     cos > 2f64.to_radians().cos() && across < 3.0 && distance_to(a, m.0, m.1) < 3.0
 }
 
+/// Do both ends of `b` lie within 3 px of `a`'s segment?
+fn within(a: &StreakFit, b: &StreakFit) -> bool {
+    b.ends.iter().all(|&(x, y)| distance_to(a, x, y) < 3.0)
+}
+
+/// Is (x, y) within `tol` of the line of `f`?
+fn near_line(f: &StreakFit, (x, y): (f64, f64), tol: f64) -> bool {
+    let (x0, y0) = f.ends[0];
+    (-(x - x0) * f.dir.1 + (y - y0) * f.dir.0).abs() < tol
+}
+
 /// Do two fits lie on one line with their tracks overlapping or less than 10 px apart?
-fn continues(a: &StreakFit, b: &StreakFit) -> bool {
+fn touches(a: &StreakFit, b: &StreakFit) -> bool {
     let cos = (a.dir.0 * b.dir.0 + a.dir.1 * b.dir.1).abs();
-    let near = |f: &StreakFit, (x, y): (f64, f64)| {
-        let (x0, y0) = f.ends[0];
-        (-(x - x0) * f.dir.1 + (y - y0) * f.dir.0).abs() < 3.0
-    };
     cos > 2f64.to_radians().cos()
-        && b.ends.iter().all(|&e| near(a, e))
+        && b.ends.iter().all(|&e| near_line(a, e, 3.0))
         && b.ends.iter().any(|&(x, y)| distance_to(a, x, y) < 10.0)
+}
+
+/// Are two fits pieces of one broken streak: as wide, `b` on `a`'s line (within 2° and 3 px),
+/// and apart by less than 1.5 times their lengths together (or overlapping)? A tumbling object goes dark for part of an
+/// exposure (in a shadowed face's turn, or an eclipse): its streak breaks into pieces whose
+/// gaps can be as long as the pieces.
+fn broken_pieces(a: &StreakFit, b: &StreakFit) -> bool {
+    let cos = (a.dir.0 * b.dir.0 + a.dir.1 * b.dir.1).abs();
+    if cos <= 2f64.to_radians().cos() || !b.ends.iter().all(|&e| near_line(a, e, 3.0)) {
+        return false;
+    }
+    let gap = b
+        .ends
+        .iter()
+        .map(|&(x, y)| distance_to(a, x, y))
+        .fold(f64::MAX, f64::min);
+    let (wa, wb) = (a.sigma_px, b.sigma_px);
+    wa.max(wb) < 1.5 * wa.min(wb) && gap < 1.5 * (length(a) + length(b))
 }
 
 /// The segment from the farther apart of two collinear fits' ends to the other.

@@ -21,6 +21,9 @@ const NOISE: f64 = 10.0;
 enum Thing {
     /// A streak from (x0, y0) to (x1, y1) with this peak SNR, PSF σ 1.2 px.
     Streak(f64, f64, f64, f64, f64),
+    /// A streak of a tumbling object: as `Streak`, its brightness along the track given in
+    /// pieces (from, to, brightness), from and to as fractions of the track from (x0, y0).
+    Tumbling(f64, f64, f64, f64, f64, Vec<(f64, f64, f64)>),
     /// A star of this peak SNR.
     Star(f64, f64, f64),
     /// A defective column: +ADU on column x from row y0 to y1.
@@ -41,6 +44,31 @@ fn frame(w: u32, h: u32, things: &[Thing], seed: u64) -> Frame {
     let mut sat = vec![false; (w * h) as usize];
     for t in things {
         match *t {
+            Thing::Tumbling(x0, y0, x1, y1, snr, ref pieces) => {
+                // The sum of uniform pieces, each blurred at its ends as a whole streak is.
+                let (dx, dy) = (x1 - x0, y1 - y0);
+                let len = (dx * dx + dy * dy).sqrt();
+                let (ux, uy) = (dx / len, dy / len);
+                let k = 1.0 / (2f64.sqrt() * sg);
+                for y in 0..h {
+                    for x in 0..w {
+                        let (px, py) = (x as f64 - x0, y as f64 - y0);
+                        let t = px * ux + py * uy;
+                        let d = -px * uy + py * ux;
+                        if d.abs() > 8.0 || t < -8.0 || t > len + 8.0 {
+                            continue;
+                        }
+                        let along: f64 = pieces
+                            .iter()
+                            .map(|&(a, b, m)| {
+                                m * 0.5 * (erf((t - a * len) * k) - erf((t - b * len) * k))
+                            })
+                            .sum();
+                        v[(y * w + x) as usize] +=
+                            snr * NOISE * (-d * d / (2.0 * sg * sg)).exp() * along;
+                    }
+                }
+            }
             Thing::Streak(x0, y0, x1, y1, snr) => {
                 let (dx, dy) = (x1 - x0, y1 - y0);
                 let len = (dx * dx + dy * dy).sqrt();
@@ -256,6 +284,71 @@ fn noise_stars_and_defects_give_no_streak() {
         assert!(found.is_empty(), "seed {seed}: {found:?}");
         let noise = frame(256, 256, &[], 40 + seed);
         assert!(find(&noise).is_empty());
+    }
+}
+
+/// Issue 26: a tumbling object's streak breaks, rises and falls, and flashes; it is one
+/// streak with both ends all the same (the rule that refused modulated tracks as chains of
+/// stars refused every one of these).
+#[test]
+fn broken_modulated_and_flashing_streaks_are_one_streak_with_both_ends() {
+    let (a, b) = ((60.4, 80.2), (420.7, 250.9));
+    // Dark over 18 % of the track in the middle (and 8 % nearer an end).
+    let broken = vec![(0.0, 0.3, 1.0), (0.38, 0.56, 1.0), (0.74, 1.0, 1.0)];
+    // Bright and faint in turn every 12 px (about 30 of them).
+    let n = 33;
+    let periodic: Vec<_> = (0..n)
+        .map(|k| {
+            let m = if k % 2 == 0 { 1.6 } else { 0.4 };
+            (k as f64 / n as f64, (k + 1) as f64 / n as f64, m)
+        })
+        .collect();
+    // Level, with five glints under a pixel long, each as much light as 6 px of the track.
+    let mut flashes = vec![(0.0, 1.0, 1.0)];
+    for c in [0.12, 0.31, 0.5, 0.66, 0.9] {
+        flashes.push((c, c + 0.002, 6.0 / 0.002 / 400.0));
+    }
+    for (what, pieces, snr) in [
+        ("broken", broken, 6.0),
+        ("periodic", periodic, 6.0),
+        ("flashing", flashes, 5.0),
+    ] {
+        let f = frame(
+            512,
+            400,
+            &[Thing::Tumbling(a.0, a.1, b.0, b.1, snr, pieces)],
+            7,
+        );
+        let found = find(&f);
+        assert_eq!(found.len(), 1, "{what}: {found:?}");
+        let (e0, e1) = end_errors(&found[0], a, b);
+        assert!(
+            e0 < 1.0 && e1 < 1.0,
+            "{what}: end errors {e0:.2} {e1:.2} px"
+        );
+        assert!(!found[0].chain.is_chain, "{what}: {:?}", found[0].chain);
+    }
+}
+
+/// Dense chains of stars, 5 px (1.8 FWHM) apart, bright and faint, with a streak beside one:
+/// no streak but the streak.
+#[test]
+fn dense_chains_of_stars_are_no_streak() {
+    let mut things = vec![Thing::Streak(30.0, 230.0, 240.0, 180.0, 6.0)];
+    for k in 0..12 {
+        let t = k as f64;
+        things.push(Thing::Star(
+            40.0 + 5.0 * t,
+            40.0 + 1.5 * t,
+            15.0 + (k % 3) as f64 * 10.0,
+        ));
+        things.push(Thing::Star(150.0 + 2.0 * t, 60.0 + 4.6 * t, 60.0));
+    }
+    for seed in 0..3u64 {
+        let f = frame(256, 256, &things, 50 + seed);
+        let found = find(&f);
+        assert_eq!(found.len(), 1, "seed {seed}: {found:?}");
+        assert!(found[0].ends.iter().all(|e| e.1 > 170.0), "{found:?}");
     }
 }
 

@@ -457,3 +457,77 @@ fn error_records_carry_an_empty_streak_list() {
         assert_eq!(broken["streaks"], serde_json::json!([]));
     }
 }
+
+/// ASTRiDE's sample frame (tests/data/astride: a 2002 SAAO frame whose one streak brightens
+/// and fades along its track and is broken in the middle): one streak with both ends, where
+/// an independent fit puts them (scripts/measure_streak.py: a Gaussian profile across the
+/// track, a free brightness every 4 px along it, erf ends; (20.55, 337.62) and (338.96,
+/// 309.45), ±0.35 px, though a start 5 px off moves its far end by 2 px: a star lies on the
+/// track 12 px inside it), and RA/Dec through the header's TAN WCS as astropy reads it.
+#[test]
+fn astride_long_fits_one_broken_streak_with_both_ends_and_header_ra_dec() {
+    use std::io::Read;
+    let gz = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/astride/long.fits.gz");
+    let tmp = tempfile::tempdir().unwrap();
+    let mut fits = Vec::new();
+    flate2::read::GzDecoder::new(std::fs::File::open(&gz).unwrap())
+        .read_to_end(&mut fits)
+        .unwrap();
+    assert_eq!(fits.len(), 535_680);
+    std::fs::write(tmp.path().join("long.fits"), &fits).unwrap();
+    let records = run_records(gpustar().args([
+        "batch",
+        tmp.path().to_str().unwrap(),
+        "--streaks",
+        "--astrometry",
+        "header",
+        "--backend",
+        "cpu",
+    ]));
+    assert_eq!(records.len(), 1);
+    let s = records[0]["streaks"].as_array().unwrap();
+    assert_eq!(s.len(), 1, "{s:?}");
+    let ends = s[0]["ends"].as_array().unwrap();
+    let order = if xy(&ends[0]).0 < xy(&ends[1]).0 {
+        [0, 1]
+    } else {
+        [1, 0]
+    };
+    for (k, px) in order.iter().zip([[20.55, 337.62], [338.96, 309.45]]) {
+        let e = &ends[*k];
+        assert_eq!(e["edge"], false);
+        let d = dist(xy(e), px);
+        assert!(d < 1.2, "end {k}: {:?} is {d:.2} px from {px:?}", xy(e));
+        // RA/Dec at the record's own pixel end through the header's TAN WCS, worked out
+        // here from its cards (astropy gives the same to 1e-9 deg).
+        let (ra, dec) = long_fits_tan(xy(e));
+        let (r, de) = (
+            e["ra_deg"].as_f64().unwrap(),
+            e["dec_deg"].as_f64().unwrap(),
+        );
+        assert!(
+            (r - ra).abs() < 1e-6 && (de - dec).abs() < 1e-6,
+            "{r} {de} vs {ra} {dec}"
+        );
+    }
+    let len = s[0]["length_px"].as_f64().unwrap();
+    assert!((len - 319.7).abs() < 2.0, "{len}");
+}
+
+/// long.fits's header WCS (RA---TAN/DEC--TAN, CRPIX, CRVAL, CD) at a 0-based pixel: the
+/// gnomonic projection inverted (Calabretta & Greisen 2002), in degrees.
+fn long_fits_tan((x, y): (f64, f64)) -> (f64, f64) {
+    let (crpix1, crpix2) = (-511.5, 256.5);
+    let (ra0, dec0) = (232.2755534f64.to_radians(), 0.09632738913f64.to_radians());
+    let cd = [
+        [8.44440778984850e-4, -2.4880646061637e-6],
+        [2.48806460616369e-6, 8.44440778984850e-4],
+    ];
+    let (u, v) = (x + 1.0 - crpix1, y + 1.0 - crpix2);
+    let xi = (cd[0][0] * u + cd[0][1] * v).to_radians();
+    let eta = (cd[1][0] * u + cd[1][1] * v).to_radians();
+    let den = dec0.cos() - eta * dec0.sin();
+    let ra = ra0 + xi.atan2(den);
+    let dec = (dec0.sin() + eta * dec0.cos()).atan2((xi * xi + den * den).sqrt());
+    (ra.to_degrees().rem_euclid(360.0), dec.to_degrees())
+}
