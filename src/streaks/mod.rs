@@ -96,6 +96,8 @@ pub struct StreakOptions {
 /// clear 4 px bins that may fall short of the fit, and the largest modulation of the
 /// along-track profile (its excess scatter over its level; a steady streak's is about 0).
 const MAX_GAP_FRACTION_SHORT: f64 = 0.25;
+/// Largest share of any streak's track where the data fall short of a third of the fit.
+const MAX_GAP_FRACTION: f64 = 0.7;
 const MAX_MODULATION_SHORT: f64 = 0.3;
 
 /// Lines closer to a frame axis than this (degrees) are suspects: bad columns and rows, and
@@ -230,13 +232,15 @@ pub fn measure(
             }
         }
     }
-    out.retain(|f| match steady_if_short(f, s) {
-        Ok(()) => true,
-        Err(why) => {
-            tracing::debug!("streak candidate {:?}: {why}", f.ends);
-            false
-        }
-    });
+    out.retain(
+        |f| match steady_if_short(f, s).and_then(|()| lit_along(f)) {
+            Ok(()) => true,
+            Err(why) => {
+                tracing::debug!("streak candidate {:?}: {why}", f.ends);
+                false
+            }
+        },
+    );
     out.sort_by(|a, b| {
         b.snr
             .total_cmp(&a.snr)
@@ -311,6 +315,20 @@ fn steady_if_short(f: &StreakFit, s: &StreakSettings) -> Result<(), String> {
         return Err(format!(
             "modulation {:.2} along a {len:.0} px track",
             f.modulation
+        ));
+    }
+    Ok(())
+}
+
+/// A streak is lit along most of its track: where the data fall short of a third of the fitted
+/// brightness along more than [`MAX_GAP_FRACTION`] of it, the fit's brightness comes from one
+/// source (a saturated star's halo drew a 164 px "streak" from a bleeding star), not from an
+/// object's motion. Tumbling objects' gaps and dark phases leave far more of the track lit.
+fn lit_along(f: &StreakFit) -> Result<(), String> {
+    if f.gap_fraction > MAX_GAP_FRACTION {
+        return Err(format!(
+            "dark along {:.0} % of the track: the light of one source",
+            100.0 * f.gap_fraction
         ));
     }
     Ok(())
@@ -436,4 +454,40 @@ pub fn off_streaks(blobs: &[Blob], streaks: &[StreakFit]) -> Vec<Blob> {
         })
         .copied()
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A long track dark along most of its length is one source's light, whatever else it
+    /// passed; a tumbling object's gaps (up to 60 % here) leave it a streak.
+    #[test]
+    fn a_track_dark_along_most_of_it_is_no_streak() {
+        let fit = |gap_fraction| StreakFit {
+            ends: [(10.0, 10.0), (180.0, 110.0)],
+            edge: [false, false],
+            sigma_px: 2.5,
+            amplitude: 500.0,
+            noise: 5.0,
+            flux: 1e6,
+            snr: 500.0,
+            fit_rms_px: 0.3,
+            gap_fraction,
+            modulation: 2.0,
+            local_snr: 50.0,
+            chain: chain::Chain {
+                peaks: 1,
+                explained: 0.5,
+                excess: 0.5,
+                dips: 0.0,
+                is_chain: false,
+            },
+            dir: (0.86, 0.5),
+            axis_angle_deg: 30.0,
+        };
+        assert!(lit_along(&fit(0.6)).is_ok());
+        let why = lit_along(&fit(0.9)).unwrap_err();
+        assert!(why.contains("dark along 90 %"), "{why}");
+    }
 }
