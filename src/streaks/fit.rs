@@ -585,36 +585,14 @@ impl Model {
         let sg = q[5];
         let (s, c) = q[1].sin_cos();
         let (w, h) = (self.w as f64 - 1.0, self.h as f64 - 1.0);
-        // d at a point between pixel centres, bilinearly; None off the frame.
-        let at = |x: f64, y: f64| -> Option<f64> {
-            if !(0.0..=w).contains(&x) || !(0.0..=h).contains(&y) {
-                return None;
-            }
-            let (x0, y0) = (
-                x.floor().min(w - 1.0).max(0.0),
-                y.floor().min(h - 1.0).max(0.0),
-            );
-            let (fx, fy) = (x - x0, y - y0);
-            let (xi, yi) = (x0 as u32, y0 as u32);
-            let v = |dx: u32, dy: u32| d(xi + dx, yi + dy);
-            let b = (1.0 - fx) * (1.0 - fy) * v(0, 0)
-                + fx * (1.0 - fy) * v(1, 0)
-                + (1.0 - fx) * fy * v(0, 1)
-                + fx * fy * v(1, 1);
-            b.is_finite().then_some(b)
-        };
-        // The profile at t, across the track around offset `base` (weights of the fitted
-        // profile, ±1.5σ in half-pixel steps).
         let profile = |t: f64, base: f64| -> Option<f64> {
-            let (px, py) = self.point(q, (s, c), t);
-            let mut sum = 0.0;
-            let mut o = -1.5 * sg;
-            while o <= 1.5 * sg {
-                let g = (-o * o / (2.0 * sg * sg)).exp();
-                sum += g * at(px - (base + o) * s, py + (base + o) * c)?;
-                o += 0.5;
-            }
-            Some(sum)
+            across(
+                &|x, y| bilinear(d, (w, h), x, y),
+                self.point(q, (s, c), t),
+                (s, c),
+                sg,
+                base,
+            )
         };
         let beside = 3.0 * sg + 4.0;
         let (mut on, mut off) = (Vec::new(), Vec::new());
@@ -700,33 +678,14 @@ impl Model {
                 v
             }
         };
-        let at_med = |x: f64, y: f64| -> Option<f64> {
-            if !(0.0..=w).contains(&x) || !(0.0..=h).contains(&y) {
-                return None;
-            }
-            let (x0, y0) = (
-                x.floor().min(w - 1.0).max(0.0),
-                y.floor().min(h - 1.0).max(0.0),
-            );
-            let (fx, fy) = (x - x0, y - y0);
-            let (xi, yi) = (x0 as u32, y0 as u32);
-            let v = |dx: u32, dy: u32| med(xi + dx, yi + dy);
-            let b = (1.0 - fx) * (1.0 - fy) * v(0, 0)
-                + fx * (1.0 - fy) * v(1, 0)
-                + (1.0 - fx) * fy * v(0, 1)
-                + fx * fy * v(1, 1);
-            b.is_finite().then_some(b)
-        };
         let profile_med = |t: f64, base: f64| -> Option<f64> {
-            let (px, py) = self.point(q, (s, c), t);
-            let mut sum = 0.0;
-            let mut o = -1.5 * sg;
-            while o <= 1.5 * sg {
-                let g = (-o * o / (2.0 * sg * sg)).exp();
-                sum += g * at_med(px - (base + o) * s, py + (base + o) * c)?;
-                o += 0.5;
-            }
-            Some(sum)
+            across(
+                &|x, y| bilinear(&med, (w, h), x, y),
+                self.point(q, (s, c), t),
+                (s, c),
+                sg,
+                base,
+            )
         };
         let (mut track, mut beside_med) = (Vec::new(), Vec::new());
         let mut t = v0 - 2.0 * sg;
@@ -786,6 +745,45 @@ fn robust_sigma(v: &[f64]) -> Option<f64> {
     let mid = a.len() / 2;
     let m = *a.select_nth_unstable_by(mid, f64::total_cmp).1;
     Some((1.4826 * m).max(1e-6))
+}
+
+/// `d` at a point between pixel centres, bilinearly; None off the frame (`w`, `h`: the last
+/// column and row) or where a pixel is not finite.
+fn bilinear(d: &dyn Fn(u32, u32) -> f64, (w, h): (f64, f64), x: f64, y: f64) -> Option<f64> {
+    if !(0.0..=w).contains(&x) || !(0.0..=h).contains(&y) {
+        return None;
+    }
+    let (x0, y0) = (
+        x.floor().min(w - 1.0).max(0.0),
+        y.floor().min(h - 1.0).max(0.0),
+    );
+    let (fx, fy) = (x - x0, y - y0);
+    let (xi, yi) = (x0 as u32, y0 as u32);
+    let v = |dx: u32, dy: u32| d(xi + dx, yi + dy);
+    let b = (1.0 - fx) * (1.0 - fy) * v(0, 0)
+        + fx * (1.0 - fy) * v(1, 0)
+        + (1.0 - fx) * fy * v(0, 1)
+        + fx * fy * v(1, 1);
+    b.is_finite().then_some(b)
+}
+
+/// The profile across the track at the track point `(px, py)` around offset `base`: `at`
+/// weighted by the fitted profile (σ `sg`), ±1.5σ in half-pixel steps.
+fn across(
+    at: &dyn Fn(f64, f64) -> Option<f64>,
+    (px, py): (f64, f64),
+    (s, c): (f64, f64),
+    sg: f64,
+    base: f64,
+) -> Option<f64> {
+    let mut sum = 0.0;
+    let mut o = -1.5 * sg;
+    while o <= 1.5 * sg {
+        let g = (-o * o / (2.0 * sg * sg)).exp();
+        sum += g * at(px - (base + o) * s, py + (base + o) * c)?;
+        o += 0.5;
+    }
+    Some(sum)
 }
 
 #[cfg(test)]
