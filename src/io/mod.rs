@@ -1,5 +1,5 @@
 //! Files in and out: images and FITS ([`frame`], [`fits`], [`dark`]), pixels already in memory
-//! ([`array`]), the inputs of a run ([`inputs`]), world coordinate systems ([`wcs`]), and the
+//! ([`array`](mod@array)), the inputs of a run ([`inputs`]), world coordinate systems ([`wcs`]), and the
 //! record file ([`output`]).
 
 pub mod array;

@@ -226,7 +226,7 @@ impl Solvers {
         r.warnings.extend(d.warnings.iter().cloned());
         r.hint = self.hint_of(d, frame).map(|h| hint_record(&h, &r));
         // A solved frame's catalog says which tracks are chains of its stars.
-        let found = found.map(|f| streaks::chain::off_catalog_chains(f, sol));
+        let found = found.map(|f| streaks::catalog_chain::off_catalog_chains(f, sol));
         let found = found.as_deref();
         self.add_streaks(&mut r, d, sol, found);
         let drawn = found.unwrap_or_default();

@@ -8,7 +8,7 @@
 //! `gd2gc`); the direction from it is split into east, north and up of the geodetic vertical,
 //! so the Az/El are geometric and airless, as the streaks' Az/El are.
 //!
-//! A whole night against a full catalog: [`TleCatalog::coarse`] propagates every object once
+//! A whole night against a full catalog: `TleCatalog::coarse` propagates every object once
 //! per [`COARSE_STEP_S`] of frame time (cached, shared by the frames of that time) and the
 //! frames interpolate those states (cubic Hermite in position and velocity: a few metres off
 //! for low orbits), which is only a prefilter; the few objects it keeps near a streak are

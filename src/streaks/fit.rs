@@ -44,7 +44,7 @@ pub struct StreakFit {
     /// frame.
     pub local_snr: f64,
     /// What point sources make of the along-track profile: a chain of stars, or light that
-    /// stars cannot make ([`chain`](super::chain)).
+    /// stars cannot make ([`chain`]).
     pub chain: Chain,
     /// Direction of the line (unit) and its angle from the frame's axes (degrees, 0–45).
     pub dir: (f64, f64),

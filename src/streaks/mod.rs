@@ -10,6 +10,7 @@
 //! out → [`reduce`] with [`sky`] (RA/Dec, times, station, Az/El) → [`export`] with [`formats`]
 //! (CCSDS TDM, IOD).
 
+pub mod catalog_chain;
 pub mod chain;
 pub mod export;
 pub mod fit;
