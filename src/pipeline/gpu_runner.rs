@@ -278,7 +278,7 @@ impl GpuRunner {
                 (kept, found)
             }
         };
-        let detections = gpu_stars(&self.gpu, frames, &blobs, settings)?;
+        let mut detections = gpu_stars(&self.gpu, frames, &blobs, settings)?;
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
         let mut outcomes: Vec<Outcome> = vec![Outcome::Unsolved("too_few_stars"); frames.len()];
@@ -299,6 +299,16 @@ impl GpuRunner {
         };
         if let Some(solver) = &global_solver {
             self.scale_free_pass(solver, &detections, epochs, &mut outcomes)?;
+            if streak_opts.is_none() && global.ready().is_some() && solver.scale_free_first() {
+                self.scale_free_filtered(
+                    solver,
+                    frames,
+                    regional,
+                    &mut detections,
+                    epochs,
+                    &mut outcomes,
+                )?;
+            }
             self.vote_passes(solver, &detections, epochs, &mut outcomes)?;
         }
         let mut solutions: Vec<Solution> = detections
@@ -342,6 +352,43 @@ impl GpuRunner {
             detect_ms,
             t1.elapsed().as_secs_f64() * 1e3,
         ))
+    }
+
+    /// The scale-free pass on the matched filter's detections of the frames without a region
+    /// that it did not solve from the first detections, before any scale walk (as
+    /// `Solver::solve_frame_scale_free_first` on the CPU): a frame solved there keeps those
+    /// detections.
+    fn scale_free_filtered(
+        &mut self,
+        solver: &Solver,
+        frames: &[&Frame],
+        regional: &[Option<Solver>],
+        detections: &mut [Vec<Detection>],
+        epochs: &[Option<f64>],
+        outcomes: &mut [Outcome],
+    ) -> Result<()> {
+        let todo: Vec<usize> = (0..frames.len())
+            .filter(|&i| regional[i].is_none() && !matches!(outcomes[i], Outcome::Solved(..)))
+            .collect();
+        if todo.is_empty() {
+            return Ok(());
+        }
+        let subset: Vec<&Frame> = todo.iter().map(|&i| frames[i]).collect();
+        let filtered = solver.filtered_settings();
+        let blobs = self
+            .gpu
+            .detect(&subset, &detect::params(frames[0], &filtered))?;
+        let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
+        let sub_epochs: Vec<Option<f64>> = todo.iter().map(|&i| epochs[i]).collect();
+        let mut sub_outcomes = vec![Outcome::Unsolved("too_few_stars"); todo.len()];
+        self.scale_free_pass(solver, &stars, &sub_epochs, &mut sub_outcomes)?;
+        for ((&i, o), d) in todo.iter().zip(sub_outcomes).zip(stars) {
+            if matches!(o, Outcome::Solved(..)) {
+                outcomes[i] = o;
+                detections[i] = d;
+            }
+        }
+        Ok(())
     }
 
     /// The scale-free first pass (when the scale is searched) for the frames not solved yet:

@@ -403,9 +403,16 @@ fn solve_with(
 ) -> Record {
     let (sol, found, detect_ms, identify_ms) = match &solvers.streaks {
         None => {
-            let (sol, detect_ms, identify_ms) = solver.solve_frame_with(frame, |dets| {
-                identify_hinted(regional, global, dets, d.epoch)
-            });
+            let (sol, detect_ms, identify_ms) = match (regional, global.ready()) {
+                // A searched scale: the scale-free pass on both detection stages first (as the
+                // GPU batch does: `scale_free_first`).
+                (None, Some(g)) if g.scale_free_first() => {
+                    solver.solve_frame_scale_free_first(frame, g, d.epoch)
+                }
+                _ => solver.solve_frame_with(frame, |dets| {
+                    identify_hinted(regional, global, dets, d.epoch)
+                }),
+            };
             (sol, None, detect_ms, identify_ms)
         }
         Some(o) => {

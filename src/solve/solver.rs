@@ -371,24 +371,39 @@ impl Solver {
     /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
     /// one solves.
     pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-        let mut outcome = Outcome::Unsolved("too_few_stars");
-        // The scale-free pass round by round: a round's lookup only when the ones before it
-        // did not solve (the GPU looks them all up at once; the records are the same).
-        if let Some(sf) = &self.scale_free {
-            for round in 0..super::scale_free::rounds_for(detections.len()) {
-                let Some(lookup) = self.scale_free_lookup(&detections, round..round + 1) else {
-                    break;
-                };
-                let rows = super::scale_free::rows_cpu(&sf.index, &lookup);
-                if let Some(o) = self.finish_scale_free(&detections, &lookup, &rows, epoch) {
-                    return Solution {
-                        detections,
-                        outcome: o,
-                        epoch,
-                    };
-                }
+        if let Some(o) = self.identify_scale_free(&detections, epoch) {
+            return Solution {
+                detections,
+                outcome: o,
+                epoch,
+            };
+        }
+        self.identify_walk(detections, epoch)
+    }
+
+    /// The scale-free pass (a searched scale only) round by round: a round's lookup only when
+    /// the ones before it did not solve (the GPU looks them all up at once; the records are
+    /// the same). The outcome when it solved.
+    pub fn identify_scale_free(
+        &self,
+        detections: &[Detection],
+        epoch: Option<f64>,
+    ) -> Option<Outcome> {
+        let sf = self.scale_free.as_ref()?;
+        for round in 0..super::scale_free::rounds_for(detections.len()) {
+            let lookup = self.scale_free_lookup(detections, round..round + 1)?;
+            let rows = super::scale_free::rows_cpu(&sf.index, &lookup);
+            if let Some(o) = self.finish_scale_free(detections, &lookup, &rows, epoch) {
+                return Some(o);
             }
         }
+        None
+    }
+
+    /// The passes of identification after the scale-free pass: the vote (or radial features,
+    /// or triangles) at each scale of the walk.
+    pub fn identify_walk(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
+        let mut outcome = Outcome::Unsolved("too_few_stars");
         for h in 0..self.passes.len() {
             let Some(p) = self.prepare(&detections, h) else {
                 continue;
@@ -703,7 +718,71 @@ impl Solver {
 
     /// Solve a decoded frame on the CPU, with its own observation epoch if it has one.
     pub fn solve_frame_at(&self, frame: &Frame, epoch: Option<f64>) -> (Solution, f64, f64) {
+        if self.scale_free_first() {
+            return self.solve_frame_scale_free_first(frame, self, epoch);
+        }
         self.solve_frame_with(frame, |dets| self.identify(dets, epoch))
+    }
+
+    /// Whether a frame goes through the scale-free pass on both detection stages before any
+    /// scale walk ([`Solver::solve_frame_scale_free_first`]).
+    pub fn scale_free_first(&self) -> bool {
+        self.scale_free.is_some() && self.detection_stages() > 1
+    }
+
+    /// Detect with this solver's settings and identify with `id`, the scale-free pass first on
+    /// both detection stages (a sparse frame the pass misses may be solved by it from the
+    /// matched filter's detections, in milliseconds, where the walk takes seconds), then the
+    /// walk on each. Solutions are those of `solve_frame_with` whenever the pass solves the
+    /// first stage or nothing solves the frame. Returns the solution, detection and
+    /// identification times (ms).
+    pub fn solve_frame_scale_free_first(
+        &self,
+        frame: &Frame,
+        id: &Solver,
+        epoch: Option<f64>,
+    ) -> (Solution, f64, f64) {
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let dets = detect::detect(frame, &self.settings.detect);
+        let mut detect_ms = ms(t);
+        let t = Instant::now();
+        let found = id.identify_scale_free(&dets, epoch);
+        let mut identify_ms = ms(t);
+        if let Some(outcome) = found {
+            let sol = Solution {
+                detections: dets,
+                outcome,
+                epoch,
+            };
+            return (sol, detect_ms, identify_ms);
+        }
+        let t = Instant::now();
+        let filtered = self.detect_filtered(frame);
+        detect_ms += ms(t);
+        let t = Instant::now();
+        let solution = match id.identify_scale_free(&filtered, epoch) {
+            Some(outcome) => Solution {
+                detections: filtered,
+                outcome,
+                epoch,
+            },
+            None => {
+                let sol = id.identify_walk(dets, epoch);
+                if matches!(sol.outcome, Outcome::Solved(..)) {
+                    sol
+                } else {
+                    let again = id.identify_walk(filtered, epoch);
+                    if matches!(again.outcome, Outcome::Solved(..)) {
+                        again
+                    } else {
+                        sol
+                    }
+                }
+            }
+        };
+        identify_ms += ms(t);
+        (solution, detect_ms, identify_ms)
     }
 
     /// Detect, identify with `identify`, and detect again with the matched filter when that
