@@ -332,12 +332,7 @@ impl GpuRunner {
                 .filter(|&i| matches!(solutions[i].outcome, Outcome::Unsolved(_)))
                 .collect();
             if !unsolved.is_empty() {
-                let subset: Vec<&Frame> = unsolved.iter().map(|&i| frames[i]).collect();
-                let filtered = solver.filtered_settings();
-                let blobs = self
-                    .gpu
-                    .detect(&subset, &detect::params(frames[0], &filtered))?;
-                let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
+                let stars = self.detect_filtered(solver, frames, &unsolved)?;
                 for (&i, d) in unsolved.iter().zip(stars) {
                     let again = identify_hinted(regional[i].as_ref(), global, d, epochs[i]);
                     if matches!(again.outcome, Outcome::Solved(..)) {
@@ -373,12 +368,7 @@ impl GpuRunner {
         if todo.is_empty() {
             return Ok(());
         }
-        let subset: Vec<&Frame> = todo.iter().map(|&i| frames[i]).collect();
-        let filtered = solver.filtered_settings();
-        let blobs = self
-            .gpu
-            .detect(&subset, &detect::params(frames[0], &filtered))?;
-        let stars = gpu_stars(&self.gpu, &subset, &blobs, &filtered)?;
+        let stars = self.detect_filtered(solver, frames, &todo)?;
         let sub_epochs: Vec<Option<f64>> = todo.iter().map(|&i| epochs[i]).collect();
         let mut sub_outcomes = vec![Outcome::Unsolved("too_few_stars"); todo.len()];
         self.scale_free_pass(solver, &stars, &sub_epochs, &mut sub_outcomes)?;
@@ -389,6 +379,22 @@ impl GpuRunner {
             }
         }
         Ok(())
+    }
+
+    /// The frames `which` detected again with the matched filter (detection's retry settings
+    /// of `solver`), in one submission.
+    fn detect_filtered(
+        &mut self,
+        solver: &Solver,
+        frames: &[&Frame],
+        which: &[usize],
+    ) -> Result<Vec<Vec<Detection>>> {
+        let subset: Vec<&Frame> = which.iter().map(|&i| frames[i]).collect();
+        let filtered = solver.filtered_settings();
+        let blobs = self
+            .gpu
+            .detect(&subset, &detect::params(frames[0], &filtered))?;
+        gpu_stars(&self.gpu, &subset, &blobs, &filtered)
     }
 
     /// The scale-free first pass (when the scale is searched) for the frames not solved yet:
