@@ -13,14 +13,18 @@
 //! edge's length in pixels. Every key bin the interval touches is a query (at most
 //! [`MAX_QUERIES`] per quad: quads of short edges are too vague to look up).
 
+use super::bands::Band;
 use super::bands::{SCALE_STEP, scaled};
-use super::detect::Detection;
+use super::detect::{self, Detection};
 use super::refine::{self, CameraFit};
-use super::{Outcome, Prepared, Solver};
+use super::{Outcome, Prepared, Settings, Solution, Solver};
 use crate::camera::{Camera, angle};
+use crate::catalog::Catalog;
 use crate::catalog::patterns::{self, BINS, PatternIndex};
 use crate::cpu::pattern::Rows;
+use crate::io::frame::Frame;
 use nalgebra::{Matrix3, Vector3};
+use std::time::Instant;
 
 /// The rounds of the pass: round r looks up the quads of the brightest `ROUND_STARS[r]`
 /// detections not looked up before (210, then 1155, 3480 and 22,560 more). False stars (satellites,
@@ -51,6 +55,40 @@ pub struct ScaleFree {
     /// Built now (false: read from the cache), and the seconds that took.
     pub built: bool,
     pub seconds: f64,
+}
+
+impl ScaleFree {
+    /// The pattern index of a searched scale `settings.scale_range`, from the stars of
+    /// `bands[band]` (loaded from the cache or built).
+    pub(crate) fn build(
+        catalog: &Catalog,
+        camera: &Camera,
+        settings: &Settings,
+        bands: &[Band],
+        band: usize,
+    ) -> ScaleFree {
+        let range = settings.scale_range.expect("a searched scale");
+        let levels = patterns::levels_for(short_side(camera, range.1), short_side(camera, range.0));
+        let (index, built, seconds) = patterns::load_or_build(
+            &bands[band].refs,
+            catalog.content_hash,
+            &levels,
+            settings.table_cache,
+        );
+        ScaleFree {
+            index,
+            band,
+            built,
+            seconds,
+        }
+    }
+}
+
+/// The angle the shorter side of `camera`'s frame spans at focal-length factor `scale`.
+fn short_side(camera: &Camera, scale: f64) -> f64 {
+    let half =
+        (camera.width as f64 / (2.0 * camera.fx)).min(camera.height as f64 / (2.0 * camera.fy));
+    2.0 * (half / scale).atan()
 }
 
 /// An image quad (detection indices, brightest first) and its queries: `queries[range]`.
@@ -217,6 +255,86 @@ fn permutations() -> Vec<[usize; 4]> {
 const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
 
 impl Solver {
+    /// The scale-free pass (a searched scale only) round by round: a round's lookup only when
+    /// the ones before it did not solve (the GPU looks them all up at once; the records are
+    /// the same). The outcome when it solved.
+    pub fn identify_scale_free(
+        &self,
+        detections: &[Detection],
+        epoch: Option<f64>,
+    ) -> Option<Outcome> {
+        let sf = self.scale_free.as_ref()?;
+        for round in 0..rounds_for(detections.len()) {
+            let lookup = self.scale_free_lookup(detections, round..round + 1)?;
+            let rows = rows_cpu(&sf.index, &lookup);
+            if let Some(o) = self.finish_scale_free(detections, &lookup, &rows, epoch) {
+                return Some(o);
+            }
+        }
+        None
+    }
+
+    /// Whether a frame goes through the scale-free pass on both detection stages before any
+    /// scale walk ([`Solver::solve_frame_scale_free_first`]).
+    pub fn scale_free_first(&self) -> bool {
+        self.scale_free.is_some() && self.detection_stages() > 1
+    }
+
+    /// Detect with this solver's settings and identify with `id`, the scale-free pass first on
+    /// both detection stages (a sparse frame the pass misses may be solved by it from the
+    /// matched filter's detections, in milliseconds, where the walk takes seconds), then the
+    /// walk on each. Solutions are those of `solve_frame_with` whenever the pass solves the
+    /// first stage or nothing solves the frame. Returns the solution, detection and
+    /// identification times (ms).
+    pub fn solve_frame_scale_free_first(
+        &self,
+        frame: &Frame,
+        id: &Solver,
+        epoch: Option<f64>,
+    ) -> (Solution, f64, f64) {
+        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let t = Instant::now();
+        let dets = detect::detect(frame, &self.settings.detect);
+        let mut detect_ms = ms(t);
+        let t = Instant::now();
+        let found = id.identify_scale_free(&dets, epoch);
+        let mut identify_ms = ms(t);
+        if let Some(outcome) = found {
+            let sol = Solution {
+                detections: dets,
+                outcome,
+                epoch,
+            };
+            return (sol, detect_ms, identify_ms);
+        }
+        let t = Instant::now();
+        let filtered = self.detect_filtered(frame);
+        detect_ms += ms(t);
+        let t = Instant::now();
+        let solution = match id.identify_scale_free(&filtered, epoch) {
+            Some(outcome) => Solution {
+                detections: filtered,
+                outcome,
+                epoch,
+            },
+            None => {
+                let sol = id.identify_walk(dets, epoch);
+                if matches!(sol.outcome, Outcome::Solved(..)) {
+                    sol
+                } else {
+                    let again = id.identify_walk(filtered, epoch);
+                    if matches!(again.outcome, Outcome::Solved(..)) {
+                        again
+                    } else {
+                        sol
+                    }
+                }
+            }
+        };
+        identify_ms += ms(t);
+        (solution, detect_ms, identify_ms)
+    }
+
     /// The queries of a frame's `rounds` of the scale-free pass; None when the solver has no
     /// pattern index (a known scale) or the frame has too few stars.
     pub fn scale_free_lookup(

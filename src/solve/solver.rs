@@ -2,8 +2,10 @@
 //! refine → accept, producing one result record.
 //!
 //! Scale bands and passes are in `bands.rs`, the automatic magnitude limits in `mag_limit.rs`,
-//! the record of a solution in `report.rs`. About 700 lines: the passes of one frame (vote,
-//! triangles, radial, the deeper check) share the `Prepared` state and the false-match budget.
+//! the record of a solution in `report.rs`, the scale-free pass of a searched scale in
+//! `scale_free.rs`. About 770 lines: the passes of one frame (vote, triangles, radial, the
+//! deeper check) share the `Prepared` state and the false-match budget, and the `Solver`'s
+//! construction (bands, shallow pass, pattern index) is one piece.
 
 use super::attitude::wahba;
 use super::bands::{
@@ -17,7 +19,7 @@ use super::mag_limit::{FULL_SKY_SR, SHALLOW_STARS_IN_VIEW, auto_mag_limit_in, ma
 use super::refine::{self, RefineSettings, Refined};
 use super::triangle;
 use crate::camera::Camera;
-use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection, patterns};
+use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
 use crate::error::Result;
 use crate::io::frame::Frame;
 use nalgebra::Vector3;
@@ -166,12 +168,22 @@ impl Solver {
         };
         // With a scale-free pass most frames never vote: the bands' tables are loaded when the
         // first frame does (the pattern index is about a fifth of their size).
-        let lazy = settings.scale_range.is_some()
+        let scale_free_on = settings.scale_range.is_some()
             && settings.scale_free
             && settings.method == crate::solve::radial::Method::Vote;
         let mut bands = edges
             .iter()
-            .map(|&e| Band::new(catalog, &camera, &settings, e, middle(e), None, lazy))
+            .map(|&e| {
+                Band::new(
+                    catalog,
+                    &camera,
+                    &settings,
+                    e,
+                    middle(e),
+                    None,
+                    scale_free_on,
+                )
+            })
             .collect::<Result<Vec<Band>>>()?;
         // The shallow pass's band: with a known scale and the magnitude limit left to the
         // solver, when it is shallower than the automatic one by half a magnitude or more.
@@ -239,30 +251,17 @@ impl Solver {
             );
         }
         let shallow_band = (bands.len() > main_bands).then_some(main_bands);
-        let scale_free = match settings.scale_range {
-            Some(range)
-                if settings.scale_free && settings.method == crate::solve::radial::Method::Vote =>
-            {
-                // The quads name the stars of the narrowest field's band, the deepest.
-                let band = main_bands - 1;
-                let levels = patterns::levels_for(
-                    short_side(&camera, range.1),
-                    short_side(&camera, range.0),
-                );
-                let (index, built, seconds) = patterns::load_or_build(
-                    &bands[band].refs,
-                    catalog.content_hash,
-                    &levels,
-                    settings.table_cache,
-                );
-                Some(super::scale_free::ScaleFree {
-                    index,
-                    band,
-                    built,
-                    seconds,
-                })
-            }
-            _ => None,
+        let scale_free = if scale_free_on {
+            // The quads name the stars of the narrowest field's band, the deepest.
+            Some(super::scale_free::ScaleFree::build(
+                catalog,
+                &camera,
+                &settings,
+                &bands,
+                main_bands - 1,
+            ))
+        } else {
+            None
         };
         Ok(Solver {
             scale_free,
@@ -379,25 +378,6 @@ impl Solver {
             };
         }
         self.identify_walk(detections, epoch)
-    }
-
-    /// The scale-free pass (a searched scale only) round by round: a round's lookup only when
-    /// the ones before it did not solve (the GPU looks them all up at once; the records are
-    /// the same). The outcome when it solved.
-    pub fn identify_scale_free(
-        &self,
-        detections: &[Detection],
-        epoch: Option<f64>,
-    ) -> Option<Outcome> {
-        let sf = self.scale_free.as_ref()?;
-        for round in 0..super::scale_free::rounds_for(detections.len()) {
-            let lookup = self.scale_free_lookup(detections, round..round + 1)?;
-            let rows = super::scale_free::rows_cpu(&sf.index, &lookup);
-            if let Some(o) = self.finish_scale_free(detections, &lookup, &rows, epoch) {
-                return Some(o);
-            }
-        }
-        None
     }
 
     /// The passes of identification after the scale-free pass: the vote (or radial features,
@@ -724,67 +704,6 @@ impl Solver {
         self.solve_frame_with(frame, |dets| self.identify(dets, epoch))
     }
 
-    /// Whether a frame goes through the scale-free pass on both detection stages before any
-    /// scale walk ([`Solver::solve_frame_scale_free_first`]).
-    pub fn scale_free_first(&self) -> bool {
-        self.scale_free.is_some() && self.detection_stages() > 1
-    }
-
-    /// Detect with this solver's settings and identify with `id`, the scale-free pass first on
-    /// both detection stages (a sparse frame the pass misses may be solved by it from the
-    /// matched filter's detections, in milliseconds, where the walk takes seconds), then the
-    /// walk on each. Solutions are those of `solve_frame_with` whenever the pass solves the
-    /// first stage or nothing solves the frame. Returns the solution, detection and
-    /// identification times (ms).
-    pub fn solve_frame_scale_free_first(
-        &self,
-        frame: &Frame,
-        id: &Solver,
-        epoch: Option<f64>,
-    ) -> (Solution, f64, f64) {
-        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let dets = detect::detect(frame, &self.settings.detect);
-        let mut detect_ms = ms(t);
-        let t = Instant::now();
-        let found = id.identify_scale_free(&dets, epoch);
-        let mut identify_ms = ms(t);
-        if let Some(outcome) = found {
-            let sol = Solution {
-                detections: dets,
-                outcome,
-                epoch,
-            };
-            return (sol, detect_ms, identify_ms);
-        }
-        let t = Instant::now();
-        let filtered = self.detect_filtered(frame);
-        detect_ms += ms(t);
-        let t = Instant::now();
-        let solution = match id.identify_scale_free(&filtered, epoch) {
-            Some(outcome) => Solution {
-                detections: filtered,
-                outcome,
-                epoch,
-            },
-            None => {
-                let sol = id.identify_walk(dets, epoch);
-                if matches!(sol.outcome, Outcome::Solved(..)) {
-                    sol
-                } else {
-                    let again = id.identify_walk(filtered, epoch);
-                    if matches!(again.outcome, Outcome::Solved(..)) {
-                        again
-                    } else {
-                        sol
-                    }
-                }
-            }
-        };
-        identify_ms += ms(t);
-        (solution, detect_ms, identify_ms)
-    }
-
     /// Detect, identify with `identify`, and detect again with the matched filter when that
     /// does not solve (the detection retry). Returns the solution, detection and
     /// identification times (ms).
@@ -847,11 +766,4 @@ impl Solver {
             scale,
         )
     }
-}
-
-/// The angle the shorter side of `camera`'s frame spans at focal-length factor `scale`.
-fn short_side(camera: &Camera, scale: f64) -> f64 {
-    let half =
-        (camera.width as f64 / (2.0 * camera.fx)).min(camera.height as f64 / (2.0 * camera.fy));
-    2.0 * (half / scale).atan()
 }
