@@ -45,8 +45,9 @@ pub struct ParticleSettings {
     /// count as a step.
     pub flux_ratio: f64,
     /// ... widened near the detection limit for a particle continued where its velocity puts
-    /// it, as a component's sum rises and falls with the pixels that clear the threshold (defocused particles most: a third of those within twice
-    /// the faintest flux change by more than 2× from one frame to the next): the bound on
+    /// it, as a component's sum rises and falls with the pixels that clear the threshold
+    /// (defocused particles most: a third of those within twice the faintest flux change by
+    /// more than 2× from one frame to the next): the bound on
     /// |ln(flux ratio)| is ln(`flux_ratio`) + this × q², q = (faintest flux of the two frames)
     /// / (the fainter of the two fluxes). Squared, so that a star a few times the limit merged
     /// with a particle as bright is still refused (at q = 1/5 the bound is 2.25×).
@@ -443,6 +444,28 @@ pub fn ln_i0(z: f64) -> f64 {
 mod tests {
     use super::*;
 
+    /// Frame `f` (at time f seconds, 0.1 px centroid noise) of detections at `px` with `flux`.
+    fn add_frame(
+        tracker: &mut Tracker,
+        camera: &Camera,
+        f: usize,
+        c: &Matrix3<f64>,
+        last: Option<&Matrix3<f64>>,
+        px: &[(f64, f64)],
+        flux: &[f64],
+    ) -> Judged {
+        let dirs: Vec<_> = px
+            .iter()
+            .map(|&(x, y)| camera.pixel_to_vector(x, y))
+            .collect();
+        let seen = Seen {
+            px,
+            dirs: &dirs,
+            flux,
+        };
+        tracker.add(f, f as f64, c, last, &seen, 0.1)
+    }
+
     #[test]
     fn ln_i0_matches_known_values_across_the_switch() {
         // I0(1) = 1.2660658777520082, I0(10) = 2815.716628466254, I0(20) = 4.355828255955353e7,
@@ -487,16 +510,7 @@ mod tests {
                     300.0
                 });
             }
-            let dirs: Vec<_> = px
-                .iter()
-                .map(|&(x, y)| camera.pixel_to_vector(x, y))
-                .collect();
-            let seen = Seen {
-                px: &px,
-                dirs: &dirs,
-                flux: &flux,
-            };
-            let j = tracker.add(f, f as f64, &c, last.as_ref(), &seen, 0.1);
+            let j = add_frame(&mut tracker, &camera, f, &c, last.as_ref(), &px, &flux);
             last = Some(c);
             if f >= 1 {
                 assert!(
@@ -536,16 +550,7 @@ mod tests {
                 px[1].1 += 0.8;
                 flux[1] *= 3.0;
             }
-            let dirs: Vec<_> = px
-                .iter()
-                .map(|&(x, y)| camera.pixel_to_vector(x, y))
-                .collect();
-            let seen = Seen {
-                px: &px,
-                dirs: &dirs,
-                flux: &flux,
-            };
-            let j = tracker.add(f, f as f64, &c, last.as_ref(), &seen, 0.1);
+            let j = add_frame(&mut tracker, &camera, f, &c, last.as_ref(), &px, &flux);
             last = Some(c);
             if f < 3 {
                 assert!(j.pulled.iter().all(|p| p.is_none()), "frame {f}: {j:?}");
@@ -578,17 +583,8 @@ mod tests {
                 let (x0, y0) = (150.0 + 70.0 * p as f64, 700.0);
                 px.push((x0 + speed_px * f as f64, y0 - 0.5 * speed_px * f as f64));
             }
-            let dirs: Vec<_> = px
-                .iter()
-                .map(|&(x, y)| camera.pixel_to_vector(x, y))
-                .collect();
             let flux = vec![1000.0; px.len()];
-            let seen = Seen {
-                px: &px,
-                dirs: &dirs,
-                flux: &flux,
-            };
-            let j = tracker.add(f, f as f64, &c, last.as_ref(), &seen, 0.1);
+            let j = add_frame(&mut tracker, &camera, f, &c, last.as_ref(), &px, &flux);
             last = Some(c);
             if f >= 1 {
                 assert!(
