@@ -423,15 +423,9 @@ impl GpuRunner {
             return Ok(());
         }
         let key = (solver.camera.width, solver.camera.height);
-        let index = self.patterns.entry(key).or_insert_with(|| {
-            self.gpu
-                .upload_patterns(&sf.index)
-                .map_err(|e| format!("{e:#}"))
-        });
-        let index = match index {
-            Ok(t) => t,
-            Err(e) => fail!(Gpu, "{e}"),
-        };
+        let index = uploaded(&mut self.patterns, key, || {
+            self.gpu.upload_patterns(&sf.index)
+        })?;
         let queries: Vec<u32> = lookups
             .iter()
             .flat_map(|(_, l)| l.queries.iter().copied())
@@ -481,15 +475,7 @@ impl GpuRunner {
                 continue;
             }
             if let Some(features) = &solver.bands[key.2].radial {
-                let table = self.radial.entry(key).or_insert_with(|| {
-                    self.gpu
-                        .upload_radial(features)
-                        .map_err(|e| format!("{e:#}"))
-                });
-                let table = match table {
-                    Ok(t) => t,
-                    Err(e) => fail!(Gpu, "{e}"),
-                };
+                let table = uploaded(&mut self.radial, key, || self.gpu.upload_radial(features))?;
                 let jobs: Vec<RadialJob> = prepared
                     .iter()
                     .map(|(_, p)| RadialJob {
@@ -503,18 +489,10 @@ impl GpuRunner {
                 }
                 continue;
             }
-            if !self.tables.contains_key(&key) {
-                let band = &solver.bands[key.2];
-                let t = self
-                    .gpu
-                    .upload_table(band.table(), band.refs.len())
-                    .map_err(|e| format!("{e:#}"));
-                self.tables.insert(key, t);
-            }
-            let table = match &self.tables[&key] {
-                Ok(t) => t,
-                Err(e) => fail!(Gpu, "{e}"),
-            };
+            let band = &solver.bands[key.2];
+            let table = uploaded(&mut self.tables, key, || {
+                self.gpu.upload_table(band.table(), band.refs.len())
+            })?;
             let jobs: Vec<VoteJob> = prepared
                 .iter()
                 .map(|(_, p)| VoteJob {
@@ -579,4 +557,20 @@ pub(crate) fn size_groups(frames: &[Decoded]) -> Vec<(DetectKey, Vec<usize>)> {
         }
     }
     groups
+}
+
+/// What `upload` put on the GPU for `key`, uploaded on first use; a failed upload is kept and
+/// told again (not retried for every batch).
+fn uploaded<K: std::hash::Hash + Eq, T>(
+    cache: &mut HashMap<K, std::result::Result<T, String>>,
+    key: K,
+    upload: impl FnOnce() -> Result<T>,
+) -> Result<&T> {
+    match cache
+        .entry(key)
+        .or_insert_with(|| upload().map_err(|e| format!("{e:#}")))
+    {
+        Ok(t) => Ok(t),
+        Err(e) => fail!(Gpu, "{e}"),
+    }
 }
