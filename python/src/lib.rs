@@ -86,7 +86,7 @@ struct Built {
     batch_size: usize,
 }
 
-/// The options' names, for the message that refuses any other.
+/// The options' names (with [`STREAK_OPTIONS`]), for the message that refuses any other.
 const OPTIONS: &[&str] = &[
     "fov_tolerance",
     "fit",
@@ -107,6 +107,12 @@ const OPTIONS: &[&str] = &[
     "cache",
     "hint",
     "streaks",
+    "threads",
+    "batch_size",
+];
+
+/// The options that only `streaks=True` takes.
+const STREAK_OPTIONS: &[&str] = &[
     "station",
     "astrometry",
     "dut1",
@@ -114,8 +120,6 @@ const OPTIONS: &[&str] = &[
     "tle",
     "tle_cross",
     "tle_along",
-    "threads",
-    "batch_size",
 ];
 
 /// Keyword options, each taken once; the command line's ranges, with its messages.
@@ -128,10 +132,11 @@ impl<'py> Opts<'py> {
         if let Some(d) = &dict {
             for k in d.keys() {
                 let k: String = k.extract()?;
-                if !OPTIONS.contains(&k.as_str()) {
+                if !OPTIONS.contains(&k.as_str()) && !STREAK_OPTIONS.contains(&k.as_str()) {
                     return Err(config(format!(
-                        "unknown option {k:?}; the options are {}",
-                        OPTIONS.join(", ")
+                        "unknown option {k:?}; the options are {}, {}",
+                        OPTIONS.join(", "),
+                        STREAK_OPTIONS.join(", ")
                     )));
                 }
             }
@@ -356,15 +361,7 @@ fn build(
             },
         });
     } else {
-        for k in [
-            "station",
-            "astrometry",
-            "dut1",
-            "streak_sigma",
-            "tle",
-            "tle_cross",
-            "tle_along",
-        ] {
+        for &k in STREAK_OPTIONS {
             if o.get::<Bound<'_, PyAny>>(k)?.is_some() {
                 return Err(config(format!("{k} is an option of streaks=True")));
             }
