@@ -12,8 +12,10 @@ segment (the part inside the pixel-centre box [0, W-1] x [0, H-1]),
     shorter of the two.
 Pairs are then taken one-to-one, greedily by overlap / length of the *longer* segment (so a
 full-length detection beats a fragment of it, which also overlaps 100% of the shorter one).
-Unmatched record streaks that passed the test against some truth streak are counted as
-"along a truth streak" (fragments/duplicates) within the false streaks.
+Unmatched record streaks that lie along some truth streak (both ends within --perp-tol of its
+line, the overlap as above, the direction not asked: a short piece's direction is the least
+sure) are counted as "along a truth streak" (fragments/duplicates, or a piece measured a few
+degrees off) within the false streaks; the rest are phantoms.
 
 End order: a single frame cannot tell start from end, so each matched streak uses the order
 (record end 0 <-> truth p0, or swapped) that minimises the summed distance over the truth ends
@@ -150,9 +152,13 @@ def associate(truth_streaks, rec_streaks, args):
         pairs[i] = j
     # unmatched records that lie along some truth streak: fragments/duplicates, not phantoms
     along = set()
-    for _, _, i, j in cands:
-        if j not in r_used:
-            along.add(j)
+    for ts in truth_streaks:
+        for j, rs in enumerate(rec_streaks):
+            ends = rec_ends(rs)
+            if j in r_used or ends is None:
+                continue
+            if match_score(ts, ends, args.perp_tol, 90.0, args.min_overlap):
+                along.add(j)
     return pairs, along
 
 
@@ -427,7 +433,8 @@ def print_summary(s):
             cells.append(f"{c['found']}/{c['total']}" + (f" ({100 * c['found'] / c['total']:.0f}%)" if c["total"] else "     "))
         p(f"  {a:<13}" + "".join(f"{c:>16}" for c in cells))
     f = s["false_streaks"]
-    p(f"false streaks: {f['total']} ({f['along_truth_streak']} lie along a truth streak: fragments/duplicates); "
+    p(f"false streaks: {f['total']} ({f['along_truth_streak']} lie along a truth streak: fragments/duplicates; "
+      f"{f['total'] - f['along_truth_streak']} phantoms); "
       f"on frames without streaks: {f['on_frames_without_streaks']}, "
       f"{f['frames_without_streaks_with_false']}/{f['frames_without_streaks']} such frames have >= 1")
     if f["by_defect_on_frames_without_streaks"]:

@@ -78,7 +78,7 @@ impl Model {
         } else {
             f64::INFINITY
         };
-        let no_chain = chain::assess(&[], 0.0, sg);
+        let no_chain = chain::assess(&[], 0.0, sg, &|_| None);
         if on.len() < 8 {
             return (0.0, local_snr, no_chain);
         }
@@ -132,8 +132,17 @@ impl Model {
             }
             t += 1.0;
         }
+        // Sample i of `track` lies at t = t0 + i.
+        let t0 = v0 - 2.0 * sg;
+        let across_at = |i: usize| {
+            sigma_across(
+                &|x, y| bilinear(&med, (w, h), x, y),
+                self.point(q, (s, c), t0 + i as f64),
+                (s, c),
+            )
+        };
         let chain = if beside_med.len() >= 8 {
-            chain::assess(&track, mad(&beside_med), sg)
+            chain::assess(&track, mad(&beside_med), sg, &across_at)
         } else {
             no_chain
         };
@@ -166,6 +175,77 @@ fn bilinear(d: &dyn Fn(u32, u32) -> f64, (w, h): (f64, f64), x: f64, y: f64) -> 
     b.is_finite().then_some(b)
 }
 
+/// How far across the track [`sigma_across`] looks, each way (pixels): beyond a PSF's
+/// reach on the frames a streak search is for (σ up to about 2 px), short of most neighbours.
+const ACROSS_REACH: f64 = 6.0;
+
+/// The σ of the light across the track at the track point `(px, py)`: a Gaussian (amplitude,
+/// centre, σ) fitted to `at` summed over three points along the track (1 px apart), in
+/// half-pixel steps out to [`ACROSS_REACH`]; its centre need not be on the line (a star of a
+/// chain sits a little off it). Started from the weighted log-parabola through the samples
+/// above a fifth of the highest, then Gauss–Newton. None where a sample is off the frame, the
+/// light is not a peak, or the fit leaves 0.3–5 px.
+fn sigma_across(
+    at: &dyn Fn(f64, f64) -> Option<f64>,
+    (px, py): (f64, f64),
+    (s, c): (f64, f64),
+) -> Option<f64> {
+    let n = (2.0 * ACROSS_REACH / 0.5) as usize + 1;
+    let mut u = Vec::with_capacity(n);
+    let mut y = Vec::with_capacity(n);
+    for k in 0..n {
+        let o = -ACROSS_REACH + 0.5 * k as f64;
+        let mut sum = 0.0;
+        for dt in [-1.0, 0.0, 1.0] {
+            sum += at(px + dt * c - o * s, py + dt * s + o * c)?;
+        }
+        u.push(o);
+        y.push(sum);
+    }
+    let top = y.iter().copied().fold(f64::MIN, f64::max);
+    if top <= 0.0 {
+        return None;
+    }
+    // ln y = α + β u + γ u², weighted by y² (noise in ln y goes as 1/y).
+    let mut m = nalgebra::Matrix3::<f64>::zeros();
+    let mut r = nalgebra::Vector3::<f64>::zeros();
+    for (&ui, &yi) in u.iter().zip(&y) {
+        if yi > 0.2 * top {
+            let b = nalgebra::Vector3::new(1.0, ui, ui * ui);
+            m += yi * yi * b * b.transpose();
+            r += yi * yi * yi.ln() * b;
+        }
+    }
+    let g = m.lu().solve(&r)?;
+    if g[2] >= 0.0 {
+        return None;
+    }
+    let mut sigma = (-0.5 / g[2]).sqrt();
+    let mut centre = (g[1] * sigma * sigma).clamp(-1.5, 1.5);
+    let mut amp = top;
+    for _ in 0..8 {
+        // Gauss–Newton in (amplitude, centre, σ).
+        let mut jtj = nalgebra::Matrix3::<f64>::zeros();
+        let mut jtr = nalgebra::Vector3::<f64>::zeros();
+        for (&ui, &yi) in u.iter().zip(&y) {
+            let d = ui - centre;
+            let e = (-0.5 * d * d / (sigma * sigma)).exp();
+            let j = nalgebra::Vector3::new(
+                e,
+                amp * e * d / (sigma * sigma),
+                amp * e * d * d / (sigma * sigma * sigma),
+            );
+            jtj += j * j.transpose();
+            jtr += j * (yi - amp * e);
+        }
+        let step = jtj.lu().solve(&jtr)?;
+        amp += step[0];
+        centre = (centre + step[1]).clamp(-ACROSS_REACH, ACROSS_REACH);
+        sigma = (sigma + step[2]).clamp(0.2, 8.0);
+    }
+    (amp > 0.0 && centre.abs() <= 1.5 && (0.3..=5.0).contains(&sigma)).then_some(sigma)
+}
+
 /// The profile across the track at the track point `(px, py)` around offset `base`: `at`
 /// weighted by the fitted profile (σ `sg`), ±1.5σ in half-pixel steps.
 fn across(
@@ -183,4 +263,26 @@ fn across(
         o += 0.5;
     }
     Some(sum)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sigma_across_measures_the_light_not_the_line() {
+        // A star of σ 1.3 px, 0.4 px off a track along x = y (the light falls as a Gaussian
+        // in the distance from the star's centre).
+        let (s, c) = std::f64::consts::FRAC_1_SQRT_2.sin_cos();
+        let (sx, sy) = (50.0 - 0.4 * s, 50.0 + 0.4 * c);
+        let star = |x: f64, y: f64| {
+            let r2 = (x - sx).powi(2) + (y - sy).powi(2);
+            Some(40.0 * (-0.5 * r2 / 1.69).exp())
+        };
+        let sigma = sigma_across(&star, (50.0, 50.0), (s, c)).unwrap();
+        assert!((sigma - 1.3).abs() < 0.01, "{sigma}");
+        // No light, or the track off the frame: nothing measured.
+        assert_eq!(sigma_across(&|_, _| Some(0.0), (50.0, 50.0), (s, c)), None);
+        assert_eq!(sigma_across(&|_, _| None, (50.0, 50.0), (s, c)), None);
+    }
 }
