@@ -63,7 +63,17 @@ impl Star {
     /// parallax: for a few decades the error stays far below an arcsecond (it grows as
     /// (μ·Δt)²/2).
     pub fn vector_at(&self, epoch: f64) -> Vector3<f64> {
-        (self.position() + self.motion() * (epoch - self.epoch)).normalize()
+        self.vector_and_motion_at(epoch).0
+    }
+
+    /// [`Star::vector_at`] and [`Star::motion`] from one evaluation of the trigonometry (a
+    /// catalog selection makes both for every star it keeps).
+    pub fn vector_and_motion_at(&self, epoch: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let (sa, ca) = self.ra_rad.sin_cos();
+        let (sd, cd) = self.dec_rad.sin_cos();
+        let motion = Self::motion_from((sa, ca), (sd, cd), self.pmra_mas_yr, self.pmdec_mas_yr);
+        let v = (Vector3::new(cd * ca, cd * sa, sd) + motion * (epoch - self.epoch)).normalize();
+        (v, motion)
     }
 
     /// Unit vector (ICRS) at the star's own epoch.
@@ -75,11 +85,20 @@ impl Star {
 
     /// Proper motion as a tangent vector of the unit sphere, radians per year.
     pub fn motion(&self) -> Vector3<f64> {
-        let (sa, ca) = self.ra_rad.sin_cos();
-        let (sd, cd) = self.dec_rad.sin_cos();
+        let ra = self.ra_rad.sin_cos();
+        let dec = self.dec_rad.sin_cos();
+        Self::motion_from(ra, dec, self.pmra_mas_yr, self.pmdec_mas_yr)
+    }
+
+    fn motion_from(
+        (sa, ca): (f64, f64),
+        (sd, cd): (f64, f64),
+        pmra_mas_yr: f64,
+        pmdec_mas_yr: f64,
+    ) -> Vector3<f64> {
         let e_ra = Vector3::new(-sa, ca, 0.0);
         let e_dec = Vector3::new(-sd * ca, -sd * sa, cd);
-        (e_ra * self.pmra_mas_yr + e_dec * self.pmdec_mas_yr) * MAS_TO_RAD
+        (e_ra * pmra_mas_yr + e_dec * pmdec_mas_yr) * MAS_TO_RAD
     }
 }
 
@@ -97,6 +116,8 @@ pub struct Catalog {
     pub content_hash: u64,
     /// The stars by sky cell: read from a binary file, built on the first cone query otherwise.
     index: OnceLock<SkyIndex>,
+    /// The stars' magnitudes in ascending order, sorted on first use.
+    mags: OnceLock<Vec<f64>>,
 }
 
 impl Catalog {
@@ -113,6 +134,7 @@ impl Catalog {
             source: source.to_string(),
             content_hash,
             index: OnceLock::new(),
+            mags: OnceLock::new(),
         }
     }
 
@@ -158,6 +180,16 @@ impl Catalog {
         })
     }
 
+    /// The stars' magnitudes, brightest first. Sorted once: the automatic magnitude limit
+    /// reads it for every frame whose focal length was fitted (a field searched in scale).
+    pub fn sorted_mags(&self) -> &[f64] {
+        self.mags.get_or_init(|| {
+            let mut mags: Vec<f64> = self.stars.iter().map(|s| s.mag).collect();
+            mags.sort_by(f64::total_cmp);
+            mags
+        })
+    }
+
     /// The stars at `indices` as a catalog of their own (a hinted region's), sharing the names.
     pub fn subset(&self, indices: &[u32], source: &str) -> Catalog {
         Catalog {
@@ -166,6 +198,7 @@ impl Catalog {
             source: source.to_string(),
             content_hash: 0,
             index: OnceLock::new(),
+            mags: OnceLock::new(),
         }
     }
 
@@ -337,13 +370,16 @@ impl RefCatalog {
             .stars
             .iter()
             .filter(|s| s.mag <= selection.mag_limit)
-            .map(|s| RefStar {
-                id: s.id,
-                hip: s.hip,
-                v: s.vector_at(selection.epoch),
-                motion: s.motion(),
-                mag: s.mag,
-                members: 1,
+            .map(|s| {
+                let (v, motion) = s.vector_and_motion_at(selection.epoch);
+                RefStar {
+                    id: s.id,
+                    hip: s.hip,
+                    v,
+                    motion,
+                    mag: s.mag,
+                    members: 1,
+                }
             })
             .collect();
         let before = stars.len();

@@ -44,8 +44,8 @@ pub struct Band {
     table_from: (u64, f64, bool),
     /// The reference stars' radial features (`--method radial`), from `table`.
     pub radial: Option<crate::solve::radial::RadialTable>,
-    /// `refs` moved to the epochs of frames that carry their own date, by day.
-    pub(crate) epochs: Mutex<HashMap<i64, Arc<RefCatalog>>>,
+    /// `refs` moved to the epochs of frames that carry their own date.
+    epochs: Days,
 }
 
 impl Band {
@@ -101,7 +101,7 @@ impl Band {
             table,
             table_from,
             radial,
-            epochs: Mutex::new(HashMap::new()),
+            epochs: Days::default(),
         })
     }
 
@@ -122,11 +122,22 @@ impl Band {
 
     /// The reference stars at a frame's own epoch (`refs` when it has none, or the same).
     pub fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
-        let Some(e) = epoch.filter(|e| (e - self.refs.selection.epoch).abs() > SAME_EPOCH_YEARS)
-        else {
-            return self.refs.clone();
+        self.epochs.refs_at(&self.refs, epoch)
+    }
+}
+
+/// A selection moved to the epochs of frames that carry their own date, by day.
+#[derive(Default)]
+pub(crate) struct Days(Mutex<HashMap<i64, Arc<RefCatalog>>>);
+
+impl Days {
+    /// `refs` at a frame's own epoch: `refs` itself when the frame has none or one within
+    /// [`SAME_EPOCH_YEARS`] of the selection's, else `refs` moved to the frame's day.
+    pub(crate) fn refs_at(&self, refs: &Arc<RefCatalog>, epoch: Option<f64>) -> Arc<RefCatalog> {
+        let Some(e) = epoch.filter(|e| (e - refs.selection.epoch).abs() > SAME_EPOCH_YEARS) else {
+            return refs.clone();
         };
-        let mut map = self.epochs.lock().unwrap_or_else(|p| p.into_inner());
+        let mut map = self.0.lock().unwrap_or_else(|p| p.into_inner());
         let day = epoch_day(e);
         // A deep catalog's stars take tens of MB a day: an archive of frames from hundreds of
         // nights must not keep them all (2-degree Gaia frames of 200 dates peaked at 7.8 GB).
@@ -137,7 +148,7 @@ impl Band {
         // At the day's own epoch, not the first frame's of that day: the positions (and the
         // records' epoch) must not depend on which frame of the day a thread reached first.
         map.entry(day)
-            .or_insert_with(|| Arc::new(self.refs.at_epoch(day_epoch(day))))
+            .or_insert_with(|| Arc::new(refs.at_epoch(day_epoch(day))))
             .clone()
     }
 }
@@ -175,15 +186,35 @@ fn check_table_size(refs: &RefCatalog, max_sep_rad: f64) -> Result<()> {
     Ok(())
 }
 
-/// The catalog, and the selections made from it for solutions' fields.
+/// The catalog, and the selections made from it for solutions' fields: at the run's epoch, by
+/// magnitude limit in tenths (None = the selection failed: fewer than 3 stars), each moved to
+/// frames' own days as a band's stars are. Selected once per limit, not once per frame's
+/// date: a frame that carries its own date used to make its own selection (sorting the
+/// catalog), a fifth of a 12-degree frame's time with the field searched, and kept it.
 pub(crate) struct Deeper {
     pub(crate) catalog: Catalog,
-    pub(crate) selections: Mutex<HashMap<SelectionKey, Option<Arc<RefCatalog>>>>,
+    pub(crate) selections: Mutex<HashMap<i64, Option<Arc<Dated>>>>,
 }
 
-/// (magnitude limit in tenths, epoch in days) of a selection; its value None = the selection
-/// failed (fewer than 3 stars).
-pub(crate) type SelectionKey = (i64, i64);
+/// A selection and the days it was moved to.
+pub(crate) struct Dated {
+    refs: Arc<RefCatalog>,
+    days: Days,
+}
+
+impl Dated {
+    pub(crate) fn new(refs: RefCatalog) -> Dated {
+        Dated {
+            refs: Arc::new(refs),
+            days: Days::default(),
+        }
+    }
+
+    /// The stars at a frame's own epoch (see [`Days::refs_at`]).
+    pub(crate) fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
+        self.days.refs_at(&self.refs, epoch)
+    }
+}
 
 /// How many days' star positions a band keeps at once (see [`Band::refs_at`]).
 const EPOCHS_KEPT: usize = 8;
@@ -341,4 +372,34 @@ pub fn scaled(camera: &Camera, factor: f64) -> Camera {
     c.fx *= factor;
     c.fy *= factor;
     c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::catalog::DoubleStars;
+
+    /// One selection serves frames of every date: moved to each frame's day, the same day's
+    /// frames share it, and only a few days are kept.
+    #[test]
+    fn a_selection_moves_to_frames_days_and_keeps_a_few() {
+        let selection = Selection {
+            epoch: 2025.0,
+            mag_limit: 4.0,
+            double_stars: DoubleStars::Keep,
+            double_sep_rad: 0.0,
+        };
+        let dated = Dated::new(RefCatalog::select(&Catalog::builtin(), selection).unwrap());
+        assert!(Arc::ptr_eq(&dated.refs_at(None), &dated.refs));
+        assert!(Arc::ptr_eq(&dated.refs_at(Some(2025.001)), &dated.refs));
+        let (morning, evening) = (2016.2568, 2016.2571);
+        let a = dated.refs_at(Some(morning));
+        assert!(Arc::ptr_eq(&a, &dated.refs_at(Some(evening))));
+        assert_eq!(a.selection.epoch, day_epoch(epoch_day(morning)));
+        assert_eq!(a.len(), dated.refs.len());
+        for k in 0..3 * EPOCHS_KEPT {
+            dated.refs_at(Some(2000.0 + k as f64));
+        }
+        assert!(dated.days.0.lock().unwrap().len() <= EPOCHS_KEPT);
+    }
 }

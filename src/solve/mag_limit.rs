@@ -33,8 +33,7 @@ pub fn mag_limit_in(catalog: &Catalog, camera: &Camera, stars: f64, sky_sr: f64)
         .to_radians()
         .to_radians();
     let fraction = (fov_sr / sky_sr).min(1.0);
-    let mut mags: Vec<f64> = catalog.stars.iter().map(|s| s.mag).collect();
-    mags.sort_by(f64::total_cmp);
+    let mags = catalog.sorted_mags();
     let n = ((stars / fraction).round() as usize).clamp(1, mags.len());
     (mags[n - 1] * 10.0).round() / 10.0
 }

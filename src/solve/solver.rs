@@ -9,9 +9,9 @@
 
 use super::attitude::wahba;
 use super::bands::{
-    Band, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SAME_EPOCH_YEARS, SCALE_STEP,
-    SPREAD_TRIANGLE_STARS, STAGES, WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, day_epoch,
-    epoch_day, scale_bands, scale_hypotheses, scaled, spread_order,
+    Band, Dated, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SCALE_STEP, SPREAD_TRIANGLE_STARS,
+    STAGES, WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, scale_bands, scale_hypotheses,
+    scaled, spread_order,
 };
 use super::detect::{self, DetectSettings, Detection};
 use super::identify::{self, IdentifySettings};
@@ -554,27 +554,22 @@ impl Solver {
         if mag_limit <= voted_with.mag_limit {
             return None;
         }
-        let epoch = match epoch {
-            Some(e) if (e - voted_with.epoch).abs() > SAME_EPOCH_YEARS => day_epoch(epoch_day(e)),
-            _ => voted_with.epoch,
-        };
-        let key = ((mag_limit * 10.0).round() as i64, epoch_day(epoch));
-        let refs = deeper
+        let selected = deeper
             .selections
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .entry(key)
+            .entry((mag_limit * 10.0).round() as i64)
             .or_insert_with(|| {
                 let selection = Selection {
-                    epoch,
                     mag_limit,
                     ..voted_with
                 };
                 RefCatalog::select(&deeper.catalog, selection)
-                    .map(Arc::new)
                     .ok()
+                    .map(|refs| Arc::new(Dated::new(refs)))
             })
             .clone()?;
+        let refs = selected.refs_at(epoch);
         let refined = refine::refine(
             accepted.r,
             detections,
