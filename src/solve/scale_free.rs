@@ -21,9 +21,10 @@ use super::{Outcome, Prepared, Settings, Solution, Solver};
 use crate::camera::{Camera, angle};
 use crate::catalog::Catalog;
 use crate::catalog::patterns::{self, BINS, PatternIndex};
-use crate::cpu::pattern::Rows;
+use crate::cpu::pattern::{Buckets, Rows};
 use crate::io::frame::Frame;
 use nalgebra::{Matrix3, Vector3};
+use std::sync::OnceLock;
 use std::time::Instant;
 
 /// The rounds of the pass: round r looks up the quads of the brightest `ROUND_STARS[r]`
@@ -55,6 +56,8 @@ pub struct ScaleFree {
     /// Built now (false: read from the cache), and the seconds that took.
     pub built: bool,
     pub seconds: f64,
+    /// The CPU lookup's table of key prefixes (made on its first use).
+    buckets: OnceLock<Buckets>,
 }
 
 impl ScaleFree {
@@ -80,6 +83,7 @@ impl ScaleFree {
             band,
             built,
             seconds,
+            buckets: OnceLock::new(),
         }
     }
 }
@@ -266,7 +270,7 @@ impl Solver {
         let sf = self.scale_free.as_ref()?;
         for round in 0..rounds_for(detections.len()) {
             let lookup = self.scale_free_lookup(detections, round..round + 1)?;
-            let rows = rows_cpu(&sf.index, &lookup);
+            let rows = rows_cpu(sf, &lookup);
             if let Some(o) = self.finish_scale_free(detections, &lookup, &rows, epoch) {
                 return Some(o);
             }
@@ -512,20 +516,20 @@ impl Solver {
         // The image's chords at the camera's own focal length, and the scale that brings
         // their sum to the catalog's.
         let k = sum_cat / img1.iter().sum::<f64>();
-        // The order of the catalog stars: the closest chords up to that scale factor.
+        // The order of the catalog stars: the closest chords up to that scale factor (the
+        // first of the least largest error; an order is left as soon as its error reaches the
+        // best's, since it cannot then be chosen).
         let mut best: Option<(f64, [usize; 4])> = None;
-        for p in perms {
-            let err = PAIRS
-                .iter()
-                .zip(img1)
-                .map(|(&(i, j), x)| {
-                    let c = d[p[i]][p[j]];
-                    (x * k - c).abs() / c.max(1e-12)
-                })
-                .fold(0.0, f64::max);
-            if best.is_none_or(|(b, _)| err < b) {
-                best = Some((err, *p));
+        'orders: for p in perms {
+            let mut err = 0.0f64;
+            for (&(i, j), x) in PAIRS.iter().zip(img1) {
+                let c = d[p[i]][p[j]];
+                err = err.max((x * k - c).abs() / c.max(1e-12));
+                if best.is_some_and(|(b, _)| err >= b) {
+                    continue 'orders;
+                }
             }
+            best = Some((err, *p));
         }
         let (_, p) = best?;
         let cat = p.map(|i| cat[i]);
@@ -569,8 +573,10 @@ impl Solver {
 }
 
 /// The lookup on the CPU twin: rows of every query.
-pub fn rows_cpu(index: &PatternIndex, lookup: &Lookup) -> Vec<Rows> {
-    crate::cpu::pattern::pattern(&index.keys, &lookup.queries)
+pub fn rows_cpu(sf: &ScaleFree, lookup: &Lookup) -> Vec<Rows> {
+    let keys = &sf.index.keys;
+    let buckets = sf.buckets.get_or_init(|| Buckets::new(keys));
+    crate::cpu::pattern::pattern(keys, buckets, &lookup.queries)
 }
 
 #[cfg(test)]

@@ -77,7 +77,9 @@ fn pattern_gpu_matches_cpu() {
     ]);
     let table = gpu.upload_patterns(&sf.index).unwrap();
     let on_gpu = gpu.pattern(&table, &queries).unwrap();
-    let on_cpu = gpustar::cpu::pattern::pattern(&sf.index.keys, &queries);
+    let keys = &sf.index.keys;
+    let buckets = gpustar::cpu::pattern::Buckets::new(keys);
+    let on_cpu = gpustar::cpu::pattern::pattern(keys, &buckets, &queries);
     assert_eq!(on_gpu, on_cpu);
     let found: u32 = on_cpu.iter().map(|r| r.end - r.start).sum();
     println!(
@@ -102,7 +104,7 @@ fn unknown_fields_solve_in_the_scale_free_pass() {
             let lookup = solver
                 .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
                 .unwrap();
-            let rows = scale_free::rows_cpu(&sf.index, &lookup);
+            let rows = scale_free::rows_cpu(sf, &lookup);
             let Some(Outcome::Solved(r, _)) = solver.finish_scale_free(&dets, &lookup, &rows, None)
             else {
                 continue;
