@@ -130,10 +130,7 @@ impl GpuRunner {
     ) -> Vec<Detected> {
         let by_size = size_groups(&frames);
         let mut found: Vec<Option<(Vec<Detection>, f64)>> = vec![None; frames.len()];
-        let s = &DetectSettings {
-            max_stars,
-            ..solvers.settings.detect
-        };
+        let s = &solvers.settings.detect.for_sequence(max_stars);
         for (_, group) in by_size {
             let batch: Vec<&Frame> = group.iter().map(|&i| decoded_frame(&frames[i])).collect();
             let t0 = Instant::now();
