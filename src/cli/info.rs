@@ -106,6 +106,7 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
                     .passes
                     .iter()
                     .filter(|p| p.band == k && p.kind == PassKind::First)
+                    .filter(|p| p.method == solver.passes[0].method)
                     .count()
             )?;
         }

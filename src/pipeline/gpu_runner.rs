@@ -130,10 +130,7 @@ impl GpuRunner {
     ) -> Vec<Detected> {
         let by_size = size_groups(&frames);
         let mut found: Vec<Option<(Vec<Detection>, f64)>> = vec![None; frames.len()];
-        let s = &DetectSettings {
-            max_stars,
-            ..solvers.settings.detect
-        };
+        let s = &solvers.settings.detect.for_sequence(max_stars);
         for (_, group) in by_size {
             let batch: Vec<&Frame> = group.iter().map(|&i| decoded_frame(&frames[i])).collect();
             let t0 = Instant::now();
@@ -444,7 +441,7 @@ impl GpuRunner {
 
     /// The passes of lost-in-space identification for the frames not solved yet: for each
     /// scale tried, one vote submission for all of them (the triangle method and radial
-    /// features as `Solver::identify` runs them).
+    /// features as `Solver::identify` runs them: each pass by its own identifier).
     fn vote_passes(
         &mut self,
         solver: &Solver,
@@ -467,14 +464,16 @@ impl GpuRunner {
                 solver.camera.height,
                 solver.passes[h].band,
             );
-            if solver.settings.method == radial::Method::Triangle {
+            let method = solver.passes[h].method;
+            if method == radial::Method::Triangle {
                 // Triangles read the distance table on the CPU: no GPU stage.
                 for (i, p) in &prepared {
                     outcomes[*i] = solver.finish_triangle_method(&detections[*i], p, epochs[*i]);
                 }
                 continue;
             }
-            if let Some(features) = &solver.bands[key.2].radial {
+            if let (radial::Method::Radial, Some(features)) = (method, &solver.bands[key.2].radial)
+            {
                 let table = uploaded(&mut self.radial, key, || self.gpu.upload_radial(features))?;
                 let jobs: Vec<RadialJob> = prepared
                     .iter()

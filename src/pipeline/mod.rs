@@ -14,7 +14,7 @@ use crate::io::dark::Darks;
 use crate::io::frame::Frame;
 use crate::products::Products;
 use crate::record::{Record, Timing};
-use crate::solve::detect::{self, DetectSettings};
+use crate::solve::detect;
 use crate::solve::{Outcome, Settings, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 pub use gpu_runner::*;
@@ -298,10 +298,7 @@ impl Solvers {
     /// The pixel stages alone on the CPU (`--sequence`), keeping the brightest `max_stars`.
     pub fn detect_cpu(&self, decoded: Decoded, max_stars: usize) -> Detected {
         let t0 = Instant::now();
-        let s = DetectSettings {
-            max_stars,
-            ..self.settings.detect
-        };
+        let s = self.settings.detect.for_sequence(max_stars);
         let detections = match &decoded.frame {
             Ok(f) => Ok(detect::detect(f, &s)),
             Err(e) => Err(e.clone()),

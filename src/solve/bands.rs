@@ -256,13 +256,15 @@ pub fn scale_hypotheses(lo: f64, hi: f64, step: f64) -> Vec<f64> {
     v
 }
 
-/// One way of trying a frame: a focal-length factor, the band it falls in, and what the vote
-/// is given.
+/// One way of trying a frame: a focal-length factor, the band it falls in, what the vote
+/// is given, and the identifier that runs (one of the method's
+/// [`identifiers`](crate::solve::radial::Method::identifiers)).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pass {
     pub scale: f64,
     pub band: usize,
     pub kind: PassKind,
+    pub method: crate::solve::radial::Method,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

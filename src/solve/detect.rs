@@ -24,6 +24,9 @@ pub struct DetectSettings {
     pub matched_filter: bool,
     /// How each star's position is measured.
     pub centroid: Centroid,
+    /// Split components that hold more than one source (`deblend`; on in `--sequence`, where
+    /// particles cross the stars and each other).
+    pub deblend: bool,
 }
 
 /// How a star's position is measured (`--centroid`).
@@ -47,6 +50,18 @@ impl Default for DetectSettings {
             max_stars: 100,
             matched_filter: false,
             centroid: Centroid::Ml,
+            deblend: false,
+        }
+    }
+}
+
+impl DetectSettings {
+    /// Detection of the sequence stage (`--sequence`): the brightest `max_stars`, deblended.
+    pub fn for_sequence(self, max_stars: usize) -> DetectSettings {
+        DetectSettings {
+            max_stars,
+            deblend: true,
+            ..self
         }
     }
 }
@@ -128,10 +143,11 @@ pub fn stars(frame: &Frame, blobs: &[Blob], s: &DetectSettings) -> Vec<Detection
     out.pop().unwrap_or_default()
 }
 
-/// The star lists of a batch of frames (with their blobs), each position measured as the
-/// settings say: with `--centroid ml` every unsaturated star's window goes to `fit` in one call
-/// (the CPU twin, or the GPU kernel in one submission for the batch); a star whose window
-/// leaves the frame, or whose fit does not settle, keeps its centre of gravity.
+/// The star lists of a batch of frames (with their blobs), deblended when the settings say
+/// (`deblend`, on the CPU for both backends), each position measured as the settings say: with
+/// `--centroid ml` every unsaturated star's window goes to `fit` in one call (the CPU twin, or
+/// the GPU kernel in one submission for the batch); a star whose window leaves the frame, or
+/// whose fit does not settle, keeps its centre of gravity.
 pub fn stars_with(
     frames: &[&Frame],
     blobs: &[&[Blob]],
@@ -139,6 +155,11 @@ pub fn stars_with(
     fit: impl FnOnce(&[Window]) -> crate::error::Result<Vec<Option<PsfFit>>>,
 ) -> crate::error::Result<Vec<Vec<Detection>>> {
     let mut lists: Vec<Vec<Detection>> = blobs.iter().map(|b| star_list(b, s)).collect();
+    if s.deblend {
+        for (list, frame) in lists.iter_mut().zip(frames) {
+            *list = super::deblend::deblend(frame, list, s.k_sigma as f64, s.max_stars);
+        }
+    }
     if s.centroid != Centroid::Ml {
         return Ok(lists);
     }

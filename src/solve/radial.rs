@@ -275,6 +275,22 @@ pub enum Method {
     Triangle,
 }
 
+impl Method {
+    /// The identifiers a frame is tried with, in turn, each through all its passes until one
+    /// solves. `--method radial` falls back to the vote: where the radial features cannot
+    /// rank three true candidates of a triangle among their best (few catalog stars among
+    /// many false ones), the vote, which counts pairs, can (issue 28, docs/radial.md). Each
+    /// identifier judges its hypotheses against an even share of the false-match budget
+    /// ([`Solver::hypothesis_factor`](crate::solve::Solver::hypothesis_factor)).
+    pub fn identifiers(self) -> &'static [Method] {
+        match self {
+            Method::Vote => &[Method::Vote],
+            Method::Radial => &[Method::Radial, Method::Vote],
+            Method::Triangle => &[Method::Triangle],
+        }
+    }
+}
+
 /// The CPU twins of the radial stages: score (`cpu::radial`) and select.
 pub fn candidates_cpu(
     t: &RadialTable,

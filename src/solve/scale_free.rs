@@ -483,6 +483,7 @@ impl Solver {
             triangle_stars: 0,
             identify: s,
             refine: rs,
+            method: crate::solve::radial::Method::Vote,
         }
     }
 

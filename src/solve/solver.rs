@@ -22,6 +22,7 @@ use crate::camera::Camera;
 use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
 use crate::error::Result;
 use crate::io::frame::Frame;
+use crate::solve::radial::Method;
 use nalgebra::Vector3;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -81,7 +82,7 @@ impl Default for Settings {
             scale_free: true,
             retry: true,
             detect_retry: true,
-            method: crate::solve::radial::Method::Vote,
+            method: Method::Vote,
             sky_sr: FULL_SKY_SR,
             searches: 1,
         }
@@ -98,7 +99,9 @@ pub struct Solver {
     pub scales: Vec<f64>,
     /// The hypotheses tried in turn until one solves: every scale with the settings, then
     /// (when `retry`) every scale with more voting stars, with voters spread over the frame,
-    /// the shallow pass (when there is one), and with wide tolerances.
+    /// the shallow pass (when there is one), and with wide tolerances; all of these for each
+    /// of the method's identifiers in turn (`--method radial`: radial features, then the
+    /// vote).
     pub passes: Vec<Pass>,
     /// When the scale is searched and the magnitude limit left to the solver: the catalog,
     /// to check each solution against as deep a selection as its fitted field calls for.
@@ -131,6 +134,8 @@ pub struct Prepared {
     pub identify: IdentifySettings,
     /// Refinement settings of this pass (match radius, what is fitted).
     pub refine: RefineSettings,
+    /// The identifier of this pass.
+    pub method: Method,
 }
 
 /// What the identification of one frame found (before it becomes a record).
@@ -170,7 +175,7 @@ impl Solver {
         // first frame does (the pattern index is about a fifth of their size).
         let scale_free_on = settings.scale_range.is_some()
             && settings.scale_free
-            && settings.method == crate::solve::radial::Method::Vote;
+            && settings.method == Method::Vote;
         let mut bands = edges
             .iter()
             .map(|&e| {
@@ -227,6 +232,7 @@ impl Solver {
                         scale,
                         band: band_of(scale),
                         kind,
+                        method: settings.method,
                     })
             })
             .collect();
@@ -247,9 +253,17 @@ impl Solver {
                     scale: 1.0,
                     band: main_bands,
                     kind: PassKind::Shallow,
+                    method: settings.method,
                 },
             );
         }
+        // The walk again for each fallback identifier, after every pass of the one before.
+        let passes: Vec<Pass> = settings
+            .method
+            .identifiers()
+            .iter()
+            .flat_map(|&method| passes.iter().map(move |&p| Pass { method, ..p }))
+            .collect();
         let shallow_band = (bands.len() > main_bands).then_some(main_bands);
         let scale_free = if scale_free_on {
             // The quads name the stars of the narrowest field's band, the deepest.
@@ -339,16 +353,17 @@ impl Solver {
             band: pass.band,
             identify: s,
             refine: rs,
+            method: pass.method,
         })
     }
 
-    /// How many passes a frame of `n` detections can be tried with: the retries with more
-    /// voting stars and with voters spread over the frame need more detections than vote
-    /// (`prepare` passes them over otherwise), so they add no hypothesis to such a frame.
-    /// With the scale-free pass, which takes half the false-match budget (see
+    /// How many passes of identifier `method` a frame of `n` detections can be tried with:
+    /// the retries with more voting stars and with voters spread over the frame need more
+    /// detections than vote (`prepare` passes them over otherwise), so they add no hypothesis
+    /// to such a frame. With the scale-free pass, which takes half the false-match budget (see
     /// [`SCALE_FREE_SHARE`](super::scale_free::SCALE_FREE_SHARE)), the passes count twice: they
     /// share the other half.
-    pub fn passes_for(&self, n: usize) -> usize {
+    pub fn passes_for(&self, n: usize, method: Method) -> usize {
         let vote = self.settings.identify.vote_stars;
         let share = if self.scale_free.is_some() {
             super::scale_free::SCALE_FREE_SHARE as usize
@@ -359,12 +374,33 @@ impl Solver {
             * self
                 .passes
                 .iter()
+                .filter(|p| p.method == method)
                 .filter(|p| match p.kind {
                     PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
                     PassKind::Spread => n > vote,
                     _ => true,
                 })
                 .count()
+    }
+
+    /// What the false-match test multiplies the hypotheses of one stage of a pass of
+    /// identifier `method` by, for a frame of `n` detections: the budget (`max_false_prob`) is
+    /// shared evenly by the searches of the frame (a hint's region, lost-in-space), its
+    /// detection stages, the method's identifiers (radial features and the vote that falls
+    /// back from them take half each), the identifier's passes, and the stages of a pass that
+    /// can accept (the vote and its triangle fallback, see `STAGES`; radial features alone).
+    /// So the chance that any of them accepts a wrong attitude stays within the whole. The
+    /// triangle method, the vote's fallback stage on its own, keeps that stage's share.
+    pub fn hypothesis_factor(&self, n: usize, method: Method) -> u64 {
+        let stages = match method {
+            Method::Radial => 1,
+            Method::Vote | Method::Triangle => STAGES,
+        };
+        stages
+            * self.settings.method.identifiers().len() as u64
+            * self.settings.searches
+            * self.detection_stages()
+            * self.passes_for(n, method) as u64
     }
 
     /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
@@ -389,11 +425,9 @@ impl Solver {
                 continue;
             };
             let band = &self.bands[p.band];
-            outcome = match (self.settings.method, &band.radial) {
-                (crate::solve::radial::Method::Triangle, _) => {
-                    self.finish_triangle_method(&detections, &p, epoch)
-                }
-                (_, Some(t)) => {
+            outcome = match (p.method, &band.radial) {
+                (Method::Triangle, _) => self.finish_triangle_method(&detections, &p, epoch),
+                (Method::Radial, Some(t)) => {
                     let image = crate::solve::radial::image_features(&p.vectors[..p.n_vote], t);
                     let found = crate::solve::radial::candidates_cpu(
                         t,
@@ -614,13 +648,10 @@ impl Solver {
             .collect();
         let r0 = wahba(&cam, &icrs).ok_or("no_consistent_match")?;
         // Every pass this frame can be tried with multiplies the hypotheses a chance match could
-        // come from; the vote has half the error budget (see `STAGES`).
-        let hypotheses = voted.hypotheses.saturating_mul(
-            STAGES
-                * self.settings.searches
-                * self.detection_stages()
-                * self.passes_for(detections.len()) as u64,
-        );
+        // come from; the vote has half the pass's error budget (see `STAGES`).
+        let hypotheses = voted
+            .hypotheses
+            .saturating_mul(self.hypothesis_factor(detections.len(), p.method));
         let refined = refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
             .ok_or("no_consistent_match")?;
         if refined.false_match_prob > s.refine.max_false_prob {
@@ -659,7 +690,7 @@ impl Solver {
 
     /// The first triangle hypothesis whose refined attitude passes the false-match test, which
     /// counts `matched` triangles for every pass this frame can be tried with (with its share
-    /// of the error budget, see `STAGES`) and three stars as fixed.
+    /// of the error budget, see [`Solver::hypothesis_factor`]) and three stars as fixed.
     fn first_accepted(
         &self,
         detections: &[Detection],
@@ -669,12 +700,7 @@ impl Solver {
         matched: u64,
     ) -> Option<(Refined, u64, usize)> {
         let vectors = &p.vectors[..p.n_vote];
-        let hypotheses = matched.saturating_mul(
-            STAGES
-                * self.settings.searches
-                * self.detection_stages()
-                * self.passes_for(detections.len()) as u64,
-        );
+        let hypotheses = matched.saturating_mul(self.hypothesis_factor(detections.len(), p.method));
         hyps.iter().find_map(|t| {
             let cam = t.stars.map(|i| vectors[i]);
             let icrs = t.refs.map(|id| refs.stars[id as usize].v);

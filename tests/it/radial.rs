@@ -112,8 +112,28 @@ fn narrow_frames_solve_with_radial_features_on_both_backends() {
     println!("4° frames: radial solves {solved} of 6, triangles alone {triangles}");
     assert!(solved >= 5, "{solved} of 6 solved");
     assert!(triangles >= 4, "triangles alone solve {triangles} of 6");
-    // The same records through the GPU pipeline (lavapipe in CI).
-    let Some(g) = common::gpu("narrow_frames_solve_with_radial_features_on_both_backends") else {
+    let settings = Settings {
+        mag_limit: Some(8.0),
+        method: Method::Radial,
+        table_cache: false,
+        ..Settings::default()
+    };
+    gpu_records_match_cpu(
+        "narrow_frames_solve_with_radial_features_on_both_backends",
+        &s,
+        &frames,
+        settings,
+    );
+}
+
+/// The same records through the GPU pipeline (lavapipe in CI) as through the CPU's.
+fn gpu_records_match_cpu(
+    test: &str,
+    s: &SimSettings,
+    frames: &[(gpustar::io::frame::Frame, gpustar::simulate::Truth)],
+    settings: Settings,
+) {
+    let Some(g) = common::gpu(test) else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
@@ -128,12 +148,6 @@ fn narrow_frames_solve_with_radial_features_on_both_backends() {
         files.push((path, format!("f{k}.png")));
     }
     let pipeline = |backend| {
-        let settings = Settings {
-            mag_limit: Some(8.0),
-            method: Method::Radial,
-            table_cache: false,
-            ..Settings::default()
-        };
         Pipeline::new(
             Catalog::builtin(),
             settings,
@@ -151,4 +165,76 @@ fn narrow_frames_solve_with_radial_features_on_both_backends() {
         };
         common::assert_records_match(&value(a), &value(b));
     }
+}
+
+/// `--method radial` falls back to the vote (`Method::identifiers`): among 4° frames with 15
+/// false stars, some that radial features cannot solve are solved by the vote after them,
+/// right, and the GPU pipeline (lavapipe in CI) writes the same records as the CPU.
+#[test]
+fn radial_falls_back_to_the_vote_on_both_backends() {
+    let s = SimSettings {
+        false_stars: 15,
+        seed: 2801,
+        ..sim()
+    };
+    let frames = common::rendered(&s, 8);
+    let settings = Settings {
+        mag_limit: Some(8.0),
+        method: Method::Radial,
+        table_cache: false,
+        // One detection list, so that "radial fails on it" is the whole story.
+        detect_retry: false,
+        ..Settings::default()
+    };
+    let solver = Solver::new(&Catalog::builtin(), s.camera().unwrap(), settings).unwrap();
+    let radial_passes = solver.passes.len() / 2;
+    assert!(
+        solver.passes[..radial_passes]
+            .iter()
+            .all(|p| p.method == Method::Radial)
+    );
+    assert!(
+        solver.passes[radial_passes..]
+            .iter()
+            .all(|p| p.method == Method::Vote)
+    );
+    let (mut by_radial, mut by_vote) = (0, 0);
+    for (frame, truth) in &frames {
+        let dets = gpustar::solve::detect::detect(frame, &solver.settings.detect);
+        let radial_solves = (0..radial_passes).any(|h| {
+            solver.prepare(&dets, h).is_some_and(|p| {
+                let t = solver.bands[p.band].radial.as_ref().unwrap();
+                let image = radial::image_features(&p.vectors[..p.n_vote], t);
+                let found = radial::candidates_cpu(t, &image, radial::CANDIDATES);
+                matches!(
+                    solver.finish_radial(&dets, &p, &found, None),
+                    Outcome::Solved(..)
+                )
+            })
+        });
+        let (sol, _, _) = solver.solve_frame(frame);
+        if let Outcome::Solved(r, _) = &sol.outcome {
+            let err = gpustar::solve::attitude::attitude_error(
+                &r.r,
+                &nalgebra::Matrix3::from_fn(|i, j| truth.rotation_matrix[i][j]),
+            );
+            assert!(err.to_degrees() * 3600.0 < 60.0, "{err} rad from the truth");
+            if radial_solves {
+                by_radial += 1;
+            } else {
+                by_vote += 1;
+            }
+        }
+    }
+    println!(
+        "4° frames, 15 false stars: {by_radial} of 8 solved by radial features, {by_vote} by \
+         the vote after them"
+    );
+    assert!(by_radial >= 3 && by_vote >= 2, "{by_radial}, {by_vote}");
+    gpu_records_match_cpu(
+        "radial_falls_back_to_the_vote_on_both_backends",
+        &s,
+        &frames,
+        solver.settings,
+    );
 }
