@@ -705,7 +705,8 @@ impl Solver {
     }
 
     /// Detect, identify with `identify`, and detect again with the matched filter when that
-    /// does not solve (the detection retry). Returns the solution, detection and
+    /// does not solve (the detection retry), identifying again when that finds a star the
+    /// first detection did not ([`detect::adds_stars`]). Returns the solution, detection and
     /// identification times (ms).
     pub fn solve_frame_with(
         &self,
@@ -722,6 +723,9 @@ impl Solver {
             let t3 = Instant::now();
             let filtered = self.detect_filtered(frame);
             detect_ms += t3.elapsed().as_secs_f64();
+            if !detect::adds_stars(&sol.detections, &filtered) {
+                return (sol, detect_ms * 1e3, identify_ms * 1e3);
+            }
             let t4 = Instant::now();
             let again = identify(filtered);
             let identify_ms = identify_ms + t4.elapsed().as_secs_f64();
