@@ -175,16 +175,17 @@ pub fn detect(frame: &Frame, s: &DetectSettings) -> Vec<Detection> {
 
 /// The matched filter's detection of a star the first detection found moves it by less than
 /// this (pixels), the false-match test's smallest radius
-/// ([`CONFIDENCE_RADIUS_FLOOR_PX`](super::refine::CONFIDENCE_RADIUS_FLOOR_PX)): on 1,200
-/// independent frames at 8–18° the same stars moved by at most 0.26 px (PSF fits by 1e-9 px,
-/// centres of gravity of the larger components more), while their brightness order changed
-/// in a third of the frames.
+/// ([`CONFIDENCE_RADIUS_FLOOR_PX`](super::refine::CONFIDENCE_RADIUS_FLOOR_PX)). Of 1,400
+/// independent frames at 8–18°, 154 reached the detection retry and 80 of those showed the
+/// same stars again: moved by at most 0.26 px (PSF fits by about 1e-9 px, centres of gravity
+/// of the larger components more), in another brightness order in a third of them. The retry
+/// solved 30 frames, none of the 80.
 pub const SAME_STAR_PX: f64 = super::refine::CONFIDENCE_RADIUS_FLOOR_PX;
 
 /// Whether the matched filter's detections `filtered` hold a star that the first ones,
 /// `first`, do not: unless they are as many and each has its own counterpart among `first`
 /// within [`SAME_STAR_PX`]. When they do not, the detection retry would try the same stars
-/// again, so it is skipped (docs/speed.md, "Fail fast: the detection retry without new stars").
+/// again, so it is skipped (docs/speed.md, "Fail fast: no detection retry without a new star").
 pub fn adds_stars(first: &[Detection], filtered: &[Detection]) -> bool {
     if first.len() != filtered.len() {
         return true;
