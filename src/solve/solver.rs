@@ -54,7 +54,8 @@ pub struct Settings {
     /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
     pub retry: bool,
     /// Frames that do not solve are detected again with the matched filter (fainter stars)
-    /// and tried again, when the filter is not on already and `retry` is.
+    /// and tried again, when the filter is not on already and `retry` is, and it finds a star
+    /// the first detection did not ([`detect::adds_stars`]).
     pub detect_retry: bool,
     /// How stars are identified: the vote, or radial features + triangles.
     pub method: crate::solve::radial::Method,
