@@ -319,7 +319,8 @@ impl GpuRunner {
             })
             .collect();
         // The detection retry: frames that did not solve, detected again with the matched
-        // filter (on the GPU, in one submission) and identified again (the CPU twin's vote).
+        // filter (on the GPU, in one submission) and identified again (the CPU twin's vote)
+        // when that finds a star the first detection did not.
         // Detection's retry settings are the run's (any solver of the group has them).
         let lead = global_solver
             .as_deref()
@@ -331,6 +332,9 @@ impl GpuRunner {
             if !unsolved.is_empty() {
                 let stars = self.detect_filtered(solver, frames, &unsolved)?;
                 for (&i, d) in unsolved.iter().zip(stars) {
+                    if !detect::adds_stars(&solutions[i].detections, &d) {
+                        continue;
+                    }
                     let again = identify_hinted(regional[i].as_ref(), global, d, epochs[i]);
                     if matches!(again.outcome, Outcome::Solved(..)) {
                         solutions[i] = again;

@@ -287,8 +287,9 @@ impl Solver {
     /// Detect with this solver's settings and identify with `id`, the scale-free pass first on
     /// both detection stages (a sparse frame the pass misses may be solved by it from the
     /// matched filter's detections, in milliseconds, where the walk takes seconds), then the
-    /// walk on each. Solutions are those of `solve_frame_with` whenever the pass solves the
-    /// first stage or nothing solves the frame. Returns the solution, detection and
+    /// walk on each (on the matched filter's only when they hold a new star, as
+    /// `solve_frame_with`). Solutions are those of `solve_frame_with` whenever the pass solves
+    /// the first stage or nothing solves the frame. Returns the solution, detection and
     /// identification times (ms).
     pub fn solve_frame_scale_free_first(
         &self,
@@ -322,8 +323,9 @@ impl Solver {
                 epoch,
             },
             None => {
+                let adds = detect::adds_stars(&dets, &filtered);
                 let sol = id.identify_walk(dets, epoch);
-                if matches!(sol.outcome, Outcome::Solved(..)) {
+                if matches!(sol.outcome, Outcome::Solved(..)) || !adds {
                     sol
                 } else {
                     let again = id.identify_walk(filtered, epoch);

@@ -55,7 +55,8 @@ pub struct Settings {
     /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
     pub retry: bool,
     /// Frames that do not solve are detected again with the matched filter (fainter stars)
-    /// and tried again, when the filter is not on already and `retry` is.
+    /// and tried again, when the filter is not on already and `retry` is, and it finds a star
+    /// the first detection did not ([`detect::adds_stars`]).
     pub detect_retry: bool,
     /// How stars are identified: the vote, or radial features + triangles.
     pub method: crate::solve::radial::Method,
@@ -726,7 +727,8 @@ impl Solver {
     }
 
     /// Detect, identify with `identify`, and detect again with the matched filter when that
-    /// does not solve (the detection retry). Returns the solution, detection and
+    /// does not solve (the detection retry), identifying again when that finds a star the
+    /// first detection did not ([`detect::adds_stars`]). Returns the solution, detection and
     /// identification times (ms).
     pub fn solve_frame_with(
         &self,
@@ -743,6 +745,9 @@ impl Solver {
             let t3 = Instant::now();
             let filtered = self.detect_filtered(frame);
             detect_ms += t3.elapsed().as_secs_f64();
+            if !detect::adds_stars(&sol.detections, &filtered) {
+                return (sol, detect_ms * 1e3, identify_ms * 1e3);
+            }
             let t4 = Instant::now();
             let again = identify(filtered);
             let identify_ms = identify_ms + t4.elapsed().as_secs_f64();
