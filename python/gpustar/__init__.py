@@ -262,11 +262,13 @@ class Solver:
         threads on the CPU (or the GPU in batches of ``batch_size``), an iterator of results in
         input order, each as soon as it and those before it are done.
 
-        ``images`` may be a list or a generator (read up to a window of frames ahead, each
-        frame copied as it is handed over); ``names`` the records'
+        ``images`` may be a list or a generator, read up to a window of frames ahead of the
+        results (as ``batch``'s, and at most 256 MiB of pixels beyond two frames per thread or
+        one GPU batch), each frame copied as it is handed over; on the GPU, the solver's other
+        calls wait until the iteration ends. ``names`` the records'
         ``file`` fields (default "image_00000", ...); ``epochs`` each frame's epoch (Julian
-        year, or None), as ``solve``'s ``epoch``. A bad array in a batch gives that frame
-        an error record rather than losing the others. ``progress`` is called as
+        year, or None), as ``solve``'s ``epoch``. An array refused for its values gives that
+        frame an error record rather than losing the others. ``progress`` is called as
         ``progress(done, total)`` (total None for a generator), or ``progress.update(1)`` when
         it has ``update`` (a tqdm bar).
         """
@@ -275,11 +277,13 @@ class Solver:
             raise InputError(f"{total} images, {len(names or [])} names and {len(epochs or [])} "
                              "epochs: give one of each per image")
         run = self._inner.start_many(None if batch_size is None else int(batch_size))
-        window = run.window
+        window = 1
         put = done = 0
         for im in images:
             run.put(im, names[put] if names is not None else f"image_{put:05d}",
                     None if epochs is None else epochs[put])
+            if put == 0:  # a 2-D array: put takes no other
+                window = run.window_for(im.shape[1], im.shape[0])
             put += 1
             # Take the records that are ready; wait for one only when the workers hold a
             # window of frames (so they always have the next ones while Python waits).

@@ -693,12 +693,19 @@ impl Solver {
                 }
             }
         });
+        // Frames in flight: enough that the workers never wait for Python (at least one
+        // GPU batch, or two frames per CPU thread), as many as `batch` would have, and within
+        // a memory budget.
+        let least = match self.engine.as_ref() {
+            Engine::Cpu => 2 * opts.threads.max(1),
+            Engine::Gpu(_) => opts.batch_size,
+        };
         Ok(ManyRun {
             frames: Some(frames_tx),
             records: records_rx,
             stop,
             thread: Some(thread),
-            window: opts.window(),
+            window: (least, opts.window().max(least)),
         })
     }
 
@@ -906,16 +913,19 @@ struct ManyRun {
     records: crossbeam_channel::Receiver<Record>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<gpustar::Result<batch::RunSummary>>>,
-    window: usize,
+    /// The least and the most frames in flight.
+    window: (usize, usize),
 }
+
+/// The pixels `solve_many` holds in flight at most (beyond the least window): 256 MiB.
+const MANY_BUDGET_BYTES: usize = 256 << 20;
 
 #[pymethods]
 impl ManyRun {
-    /// Frames the workers may hold at once: put no more than this many ahead of the records
-    /// taken.
-    #[getter]
-    fn window(&self) -> usize {
-        self.window
+    /// Frames of `width` × `height` to put ahead of the records taken, at most.
+    fn window_for(&self, width: usize, height: usize) -> usize {
+        let (least, most) = self.window;
+        (MANY_BUDGET_BYTES / (2 * width * height).max(1)).clamp(least, most)
     }
 
     /// Hand over the next frame (its pixels copied: the workers solve it while Python goes

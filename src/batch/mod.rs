@@ -531,7 +531,7 @@ fn write_in_order(
     if let Some(r) = linker.as_mut().and_then(|l| l.finish()) {
         emit(r, writer.as_deref_mut(), &mut summary, &mut unflushed);
     }
-    if let Some(Err(e)) = writer.as_deref_mut().map(RecordWriter::flush) {
+    if let Some(Err(e)) = writer.map(RecordWriter::flush) {
         summary.write_error = Some(format!("{e:#}"));
     }
     Ok(summary)
