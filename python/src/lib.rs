@@ -932,7 +932,13 @@ impl ManyRun {
     /// on). An array refused for its values becomes an error record; what is not an array
     /// raises `InputError`.
     #[pyo3(signature = (image, name, epoch=None))]
-    fn put(&self, image: Bound<'_, PyAny>, name: &str, epoch: Option<f64>) -> PyResult<()> {
+    fn put(
+        &mut self,
+        py: Python<'_>,
+        image: Bound<'_, PyAny>,
+        name: &str,
+        epoch: Option<f64>,
+    ) -> PyResult<()> {
         let held = held(&image)?;
         let d = decoded_of(&held, name, epoch, None, false)?;
         let d = Decoded {
@@ -941,7 +947,11 @@ impl ManyRun {
         };
         match &self.frames {
             Some(tx) if tx.send(d).is_ok() => Ok(()),
-            _ => Err(Error::new_err("the run is closed")),
+            // The run has ended: its error, if it failed.
+            _ => {
+                self.finish(py)?;
+                Err(Error::new_err("the run is closed"))
+            }
         }
     }
 
@@ -966,12 +976,20 @@ impl ManyRun {
         if let Some(record) = got {
             return Ok(Some(RecordHandle::new(record)));
         }
+        self.finish(py)?;
+        Ok(None)
+    }
+}
+
+impl ManyRun {
+    /// Wait for the run's thread to end; its error, if it failed.
+    fn finish(&mut self, py: Python<'_>) -> PyResult<()> {
         if let Some(t) = self.thread.take() {
             py.detach(|| t.join())
                 .map_err(|_| Error::new_err("the solving thread panicked"))?
                 .map_err(py_err)?;
         }
-        Ok(None)
+        Ok(())
     }
 }
 
