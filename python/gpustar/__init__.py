@@ -245,9 +245,11 @@ class Solver:
               time: Any = None, header: Optional[dict] = None) -> Result:
         """Solve one frame: a 2-D numpy array (height, width) of uint8, uint16 or float32.
 
-        C-contiguous arrays are read in place; other strides are gathered. uint8 and uint16
-        values are taken as they are (as 8- and 16-bit PNGs); float32 values are scaled from
-        their range as a BITPIX -32 FITS file's. ``name`` is the record's ``file``;
+        A C-contiguous uint16 array is solved where it lies, without a copy (and with the GIL
+        released: another thread must not write to it until ``solve`` returns); other dtypes
+        are converted, other strides gathered. uint8 and uint16 values are taken as they are
+        (as 8- and 16-bit PNGs); float32 values are scaled from their range as a BITPIX -32
+        FITS file's. ``name`` is the record's ``file``;
         ``epoch`` (Julian year) moves the catalog stars by proper motion; ``time`` (ISO UTC
         string or datetime) and ``header`` (FITS keywords: EXPTIME, station, ...) serve
         streaks. A bad array raises :class:`InputError`; a frame that cannot be solved is a
