@@ -44,7 +44,7 @@ fn main() {
         })
         .collect();
     names.sort();
-    let frames: Vec<Frame> = names.iter().map(|p| Frame::read(p).unwrap()).collect();
+    let frames: Vec<Frame<'static>> = names.iter().map(|p| Frame::read(p).unwrap()).collect();
     println!("{} frames of {}", frames.len(), dir.display());
     let gpu = Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref())
         .map_err(|e| eprintln!("no GPU: {e:#}; the CPU backend only"))

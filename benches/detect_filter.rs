@@ -34,7 +34,7 @@ fn main() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
-    let frames: Vec<Frame> = truth
+    let frames: Vec<Frame<'static>> = truth
         .iter()
         .map(|t| Frame::read(&dir.join(t["file"].as_str().unwrap())).unwrap())
         .collect();

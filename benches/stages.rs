@@ -58,11 +58,11 @@ fn main() {
             ..SimSettings::default()
         };
         eprintln!("rendering 8 frames of {size}x{size}...");
-        let distinct: Vec<Frame> = (0..8)
+        let distinct: Vec<Frame<'static>> = (0..8)
             .map(|k| Frame {
                 width: size,
                 height: size,
-                pixels: render(&catalog, &sim, k).unwrap().0,
+                pixels: render(&catalog, &sim, k).unwrap().0.into(),
                 saturation: 255,
             })
             .collect();

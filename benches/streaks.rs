@@ -65,11 +65,11 @@ fn main() {
             ..SimSettings::default()
         };
         eprintln!("rendering 8 frames of {size}x{size}...");
-        let frames: Vec<Frame> = (0..8)
+        let frames: Vec<Frame<'static>> = (0..8)
             .map(|k| Frame {
                 width: size,
                 height: size,
-                pixels: render_streaks(&catalog, &sim, &st, k).unwrap().0,
+                pixels: render_streaks(&catalog, &sim, &st, k).unwrap().0.into(),
                 saturation: u16::MAX,
             })
             .collect();

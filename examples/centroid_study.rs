@@ -119,7 +119,13 @@ fn share(i: i64, c: f64, s: f64) -> (f64, f64, f64) {
 }
 
 /// Render one frame: the stars' positions, their width and signal, the bias.
-fn render(stars: &[(f64, f64)], sigma: f64, n: f64, bias: f64, rng: &mut ChaCha8Rng) -> Frame {
+fn render(
+    stars: &[(f64, f64)],
+    sigma: f64,
+    n: f64,
+    bias: f64,
+    rng: &mut ChaCha8Rng,
+) -> Frame<'static> {
     let (w, h) = (SIZE as usize, SIZE as usize);
     let mut signal = vec![0.0f64; w * h];
     let r = (6.0 * sigma + 2.0).ceil() as i64;

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """What the Python package costs, and gpustar beside cedar-solve in one Python process.
 
-    python scripts/bench_python.py FRAMES_DIR [--cli PATH] [--reps 30] [--cedar N]
+    python scripts/bench_python.py FRAMES_DIR [--cli PATH] [--reps 30] [--pairs N] [--cedar N]
 
 FRAMES_DIR is a set of scripts/sim_frames.py (FITS frames, truth.jsonl, camera.toml), e.g.
 `python3 scripts/sim_frames.py --out /tmp/sim300 -n 300 --size 1024 --fov-deg 10`. Run it with
@@ -12,9 +12,13 @@ cedar-solve too for --cedar. Everything is the CPU backend, default threads (all
    (the same from Python), Solver.solve_many() on the frames already in memory (numpy uint16,
    read here by a FITS reader of this script's own, with each frame's DATE-OBS as its epoch):
    images/s = frames / wall seconds of the call (the distance table is cached on disk before).
+   With --pairs N: N pairs run back to back (CLI, solve_many, solve_many, CLI), each giving two
+   ratios solve_many img/s / CLI img/s: on a shared machine whose load moves, the ratios of
+   runs made together say more than any single rate.
 2. Latency: Solver.solve() of one frame from Python, --reps times, against the library's own
-   call (Solvers::solve_cpu on the frame made beforehand, timed in Rust), interleaved: the
-   difference is what the binding adds (array to frame, record to JSON to a Result).
+   call (Solvers::solve_cpu on the frame made beforehand, timed in Rust, the same name and
+   epoch), interleaved: the difference is what the binding adds (array to frame, a Result;
+   with a field read, the record to JSON and parsed).
 3. With --cedar N: the first N frames solved by cedar-solve (tetra3.Tetra3().solve_from_image
    on the same arrays as PIL images, which it requires, fov_estimate from camera.toml, other arguments at their defaults) and by
    gpustar in this one process; correct = boresight and roll within 0.1 deg of the truth.
@@ -92,6 +96,8 @@ def main():
     ap.add_argument("--cli", default="target/release/gpustar")
     ap.add_argument("--reps", type=int, default=30)
     ap.add_argument("--cedar", type=int, default=0)
+    ap.add_argument("--pairs", type=int, default=0,
+                    help="also N back-to-back pairs (CLI, solve_many, solve_many, CLI): ratios")
     a = ap.parse_args()
 
     truth = {t["file"]: t for t in map(json.loads, open(a.frames / "truth.jsonl"))}
@@ -132,25 +138,63 @@ def main():
         "solve_many_records_equal_to_cli": f"{same} of {n}",
     }
 
+    # 1b. Pairs run back to back, for a machine whose load moves: each gives two ratios
+    # solve_many img/s / CLI img/s (CLI, solve_many, solve_many, CLI cancels a drift).
+    if a.pairs:
+        def cli_rate():
+            with tempfile.TemporaryDirectory() as tmp:
+                t0 = time.perf_counter()
+                subprocess.run([a.cli, "batch", str(a.frames), "--camera", str(camera), "--backend", "cpu",
+                                "-q", "-o", f"{tmp}/cli.jsonl"], capture_output=True, check=False)
+                return n / (time.perf_counter() - t0)
+
+        def many_rate():
+            t0 = time.perf_counter()
+            for r in solver.solve_many(images, names=names, epochs=epochs):
+                r.to_dict()
+            return n / (time.perf_counter() - t0)
+
+        pairs = []
+        for _ in range(a.pairs):
+            c1, m1, m2, c2 = cli_rate(), many_rate(), many_rate(), cli_rate()
+            pairs.append({"cli_img_s": [round(c1, 1), round(c2, 1)], "many_img_s": [round(m1, 1), round(m2, 1)],
+                          "ratio": [round(m1 / c1, 3), round(m2 / c2, 3)]})
+        ratios = sorted(x for p in pairs for x in p["ratio"])
+        out["pairs"] = {"runs": pairs, "ratio_median": round(statistics.median(ratios), 3),
+                        "ratio_range": [ratios[0], ratios[-1]]}
+
     # 2. Latency of one call: solve() from Python against the library's own call on a frame
-    # made beforehand (Solver._library_call_ms: the same compiled code, no Python), each
-    # repeated --reps times, interleaved so that both see the same machine load.
+    # made beforehand (Solver._library_call_ms: the same compiled code, the same name and
+    # epoch, no Python), each repeated --reps times, interleaved so that both see the same
+    # machine load. solve() builds its Result lazily; "solve_and_read" also reads one field
+    # (ra_deg), which turns the record into its JSON line and parses it once.
     # Two frames: the first solved one, and the solved frame of median solve time.
+    def library_ms(k):
+        try:
+            return solver._inner._library_call_ms(images[k], 1, names[k], epochs[k])
+        except TypeError:  # a binding from before _library_call_ms took the name and epoch
+            return solver._inner._library_call_ms(images[k], 1)
+
     solved = [i for i, r in enumerate(many) if r["status"] == "solved"]
     by_time = sorted(solved, key=lambda i: many[i]["timing_ms"]["total"])
     out["latency_one_frame"] = []
     for k in (solved[0], by_time[len(by_time) // 2]):
-        py_ms, rust_ms = [], []
+        py_ms, read_ms, rust_ms = [], [], []
         for _ in range(a.reps):
             t0 = time.perf_counter()
             solver.solve(images[k], name=names[k], epoch=epochs[k])
             py_ms.append((time.perf_counter() - t0) * 1e3)
-            rust_ms += solver._inner._library_call_ms(images[k], 1)
+            t0 = time.perf_counter()
+            solver.solve(images[k], name=names[k], epoch=epochs[k]).ra_deg
+            read_ms.append((time.perf_counter() - t0) * 1e3)
+            rust_ms += library_ms(k)
         stat = {"median": statistics.median, "min": min}
         out["latency_one_frame"].append({"frame": names[k], "reps": a.reps, **{
-            f"{name}_ms": {"python_solve": round(f(py_ms), 3), "rust_library": round(f(rust_ms), 3),
+            f"{name}_ms": {"python_solve": round(f(py_ms), 3), "python_solve_and_read": round(f(read_ms), 3),
+                           "rust_library": round(f(rust_ms), 3),
                            "overhead_ms": round(f(py_ms) - f(rust_ms), 3),
-                           "overhead_pct": round(100 * (f(py_ms) / f(rust_ms) - 1), 2)}
+                           "overhead_pct": round(100 * (f(py_ms) / f(rust_ms) - 1), 2),
+                           "overhead_read_pct": round(100 * (f(read_ms) / f(rust_ms) - 1), 2)}
             for name, f in stat.items()}})
 
     # 3. cedar-solve beside gpustar, in this process.

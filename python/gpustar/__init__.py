@@ -105,34 +105,62 @@ class Result:
     record does not have is None. :meth:`to_dict` gives the record exactly.
     """
 
-    __slots__ = ("_line", "_record")
+    __slots__ = ("_source", "_text", "_dict")
 
-    def __init__(self, line: str):
-        self._line = line
-        self._record = json.loads(line)
+    def __init__(self, line: Any):
+        # A JSON line, or the extension's record handle, turned into its line and parsed only
+        # when a field is first read: solve() pays for neither.
+        self._source = line
+        self._text: Optional[str] = line if isinstance(line, str) else None
+        self._dict: Optional[dict] = None
+
+    @property
+    def _line(self) -> str:
+        if self._text is None:
+            self._text = self._source.json()
+        return self._text
+
+    @property
+    def _record(self) -> dict:
+        if self._dict is None:
+            self._dict = json.loads(self._line)
+        return self._dict
+
+    def _field(self, name: str) -> Any:
+        # A field alone from the extension's record, until the whole record is parsed.
+        if self._dict is None and self._text is None:
+            return self._source.get(name)
+        return self._record.get(name)
+
+    @property
+    def status(self) -> str:
+        """"solved", "unsolved" or "error"."""
+        if self._dict is None and self._text is None:
+            return self._source.status
+        return self._record["status"]
 
     @property
     def solved(self) -> bool:
-        return self._record["status"] == "solved"
+        return self.status == "solved"
 
     @property
     def quaternion(self) -> Optional[np.ndarray]:
-        q = self._record.get("quaternion")
+        q = self._field("quaternion")
         return None if q is None else np.array(q, dtype=np.float64)
 
     @property
     def rotation_matrix(self) -> Optional[np.ndarray]:
-        m = self._record.get("rotation_matrix")
+        m = self._field("rotation_matrix")
         return None if m is None else np.array(m, dtype=np.float64)
 
     @property
     def matches(self) -> Matches:
-        return Matches(self._record.get("matches") or [])
+        return Matches(self._field("matches") or [])
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_"):
             raise AttributeError(name)
-        return self._record.get(name)
+        return self._field(name)
 
     def to_dict(self) -> dict:
         """The JSON Lines record, exactly as ``gpustar batch`` writes it (a fresh copy)."""
@@ -201,7 +229,6 @@ class Solver:
                  catalog: Optional[PathLike] = None, backend: str = "auto", **options: Any):
         if camera is not None and not isinstance(camera, str):
             camera = os.fspath(camera)
-        self._batch_size = int(options.get("batch_size") or 32)
         self._inner = _gpustar.Solver(camera, fov_deg, None if catalog is None else os.fspath(catalog),
                                       backend, options or None)
 
@@ -218,9 +245,11 @@ class Solver:
               time: Any = None, header: Optional[dict] = None) -> Result:
         """Solve one frame: a 2-D numpy array (height, width) of uint8, uint16 or float32.
 
-        C-contiguous arrays are read in place; other strides are gathered. uint8 and uint16
-        values are taken as they are (as 8- and 16-bit PNGs); float32 values are scaled from
-        their range as a BITPIX -32 FITS file's. ``name`` is the record's ``file``;
+        A C-contiguous uint16 array is solved where it lies, without a copy (and with the GIL
+        released: another thread must not write to it until ``solve`` returns); other dtypes
+        are converted, other strides gathered. uint8 and uint16 values are taken as they are
+        (as 8- and 16-bit PNGs); float32 values are scaled from their range as a BITPIX -32
+        FITS file's. ``name`` is the record's ``file``;
         ``epoch`` (Julian year) moves the catalog stars by proper motion; ``time`` (ISO UTC
         string or datetime) and ``header`` (FITS keywords: EXPTIME, station, ...) serve
         streaks. A bad array raises :class:`InputError`; a frame that cannot be solved is a
@@ -231,35 +260,50 @@ class Solver:
     def solve_many(self, images: Iterable[np.ndarray], *, names: Optional[_Seq[str]] = None,
                    epochs: Optional[_Seq[Optional[float]]] = None, progress: Progress = None,
                    batch_size: Optional[int] = None) -> Iterator[Result]:
-        """Solve frames in batches (one GPU submission per batch of one size; on the CPU,
-        ``threads`` frames at once): an iterator of results in input order.
+        """Solve frames as ``gpustar batch`` solves files: streamed to ``threads`` worker
+        threads on the CPU (or the GPU in batches of ``batch_size``), an iterator of results in
+        input order, each as soon as it and those before it are done.
 
-        ``images`` may be a list or a generator (read one batch ahead); ``names`` the records'
+        ``images`` may be a list or a generator, read up to a window of frames ahead of the
+        results (as ``batch``'s, and at most 256 MiB of pixels beyond two frames per thread or
+        one GPU batch), each frame copied as it is handed over; on the GPU, the solver's other
+        calls wait until the iteration ends. ``names`` the records'
         ``file`` fields (default "image_00000", ...); ``epochs`` each frame's epoch (Julian
-        year, or None), as ``solve``'s ``epoch``. A bad array in a batch gives that frame
-        an error record rather than losing the others. ``progress`` is called as
+        year, or None), as ``solve``'s ``epoch``. An array refused for its values gives that
+        frame an error record rather than losing the others. ``progress`` is called as
         ``progress(done, total)`` (total None for a generator), or ``progress.update(1)`` when
         it has ``update`` (a tqdm bar).
         """
-        size = int(batch_size or self._batch_size)
         total = len(images) if hasattr(images, "__len__") else None  # type: ignore[arg-type]
-        it = iter(images)
-        done = 0
-        while True:
-            chunk = []
-            for im in it:
-                chunk.append(im)
-                if len(chunk) == size:
+        if total is not None and any(s is not None and len(s) != total for s in (names, epochs)):
+            raise InputError(f"{total} images, {len(names or [])} names and {len(epochs or [])} "
+                             "epochs: give one of each per image")
+        run = self._inner.start_many(None if batch_size is None else int(batch_size))
+        window = 1
+        put = done = 0
+        for im in images:
+            run.put(im, names[put] if names is not None else f"image_{put:05d}",
+                    None if epochs is None else epochs[put])
+            if put == 0:  # a 2-D array: put takes no other
+                window = run.window_for(im.shape[1], im.shape[0])
+            put += 1
+            # Take the records that are ready; wait for one only when the workers hold a
+            # window of frames (so they always have the next ones while Python waits).
+            while True:
+                handle = run.next_record(put - done >= window)
+                if handle is None:
                     break
-            if not chunk:
-                return
-            chunk_names = [names[done + i] if names is not None else f"image_{done + i:05d}"
-                           for i in range(len(chunk))]
-            chunk_epochs = None if epochs is None else [epochs[done + i] for i in range(len(chunk))]
-            for line in self._inner.solve_many(chunk, chunk_names, chunk_epochs):
                 done += 1
                 _tick(progress, done, total)
-                yield Result(line)
+                yield Result(handle)
+        run.close()
+        while True:
+            handle = run.next_record(True)
+            if handle is None:
+                return
+            done += 1
+            _tick(progress, done, total)
+            yield Result(handle)
 
     def solve_centroids(self, xy: np.ndarray, image_size: Tuple[int, int],
                         fluxes: Optional[np.ndarray] = None, *, name: str = "centroids",
@@ -330,22 +374,31 @@ class Batch:
 
 def batch(directory: PathLike, camera: Optional[PathLike] = None,
           fov_deg: Union[float, Tuple[float, float], None] = None, catalog: Optional[PathLike] = None,
-          backend: str = "auto", *, output: Optional[PathLike] = None, resume: bool = False,
-          retry_errors: bool = False, shard: Optional[str] = None, recursive: bool = False,
-          sequence: bool = False, frame_interval_s: Optional[float] = None,
+          backend: str = "auto", *, output: Optional[PathLike] = None, format: str = "jsonl",
+          resume: bool = False, retry_errors: bool = False, shard: Optional[str] = None,
+          recursive: bool = False, sequence: bool = False, frame_interval_s: Optional[float] = None,
+          dark: Optional[PathLike] = None, dark_median: bool = False,
+          wcs_dir: Optional[PathLike] = None, annotate_dir: Optional[PathLike] = None,
+          tdm: Optional[PathLike] = None, iod: Optional[PathLike] = None, iod_station: int = 9999,
           progress: Progress = None, **options: Any) -> Batch:
     """``gpustar batch DIRECTORY``: every image file of the directory (sorted by path),
     decoded and solved on worker threads (or the GPU in batches), as an iterator of results
-    in input order. ``output`` also writes the JSON Lines file, which ``resume`` continues
-    (and ``retry_errors`` retries the error records of); ``shard`` = "K/N" takes one shard;
-    ``sequence`` solves each directory as a sequence. ``progress`` as in
+    in input order. ``output`` also writes the records to a file, as JSON Lines or
+    ``format="csv"``, which ``resume`` continues (and ``retry_errors`` retries the error
+    records of); ``shard`` = "K/N" takes one shard; ``sequence`` solves each directory as a
+    sequence. ``dark`` (a dark frame's file) or ``dark_median`` (each directory's median frame)
+    is subtracted before detection; ``wcs_dir`` gets a FITS WCS header per solved frame,
+    ``annotate_dir`` an annotated PNG per frame; with ``streaks=True``, ``tdm`` and ``iod``
+    write the streaks as a CCSDS TDM and as IOD lines (``iod_station``: your COSPAR site)
+    when the run ends. Each is the command line's option of that name. ``progress`` as in
     :meth:`Solver.solve_many`; other options as :class:`Solver`'s.
     """
+    path = lambda p: None if p is None else os.fspath(p)  # noqa: E731
     run = _gpustar.start_batch(
-        os.fspath(directory), None if camera is None else os.fspath(camera), fov_deg,
-        None if catalog is None else os.fspath(catalog), backend,
-        None if output is None else os.fspath(output), resume, retry_errors, shard, recursive,
-        sequence, frame_interval_s, options or None)
+        os.fspath(directory), path(camera), fov_deg, path(catalog), backend, path(output), resume,
+        retry_errors, shard, recursive, sequence, frame_interval_s, options or None, format,
+        path(dark), dark_median, path(wcs_dir), path(annotate_dir), path(tdm), path(iod),
+        int(iod_station))
     return Batch(run, progress)
 
 

@@ -6,18 +6,22 @@
 
 use gpustar::batch::{self, RunOptions};
 use gpustar::io::array::Samples;
+use gpustar::io::dark::Darks;
 use gpustar::io::inputs::{self, Shard};
 use gpustar::io::output::{self, Format, RecordWriter};
-use gpustar::pipeline::{Backend, BackendChoice, CameraSource, Decoded, GpuRunner, Solvers};
+use gpustar::pipeline::Counts;
+use gpustar::pipeline::{Backend, BackendChoice, CameraSource, Decoded, Solvers};
+use gpustar::products::Products;
 use gpustar::sequence::{Detected, SequenceOptions, Sequencer};
 use gpustar::solve::detect::Detection;
+use gpustar::streaks::export::{Exports, NO_SITE};
 use gpustar::streaks::{StreakOptions, StreakSettings};
 use gpustar::{Camera, Catalog, Frame, Record, Settings};
-use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyTypeError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict, PyList};
+use pyo3::types::{PyBool, PyBytes, PyDict, PyList, PyString};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -379,39 +383,61 @@ fn build(
     })
 }
 
-/// A 2-D array of uint8, uint16 or float32 as the library's samples: read in place when it is
-/// C-contiguous, gathered row by row otherwise (any strides, negative too).
-fn frame_of(
-    image: &Bound<'_, PyAny>,
-) -> PyResult<std::result::Result<(Frame, Vec<String>), gpustar::Error>> {
-    fn take<T: numpy::Element + Copy>(
-        a: PyReadonlyArray2<'_, T>,
-        wrap: impl for<'b> Fn(&'b [T]) -> Samples<'b>,
-    ) -> gpustar::Result<(Frame, Vec<String>)> {
-        let (h, w) = (a.shape()[0], a.shape()[1]);
-        let (w32, h32) = (u32::try_from(w), u32::try_from(h));
-        let (Ok(w32), Ok(h32)) = (w32, h32) else {
-            return Err(gpustar::Error::Input(format!(
-                "the image is {w}x{h} pixels: too large"
-            )));
-        };
-        // ndarray's as_slice is Some only in row-major order (numpy's `as_slice` also takes
-        // Fortran order, whose memory is the transpose).
-        let view = a.as_array();
-        match view.as_slice() {
-            Some(s) => Frame::from_samples(w32, h32, wrap(s)),
-            None => {
-                let v: Vec<T> = view.iter().copied().collect();
-                Frame::from_samples(w32, h32, wrap(&v))
+/// A 2-D numpy array of uint8, uint16 or float32, borrowed read-only (numpy's flag keeps
+/// other Rust code from writing it meanwhile).
+enum Held<'py> {
+    U8(PyReadonlyArray2<'py, u8>),
+    U16(PyReadonlyArray2<'py, u16>),
+    F32(PyReadonlyArray2<'py, f32>),
+}
+
+impl Held<'_> {
+    /// The frame of the array: a C-contiguous uint16 array is borrowed where it lies (solved
+    /// without a copy), other dtypes are converted, other strides (any, negative too)
+    /// gathered row by row into pixels of the frame's own.
+    fn frame(&self) -> gpustar::Result<(Frame<'_>, Vec<String>)> {
+        fn take<'a, T: numpy::Element + Copy>(
+            a: &'a PyReadonlyArray2<'_, T>,
+            wrap: impl for<'b> Fn(&'b [T]) -> Samples<'b>,
+        ) -> gpustar::Result<(Frame<'a>, Vec<String>)> {
+            let (h, w) = (a.shape()[0], a.shape()[1]);
+            let (w32, h32) = (u32::try_from(w), u32::try_from(h));
+            let (Ok(w32), Ok(h32)) = (w32, h32) else {
+                return Err(gpustar::Error::Input(format!(
+                    "the image is {w}x{h} pixels: too large"
+                )));
+            };
+            // ndarray's as_slice is Some only in row-major order (numpy's `as_slice` also
+            // takes Fortran order, whose memory is the transpose).
+            let view = a.as_array();
+            match view.to_slice() {
+                Some(s) => Frame::from_samples(w32, h32, wrap(s)),
+                None => {
+                    let v: Vec<T> = view.iter().copied().collect();
+                    Frame::from_samples(w32, h32, wrap(&v)).map(|(f, w)| (f.into_owned(), w))
+                }
             }
         }
+        match self {
+            Held::U8(a) => take(a, |s| Samples::U8(s)),
+            Held::U16(a) => take(a, |s| Samples::U16(s)),
+            Held::F32(a) => take(a, |s| Samples::F32(s)),
+        }
     }
+}
+
+/// The array held for reading, or `InputError` saying why gpustar cannot take it.
+fn held<'py>(image: &Bound<'py, PyAny>) -> PyResult<Held<'py>> {
     let refuse = |what: String| {
         InputError::new_err(format!(
             "{what}: gpustar takes a 2-D numpy array (height, width) of uint8, uint16 or \
              float32"
         ))
     };
+    // The common case first, without looking at attributes.
+    if let Ok(a) = image.cast::<PyArray2<u16>>() {
+        return Ok(Held::U16(a.try_readonly()?));
+    }
     if !image.hasattr("ndim")? || !image.hasattr("dtype")? {
         return Err(refuse(format!(
             "got a {}",
@@ -428,27 +454,24 @@ fn frame_of(
         return Err(refuse(format!("the array has {ndim} dimensions")));
     }
     Ok(match dtype.as_str() {
-        "uint8" => take(image.extract::<PyReadonlyArray2<u8>>()?, |s| Samples::U8(s)),
-        "uint16" => take(image.extract::<PyReadonlyArray2<u16>>()?, |s| {
-            Samples::U16(s)
-        }),
-        "float32" => take(image.extract::<PyReadonlyArray2<f32>>()?, |s| {
-            Samples::F32(s)
-        }),
+        "uint8" => Held::U8(image.extract()?),
+        "uint16" => Held::U16(image.extract()?),
+        "float32" => Held::F32(image.extract()?),
         other => return Err(refuse(format!("the array's dtype is {other}"))),
     })
 }
 
-/// An array refused for its values raises; `strict` = false makes it an error record instead
-/// (`solve_many`, where one bad frame must not lose the others' records).
-fn decoded_of(
-    image: &Bound<'_, PyAny>,
+/// The frame of `held` under `name`. An array refused for its values raises; `strict` = false
+/// makes it an error record instead (`solve_many`, where one bad frame must not lose the
+/// others' records).
+fn decoded_of<'a>(
+    held: &'a Held<'_>,
     name: &str,
     epoch: Option<f64>,
     header: Option<BTreeMap<String, String>>,
     strict: bool,
-) -> PyResult<Decoded> {
-    let frame = frame_of(image)?;
+) -> PyResult<Decoded<'a>> {
+    let frame = held.frame();
     if strict && let Err(e) = frame {
         return Err(py_err(e));
     }
@@ -460,11 +483,93 @@ fn decoded_of(
     ))
 }
 
+/// A record handed to Python: its JSON line is made only when asked for (most callers of
+/// `solve` read a few fields, or none), and a field read alone is taken from the record's
+/// JSON value without writing and parsing the whole line.
+#[pyclass(frozen, module = "gpustar._gpustar")]
+struct RecordHandle {
+    record: Record,
+    value: std::sync::OnceLock<serde_json::Value>,
+}
+
+impl RecordHandle {
+    fn new(record: Record) -> RecordHandle {
+        RecordHandle {
+            record,
+            value: std::sync::OnceLock::new(),
+        }
+    }
+}
+
+/// A JSON value as the Python object `json.loads` makes of it.
+fn value_to_py(py: Python<'_>, v: &serde_json::Value) -> PyResult<Py<PyAny>> {
+    use serde_json::Value;
+    Ok(match v {
+        Value::Null => py.None(),
+        Value::Bool(b) => PyBool::new(py, *b).to_owned().into_any().unbind(),
+        Value::Number(n) => match (n.as_i64(), n.as_u64()) {
+            (Some(i), _) => i.into_pyobject(py)?.into_any().unbind(),
+            (None, Some(u)) => u.into_pyobject(py)?.into_any().unbind(),
+            _ => n
+                .as_f64()
+                .unwrap_or(f64::NAN)
+                .into_pyobject(py)?
+                .into_any()
+                .unbind(),
+        },
+        Value::String(s) => PyString::new(py, s).into_any().unbind(),
+        Value::Array(a) => {
+            let l = PyList::empty(py);
+            for x in a {
+                l.append(value_to_py(py, x)?)?;
+            }
+            l.into_any().unbind()
+        }
+        Value::Object(m) => {
+            let d = PyDict::new(py);
+            for (k, x) in m {
+                d.set_item(k, value_to_py(py, x)?)?;
+            }
+            d.into_any().unbind()
+        }
+    })
+}
+
+#[pymethods]
+impl RecordHandle {
+    /// "solved", "unsolved" or "error".
+    #[getter]
+    fn status(&self) -> &'static str {
+        match self.record.status {
+            gpustar::record::Status::Solved => "solved",
+            gpustar::record::Status::Unsolved => "unsolved",
+            gpustar::record::Status::Error => "error",
+        }
+    }
+
+    /// The record's JSON line (`gpustar batch`'s, field for field).
+    fn json(&self) -> String {
+        self.record.to_json_line()
+    }
+
+    /// One field of the record as `json.loads` of its line gives it; None when the record
+    /// has no such field.
+    fn get(&self, py: Python<'_>, name: &str) -> PyResult<Py<PyAny>> {
+        let v = self
+            .value
+            .get_or_init(|| serde_json::to_value(&self.record).expect("records serialise"));
+        match v.get(name) {
+            Some(x) => value_to_py(py, x),
+            None => Ok(py.None()),
+        }
+    }
+}
+
 /// Where a solver's kernels run.
 enum Engine {
     Cpu,
-    /// The GPU context is used by one call at a time.
-    Gpu(Mutex<Box<GpuRunner>>),
+    /// The GPU context (always `Backend::Gpu`) is used by one call at a time.
+    Gpu(Mutex<Backend>),
 }
 
 /// A solver built once (catalog, distance tables, GPU context) and reused; shareable
@@ -472,20 +577,22 @@ enum Engine {
 #[pyclass(frozen, module = "gpustar._gpustar")]
 struct Solver {
     solvers: Arc<Solvers>,
-    engine: Engine,
+    engine: Arc<Engine>,
     backend: String,
     threads: usize,
+    batch_size: usize,
 }
 
 impl Solver {
-    fn run(&self, py: Python<'_>, frames: Vec<Decoded>) -> Vec<Record> {
-        py.detach(|| match &self.engine {
-            Engine::Cpu => gpustar::pipeline::solve_cpu_many(&self.solvers, frames, self.threads),
-            Engine::Gpu(g) => {
-                let mut g = g.lock().unwrap_or_else(|e| e.into_inner());
-                g.solve(&self.solvers, frames)
-            }
-        })
+    /// One frame's record, on the caller's thread (CPU) or as a batch of one (GPU).
+    fn solve_one(&self, d: Decoded<'_>) -> Record {
+        match self.engine.as_ref() {
+            Engine::Cpu => self.solvers.solve_cpu(d),
+            Engine::Gpu(b) => match &mut *b.lock().unwrap_or_else(|e| e.into_inner()) {
+                Backend::Gpu(g) => g.solve(&self.solvers, vec![d]).remove(0),
+                Backend::Cpu => self.solvers.solve_cpu(d),
+            },
+        }
     }
 }
 
@@ -508,15 +615,16 @@ impl Solver {
                 let name = backend.name();
                 Ok(match backend {
                     Backend::Cpu => (Engine::Cpu, name),
-                    Backend::Gpu(g) => (Engine::Gpu(Mutex::new(g)), name),
+                    gpu => (Engine::Gpu(Mutex::new(gpu)), name),
                 })
             })
             .map_err(py_err)?;
         Ok(Solver {
             solvers: Arc::new(b.solvers),
-            engine,
+            engine: Arc::new(engine),
             backend: name,
             threads: b.threads,
+            batch_size: b.batch_size,
         })
     }
 
@@ -535,7 +643,7 @@ impl Solver {
         }
     }
 
-    /// One frame: its record as a JSON line.
+    /// One frame: its record (a C-contiguous uint16 array is solved where it lies).
     #[pyo3(signature = (image, name, epoch=None, header=None))]
     fn solve(
         &self,
@@ -544,70 +652,89 @@ impl Solver {
         name: &str,
         epoch: Option<f64>,
         header: Option<BTreeMap<String, String>>,
-    ) -> PyResult<String> {
-        let d = decoded_of(&image, name, epoch, header, true)?;
-        let mut r = self.run(py, vec![d]);
-        Ok(r.remove(0).to_json_line())
+    ) -> PyResult<RecordHandle> {
+        let held = held(&image)?;
+        let d = decoded_of(&held, name, epoch, header, true)?;
+        let record = py.detach(|| self.solve_one(d));
+        Ok(RecordHandle::new(record))
     }
 
-    /// Frames in one call (one GPU batch per frame size): their records as JSON lines.
-    #[pyo3(signature = (images, names, epochs=None))]
-    fn solve_many(
-        &self,
-        py: Python<'_>,
-        images: Vec<Bound<'_, PyAny>>,
-        names: Vec<String>,
-        epochs: Option<Vec<Option<f64>>>,
-    ) -> PyResult<Vec<String>> {
-        let epochs = epochs.unwrap_or_else(|| vec![None; images.len()]);
-        if names.len() != images.len() || epochs.len() != images.len() {
-            return Err(InputError::new_err(format!(
-                "{} images, {} names and {} epochs: give one of each per image",
-                images.len(),
-                names.len(),
-                epochs.len()
-            )));
-        }
-        let frames = images
-            .iter()
-            .zip(&names)
-            .zip(&epochs)
-            .map(|((im, n), e)| decoded_of(im, n, *e, None, false))
-            .collect::<PyResult<Vec<_>>>()?;
-        Ok(self
-            .run(py, frames)
-            .iter()
-            .map(Record::to_json_line)
-            .collect())
+    /// Start solving frames streamed in with `ManyRun.put` (worker threads on the CPU, GPU
+    /// batches of `batch_size`), as `batch` streams files.
+    #[pyo3(signature = (batch_size=None))]
+    fn start_many(&self, batch_size: Option<usize>) -> PyResult<ManyRun> {
+        let opts = RunOptions {
+            threads: self.threads,
+            batch_size: batch_size.unwrap_or(self.batch_size).clamp(1, 4096),
+            flush_every: std::time::Duration::from_millis(250),
+            sequence: None,
+            tracklets: false,
+        };
+        let (frames_tx, frames_rx) = crossbeam_channel::unbounded::<Decoded<'static>>();
+        let (records_tx, records_rx) = crossbeam_channel::unbounded::<Record>();
+        let stop = Arc::new(AtomicBool::new(false));
+        let (solvers, engine, stop2) = (self.solvers.clone(), self.engine.clone(), stop.clone());
+        let thread = std::thread::spawn(move || {
+            let send = |r: &Record, _: &Counts| {
+                let _ = records_tx.send(r.clone());
+            };
+            match engine.as_ref() {
+                Engine::Cpu => batch::run_frames(
+                    frames_rx.into_iter(),
+                    &solvers,
+                    &mut Backend::Cpu,
+                    opts,
+                    &stop2,
+                    send,
+                ),
+                Engine::Gpu(b) => {
+                    let mut b = b.lock().unwrap_or_else(|e| e.into_inner());
+                    batch::run_frames(frames_rx.into_iter(), &solvers, &mut b, opts, &stop2, send)
+                }
+            }
+        });
+        // Frames in flight: enough that the workers never wait for Python (at least one
+        // GPU batch, or two frames per CPU thread), as many as `batch` would have, and within
+        // a memory budget.
+        let least = match self.engine.as_ref() {
+            Engine::Cpu => 2 * opts.threads.max(1),
+            Engine::Gpu(_) => opts.batch_size,
+        };
+        Ok(ManyRun {
+            frames: Some(frames_tx),
+            records: records_rx,
+            stop,
+            thread: Some(thread),
+            window: (least, opts.window().max(least)),
+        })
     }
 
     /// The Rust path's time (ms) of each of `reps` solves of this image, the frame made
     /// beforehand and no Python in between: what scripts/bench_python.py sets the per-call
-    /// cost of `solve` against.
+    /// cost of `solve` against (the same name and epoch as the `solve` it is set against).
+    #[pyo3(signature = (image, reps, name="x", epoch=None))]
     fn _library_call_ms(
         &self,
         py: Python<'_>,
         image: Bound<'_, PyAny>,
         reps: usize,
+        name: &str,
+        epoch: Option<f64>,
     ) -> PyResult<Vec<f64>> {
-        let (frame, _) = frame_of(&image)?.map_err(py_err)?;
+        let held = held(&image)?;
+        let (frame, _) = held.frame().map_err(py_err)?;
+        let frame = frame.into_owned();
         Ok(py.detach(|| {
             (0..reps)
                 .map(|_| {
                     let d = Decoded::in_memory(
-                        "x",
+                        name,
                         Ok((frame.clone(), Vec::new())),
-                        None,
+                        epoch,
                         BTreeMap::new(),
                     );
                     let t0 = std::time::Instant::now();
-                    let r = match &self.engine {
-                        Engine::Cpu => self.solvers.solve_cpu(d),
-                        Engine::Gpu(g) => {
-                            let mut g = g.lock().unwrap_or_else(|e| e.into_inner());
-                            g.solve(&self.solvers, vec![d]).remove(0)
-                        }
-                    };
+                    let r = self.solve_one(d);
                     let ms = t0.elapsed().as_secs_f64() * 1e3;
                     drop(r);
                     ms
@@ -707,7 +834,13 @@ impl Sequence {
         name: &str,
         header: Option<BTreeMap<String, String>>,
     ) -> PyResult<String> {
-        let d = decoded_of(&image, name, None, header, true)?;
+        let held = held(&image)?;
+        let d = decoded_of(&held, name, None, header, true)?;
+        // The sequence keeps frames between calls: their pixels are its own.
+        let d = Decoded {
+            frame: d.frame.map(Frame::into_owned),
+            ..d
+        };
         let r = py.detach(|| {
             let detected: Detected = self.solvers.detect_cpu(d, self.opts.detect_stars);
             let mut s = self.seq.lock().unwrap_or_else(|e| e.into_inner());
@@ -772,11 +905,110 @@ impl Drop for BatchRun {
     }
 }
 
+/// Frames streamed to a solver's workers (`Solver.solve_many`): `put` hands one over,
+/// `next_record` takes the records in the order put.
+#[pyclass(module = "gpustar._gpustar")]
+struct ManyRun {
+    frames: Option<crossbeam_channel::Sender<Decoded<'static>>>,
+    records: crossbeam_channel::Receiver<Record>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<gpustar::Result<batch::RunSummary>>>,
+    /// The least and the most frames in flight.
+    window: (usize, usize),
+}
+
+/// The pixels `solve_many` holds in flight at most (beyond the least window): 256 MiB.
+const MANY_BUDGET_BYTES: usize = 256 << 20;
+
+#[pymethods]
+impl ManyRun {
+    /// Frames of `width` × `height` to put ahead of the records taken, at most.
+    fn window_for(&self, width: usize, height: usize) -> usize {
+        let (least, most) = self.window;
+        (MANY_BUDGET_BYTES / (2 * width * height).max(1)).clamp(least, most)
+    }
+
+    /// Hand over the next frame (its pixels copied: the workers solve it while Python goes
+    /// on). An array refused for its values becomes an error record; what is not an array
+    /// raises `InputError`.
+    #[pyo3(signature = (image, name, epoch=None))]
+    fn put(
+        &mut self,
+        py: Python<'_>,
+        image: Bound<'_, PyAny>,
+        name: &str,
+        epoch: Option<f64>,
+    ) -> PyResult<()> {
+        let held = held(&image)?;
+        let d = decoded_of(&held, name, epoch, None, false)?;
+        let d = Decoded {
+            frame: d.frame.map(Frame::into_owned),
+            ..d
+        };
+        match &self.frames {
+            Some(tx) if tx.send(d).is_ok() => Ok(()),
+            // The run has ended: its error, if it failed.
+            _ => {
+                self.finish(py)?;
+                Err(Error::new_err("the run is closed"))
+            }
+        }
+    }
+
+    /// No more frames: the run ends when those put are solved.
+    fn close(&mut self) {
+        self.frames = None;
+    }
+
+    /// The next record in the order put; with `wait` false, None when it is not done yet.
+    /// None when the run is over (then its error, if any, is raised).
+    fn next_record(&mut self, py: Python<'_>, wait: bool) -> PyResult<Option<RecordHandle>> {
+        let rx = self.records.clone();
+        let got = if wait {
+            py.detach(move || rx.recv().ok())
+        } else {
+            match rx.try_recv() {
+                Ok(r) => Some(r),
+                Err(crossbeam_channel::TryRecvError::Empty) => return Ok(None),
+                Err(crossbeam_channel::TryRecvError::Disconnected) => None,
+            }
+        };
+        if let Some(record) = got {
+            return Ok(Some(RecordHandle::new(record)));
+        }
+        self.finish(py)?;
+        Ok(None)
+    }
+}
+
+impl ManyRun {
+    /// Wait for the run's thread to end; its error, if it failed.
+    fn finish(&mut self, py: Python<'_>) -> PyResult<()> {
+        if let Some(t) = self.thread.take() {
+            py.detach(|| t.join())
+                .map_err(|_| Error::new_err("the solving thread panicked"))?
+                .map_err(py_err)?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for ManyRun {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        self.frames = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
 /// Start `gpustar batch DIRECTORY` with these options.
 #[pyfunction]
 #[pyo3(signature = (directory, camera=None, fov_deg=None, catalog=None, backend="auto",
     output=None, resume=false, retry_errors=false, shard=None, recursive=false, sequence=false,
-    frame_interval_s=None, options=None))]
+    frame_interval_s=None, options=None, format="jsonl", dark=None, dark_median=false,
+    wcs_dir=None, annotate_dir=None, tdm=None, iod=None, iod_station=NO_SITE))]
 #[allow(clippy::too_many_arguments)]
 fn start_batch(
     py: Python<'_>,
@@ -793,7 +1025,30 @@ fn start_batch(
     sequence: bool,
     frame_interval_s: Option<f64>,
     options: Option<Bound<'_, PyDict>>,
+    format: &str,
+    dark: Option<PathBuf>,
+    dark_median: bool,
+    wcs_dir: Option<PathBuf>,
+    annotate_dir: Option<PathBuf>,
+    tdm: Option<PathBuf>,
+    iod: Option<PathBuf>,
+    iod_station: u16,
 ) -> PyResult<BatchRun> {
+    let format = <Format as clap::ValueEnum>::from_str(format, true)
+        .map_err(|_| config(format!("format: {format:?} is not one of jsonl, csv")))?;
+    if format == Format::Csv && output.is_none() {
+        return Err(config(
+            "format is the output file's: give output=FILE (the records come as results)",
+        ));
+    }
+    if dark.is_some() && dark_median {
+        return Err(config("dark and dark_median do not go together: give one"));
+    }
+    if iod_station > NO_SITE {
+        return Err(config(format!(
+            "iod_station: {iod_station} is outside 0 to {NO_SITE}"
+        )));
+    }
     if (resume || retry_errors) && output.is_none() {
         return Err(config(
             "resume needs output=FILE: the records of an earlier run",
@@ -802,7 +1057,27 @@ fn start_batch(
     if retry_errors && !resume {
         return Err(config("retry_errors goes with resume=True"));
     }
-    let b = build(camera.as_ref(), fov_deg.as_ref(), catalog, backend, options)?;
+    let mut b = build(camera.as_ref(), fov_deg.as_ref(), catalog, backend, options)?;
+    if b.solvers.streaks.is_none() {
+        for (k, given) in [("tdm", tdm.is_some()), ("iod", iod.is_some())] {
+            if given {
+                return Err(config(format!("{k} is an option of streaks=True")));
+            }
+        }
+    }
+    // As `--dark`, `--dark-median`, `--wcs-dir`, `--annotate-dir`, `--tdm`, `--iod`: the
+    // library's own.
+    b.solvers.darks = match (&dark, dark_median) {
+        (Some(p), _) => Darks::from_file(p).map_err(py_err)?,
+        (None, true) => Darks::directory_median(),
+        (None, false) => Darks::None,
+    };
+    b.solvers.products = Products {
+        wcs_dir,
+        annotate_dir,
+    };
+    let mut exports = Exports::new(tdm, iod, iod_station);
+    exports.check_paths().map_err(py_err)?;
     if sequence && b.solvers.streaks.is_some() {
         return Err(config(
             "sequence and streaks do not go together yet: run the sequences and the streak \
@@ -826,9 +1101,14 @@ fn start_batch(
     }
     let (out, header): (Box<dyn std::io::Write + Send>, bool) = match &output {
         Some(p) => {
-            let opened =
-                output::open_output(p, Format::Jsonl, resume, retry_errors).map_err(py_err)?;
+            let opened = output::open_output(p, format, resume, retry_errors).map_err(py_err)?;
             list = batch::resumed_inputs(list, &opened.previous.done, sequence);
+            // The exports are written whole at the end, with the streaks already recorded.
+            if resume && exports.wanted() {
+                for r in &opened.previous.streaks {
+                    exports.add(r);
+                }
+            }
             (Box::new(opened.file), !opened.previous.has_header)
         }
         None => (Box::new(std::io::sink()), true),
@@ -851,8 +1131,8 @@ fn start_batch(
     let solvers = b.solvers;
     let stop2 = stop.clone();
     let thread = std::thread::spawn(move || {
-        let mut writer = RecordWriter::new(out, Format::Jsonl, header);
-        batch::run(
+        let mut writer = RecordWriter::new(out, format, header);
+        let summary = batch::run(
             list,
             &solvers,
             &mut backend,
@@ -860,10 +1140,15 @@ fn start_batch(
             opts,
             &stop2,
             |r, _| {
+                exports.add(r);
                 // A closed receiver (the iterator dropped) has set the stop flag.
                 let _ = tx.send(r.to_json_line());
             },
-        )
+        )?;
+        if exports.wanted() && summary.write_error.is_none() {
+            exports.finish(&gpustar::sky::now_utc_iso())?;
+        }
+        Ok(summary)
     });
     Ok(BatchRun {
         records: rx,
@@ -1040,6 +1325,8 @@ fn _gpustar(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Solver>()?;
     m.add_class::<Sequence>()?;
     m.add_class::<BatchRun>()?;
+    m.add_class::<ManyRun>()?;
+    m.add_class::<RecordHandle>()?;
     m.add_function(wrap_pyfunction!(start_batch, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;

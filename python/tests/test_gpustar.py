@@ -8,6 +8,8 @@ adapter or the real frames print `SKIPPED <test>: <why>` and skip when these are
 CI=true they fail instead.
 """
 
+import csv
+import io
 import json
 import os
 import pathlib
@@ -155,6 +157,12 @@ def test_records_equal_the_clis(tmp_path, frames, backend):
 def test_result_fields_are_the_records(cpu_solver, frames):
     image, truth = frames[0]
     r = cpu_solver.solve(image, name="a")
+    # Fields read before the record is parsed (taken from the record one by one) are those of
+    # its JSON line.
+    fresh = cpu_solver.solve(image, name="a")
+    assert fresh.solved and fresh.status == "solved"
+    assert comparable({k: fresh._field(k) for k in r.to_dict()}) == comparable(r.to_dict())
+    assert fresh._dict is None and fresh._text is None
     d = r.to_dict()
     assert r.solved and d["status"] == "solved"
     assert r.rotation_matrix.shape == (3, 3) and r.quaternion.shape == (4,)
@@ -258,6 +266,29 @@ def test_threads_share_one_solver(cpu_solver, frames):
     assert all(got[k] == want for k in range(4))
 
 
+def test_solve_many_streams_in_order(cpu_solver, frames):
+    """solve_many over a generator (no length): records in input order, each frame's the one
+    solve gives, a bad array an error record that loses no other frame's; leaving the loop
+    early ends the run; names and epochs of the wrong length are refused."""
+    images = [f for f, _ in frames] * 3
+    want = [comparable(cpu_solver.solve(im, name=f"f{k}").to_dict()) for k, im in enumerate(images)]
+    seen = []
+    got = [comparable(r.to_dict()) for r in cpu_solver.solve_many(
+        (im for im in images), names=[f"f{k}" for k in range(len(images))], batch_size=2,
+        progress=lambda done, total: seen.append((done, total)))]
+    assert got == want
+    assert seen == [(k + 1, None) for k in range(len(images))]
+    mixed = [images[0], np.full((64, 64), np.nan, np.float32), images[1]]
+    rs = list(cpu_solver.solve_many(mixed))
+    assert [r.status for r in rs] == ["solved", "error", "solved"]
+    assert "NaN" in rs[1].error and rs[2].file == "image_00002"
+    for r in cpu_solver.solve_many(images):
+        break
+    assert r.solved
+    with pytest.raises(gpustar.InputError, match="2 images, 1 names"):
+        list(cpu_solver.solve_many(images[:2], names=["a"]))
+
+
 def test_batch_shard_resume_and_progress(tmp_path, frames):
     d = tmp_path / "frames"
     d.mkdir()
@@ -301,6 +332,52 @@ def test_streak_records_equal_the_clis(tmp_path):
         got = solver.solve(image, name=want["file"], header=header).to_dict()
         assert comparable(got) == comparable(unlinked(want))
     assert sum(len(r["streaks"]) for r in expected) >= 1 and expected[0]["epoch"] is not None
+
+
+def test_batch_writes_the_clis_files(tmp_path):
+    """batch()'s dark, wcs_dir, annotate_dir, CSV output and TDM/IOD exports are the command
+    line's: the same files, byte for byte (the TDM's CREATION_DATE aside)."""
+    d = tmp_path / "streaks"
+    p = subprocess.run([cli(), "simulate", "--streaks", "--out", str(d), "-n", "2"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    frames = sorted(f for f in os.listdir(d) if f.endswith(".fits"))
+    dark = tmp_path / "dark.fits"
+    write_fits(dark, np.full(read_fits(d / frames[0])[0].shape, 7, np.uint16))
+    outs = {}
+    for who in ("cli", "py"):
+        o = tmp_path / who
+        o.mkdir()
+        files = dict(output=o / "records.csv", dark=dark, wcs_dir=o / "wcs", annotate_dir=o / "png",
+                     tdm=o / "streaks.tdm", iod=o / "streaks.iod")
+        if who == "cli":
+            args = [cli(), "batch", str(d), "--camera", str(d / "camera.toml"), "--streaks", "--backend", "cpu",
+                    "-q", "--format", "csv", "--iod-station", "4171"]
+            for k, v in files.items():
+                args += [f"--{k.replace('_', '-')}", str(v)]
+            p = subprocess.run(args, capture_output=True, text=True)
+            assert p.returncode == 0, p.stderr
+        else:
+            records = list(gpustar.batch(d, camera=d / "camera.toml", backend="cpu", streaks=True, format="csv",
+                                         iod_station=4171, **files))
+            assert [r.file for r in records] == frames
+        outs[who] = {str(f.relative_to(o)): f.read_bytes() for f in sorted(o.rglob("*")) if f.is_file()}
+    assert set(outs["py"]) == set(outs["cli"]) and len(outs["py"]) >= 6, sorted(outs["py"])
+    for name, want in outs["cli"].items():
+        got = outs["py"][name]
+        if name.endswith(".tdm"):
+            want, got = (b"\n".join(x for x in t.split(b"\n") if not x.startswith(b"CREATION_DATE"))
+                         for t in (want, got))
+        if name.endswith(".csv"):  # less the timing column
+            want, got = ([{k: v for k, v in row.items() if k != "total_ms"}
+                          for row in csv.DictReader(io.StringIO(t.decode()))] for t in (want, got))
+        assert got == want, name
+    assert outs["py"]["records.csv"].startswith(b"file,status")
+    with pytest.raises(gpustar.ConfigError, match="tdm is an option of streaks=True"):
+        gpustar.batch(d, camera=d / "camera.toml", tdm=tmp_path / "x.tdm")
+    with pytest.raises(gpustar.ConfigError, match="dark and dark_median"):
+        gpustar.batch(d, camera=d / "camera.toml", dark=dark, dark_median=True)
+    with pytest.raises(gpustar.ConfigError, match="give output=FILE"):
+        gpustar.batch(d, camera=d / "camera.toml", format="csv")
 
 
 def test_sequence_tracks_frames(cpu_solver, frames):

@@ -32,6 +32,13 @@ pub struct RunOptions {
     pub tracklets: bool,
 }
 
+impl RunOptions {
+    /// Inputs handed out and not yet written, at most: what bounds a run's memory.
+    pub fn window(&self) -> usize {
+        (4 * self.batch_size.max(1)).max(8 * self.threads.max(1))
+    }
+}
+
 /// Records written between flushes at most: a crash loses at most this many (plus those the
 /// last `flush_every` produced), and `--resume` redoes them.
 pub const FLUSH_RECORDS: usize = 64;
@@ -83,29 +90,99 @@ pub fn run(
     writer: &mut RecordWriter,
     opts: RunOptions,
     stop: &AtomicBool,
-    mut on_record: impl FnMut(&Record, &Counts),
+    on_record: impl FnMut(&Record, &Counts),
 ) -> Result<RunSummary> {
-    let t0 = Instant::now();
-    let threads = opts.threads.max(1);
-    let batch = opts.batch_size.max(1);
-    let window = (4 * batch).max(8 * threads);
-    let (work_tx, work_rx) = bounded::<(usize, Input)>(window);
-    let (done_tx, done_rx) = bounded::<(usize, Record)>(window);
-    let (ticket_tx, ticket_rx) = bounded::<()>(window);
-    for _ in 0..window {
-        ticket_tx.send(()).expect("room for every ticket");
-    }
     let replay: std::collections::HashSet<usize> = inputs
         .iter()
         .enumerate()
         .filter(|(_, i)| i.replay)
         .map(|(k, _)| k)
         .collect();
+    let work = inputs.into_iter().map(Work::File);
+    run_work(
+        work,
+        replay,
+        solvers,
+        backend,
+        Some(writer),
+        opts,
+        stop,
+        on_record,
+    )
+}
+
+/// Frames the caller holds in memory (a camera's, an array library's), streamed through the
+/// workers (or the GPU in batches) as [`run`] streams files: `on_record` sees each record in
+/// the order of `frames`, as soon as it and those before it are done. The frames are taken
+/// from the iterator on a thread of their own, at most a window ahead of the records.
+pub fn run_frames(
+    frames: impl Iterator<Item = Decoded<'static>> + Send,
+    solvers: &Solvers,
+    backend: &mut Backend,
+    opts: RunOptions,
+    stop: &AtomicBool,
+    on_record: impl FnMut(&Record, &Counts),
+) -> Result<RunSummary> {
+    let work = frames.map(Work::Frame);
+    let replay = std::collections::HashSet::new();
+    run_work(work, replay, solvers, backend, None, opts, stop, on_record)
+}
+
+/// What a worker is handed: a file to decode, or a frame already in memory.
+enum Work {
+    File(Input),
+    Frame(Decoded<'static>),
+}
+
+impl Work {
+    /// The input as its record names it, and its path (for the record of a panic).
+    fn input(&self) -> Input {
+        match self {
+            Work::File(i) => i.clone(),
+            Work::Frame(d) => Input {
+                path: d.path.clone(),
+                name: d.name.clone(),
+                replay: false,
+            },
+        }
+    }
+
+    fn decode(self, solvers: &Solvers) -> Decoded<'static> {
+        match self {
+            Work::File(i) => solvers.decode(&i.path, &i.name),
+            Work::Frame(d) => d,
+        }
+    }
+}
+
+/// [`run`] and [`run_frames`]: `work` handed out one per ticket, records written (when there
+/// is a writer) and seen in input order.
+#[allow(clippy::too_many_arguments)]
+fn run_work(
+    inputs: impl Iterator<Item = Work> + Send,
+    replay: std::collections::HashSet<usize>,
+    solvers: &Solvers,
+    backend: &mut Backend,
+    writer: Option<&mut RecordWriter>,
+    opts: RunOptions,
+    stop: &AtomicBool,
+    mut on_record: impl FnMut(&Record, &Counts),
+) -> Result<RunSummary> {
+    let t0 = Instant::now();
+    let threads = opts.threads.max(1);
+    let batch = opts.batch_size.max(1);
+    let window = opts.window();
+    let (work_tx, work_rx) = bounded::<(usize, Work)>(window);
+    let (done_tx, done_rx) = bounded::<(usize, Record)>(window);
+    let (ticket_tx, ticket_rx) = bounded::<()>(window);
+    for _ in 0..window {
+        ticket_tx.send(()).expect("room for every ticket");
+    }
     let mut summary = RunSummary::default();
     std::thread::scope(|scope| -> Result<()> {
         // The feeder: one input per ticket, until the inputs end or a stop is asked.
         scope.spawn(move || {
-            for item in inputs.into_iter().enumerate() {
+            for item in inputs.enumerate() {
                 if ticket_rx.recv().is_err() || stop.load(Ordering::SeqCst) {
                     break;
                 }
@@ -123,12 +200,10 @@ pub fn run(
                     for _ in 0..threads {
                         let (rx, tx) = (work_rx.clone(), det_tx.clone());
                         scope.spawn(move || {
-                            for (i, input) in until_stop(&rx, stop) {
+                            for (i, work) in until_stop(&rx, stop) {
+                                let input = work.input();
                                 let d = guarded_detect(&input, || {
-                                    solvers.detect_cpu(
-                                        solvers.decode(&input.path, &input.name),
-                                        seq.detect_stars,
-                                    )
+                                    solvers.detect_cpu(work.decode(solvers), seq.detect_stars)
                                 });
                                 if tx.send((i, d)).is_err() {
                                     break;
@@ -154,9 +229,13 @@ pub fn run(
                     for _ in 0..threads {
                         let (rx, tx) = (work_rx.clone(), done_tx.clone());
                         scope.spawn(move || {
-                            for (i, input) in until_stop(&rx, stop) {
-                                let r = guarded(solvers, &input.name, || {
-                                    solvers.solve_cpu(solvers.decode(&input.path, &input.name))
+                            for (i, work) in until_stop(&rx, stop) {
+                                let name = match &work {
+                                    Work::File(input) => input.name.clone(),
+                                    Work::Frame(d) => d.name.clone(),
+                                };
+                                let r = guarded(solvers, &name, || {
+                                    solvers.solve_cpu(work.decode(solvers))
                                 });
                                 if tx.send((i, r)).is_err() {
                                     break;
@@ -195,12 +274,12 @@ pub fn run(
 fn gpu_loop(
     runner: &mut crate::pipeline::GpuRunner,
     solvers: &Solvers,
-    frames: Receiver<(usize, Decoded)>,
+    frames: Receiver<(usize, Decoded<'static>)>,
     done: Sender<(usize, Record)>,
     batch: usize,
 ) {
     while let Some(items) = next_batch(&frames, batch) {
-        let (indices, decoded): (Vec<usize>, Vec<Decoded>) = items.into_iter().unzip();
+        let (indices, decoded): (Vec<usize>, Vec<Decoded<'static>>) = items.into_iter().unzip();
         let names: Vec<String> = decoded.iter().map(|d| d.name.clone()).collect();
         let records = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             runner.solve(solvers, decoded)
@@ -223,7 +302,10 @@ fn gpu_loop(
 /// The next GPU batch: as many decoded frames as are ready, up to `batch`, after waiting
 /// briefly for the decoders so batches are full while they keep up; None when the decoders are
 /// done.
-fn next_batch(frames: &Receiver<(usize, Decoded)>, batch: usize) -> Option<Vec<(usize, Decoded)>> {
+fn next_batch(
+    frames: &Receiver<(usize, Decoded<'static>)>,
+    batch: usize,
+) -> Option<Vec<(usize, Decoded<'static>)>> {
     let mut items = vec![frames.recv().ok()?];
     let deadline = Instant::now() + Duration::from_millis(50);
     while items.len() < batch {
@@ -239,18 +321,20 @@ fn next_batch(frames: &Receiver<(usize, Decoded)>, batch: usize) -> Option<Vec<(
 fn spawn_decoders<'s, 'e: 's>(
     scope: &'s std::thread::Scope<'s, 'e>,
     solvers: &'e Solvers,
-    work: &Receiver<(usize, Input)>,
+    work: &Receiver<(usize, Work)>,
     threads: usize,
     window: usize,
     stop: &'e AtomicBool,
-) -> Receiver<(usize, Decoded)> {
-    let (frame_tx, frame_rx) = bounded::<(usize, Decoded)>(window);
+) -> Receiver<(usize, Decoded<'static>)> {
+    let (frame_tx, frame_rx) = bounded::<(usize, Decoded<'static>)>(window);
     for _ in 0..threads {
         let (rx, tx) = (work.clone(), frame_tx.clone());
         scope.spawn(move || {
-            for (i, input) in until_stop(&rx, stop) {
-                let d = std::panic::catch_unwind(|| solvers.decode(&input.path, &input.name))
-                    .unwrap_or_else(|p| panicked_decode(&input, &p));
+            for (i, work) in until_stop(&rx, stop) {
+                let input = work.input();
+                let d =
+                    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| work.decode(solvers)))
+                        .unwrap_or_else(|p| panicked_decode(&input, &p));
                 if tx.send((i, d)).is_err() {
                     break;
                 }
@@ -261,7 +345,7 @@ fn spawn_decoders<'s, 'e: 's>(
 }
 
 /// The decoded frame of an input whose decoding panicked: its error record says so.
-fn panicked_decode(input: &Input, p: &Box<dyn std::any::Any + Send>) -> Decoded {
+fn panicked_decode(input: &Input, p: &Box<dyn std::any::Any + Send>) -> Decoded<'static> {
     Decoded {
         name: input.name.clone(),
         path: input.path.clone(),
@@ -277,13 +361,13 @@ fn panicked_decode(input: &Input, p: &Box<dyn std::any::Any + Send>) -> Decoded 
 fn gpu_detect_loop(
     runner: &mut crate::pipeline::GpuRunner,
     solvers: &Solvers,
-    frames: Receiver<(usize, Decoded)>,
+    frames: Receiver<(usize, Decoded<'static>)>,
     done: Sender<(usize, Detected)>,
     batch: usize,
     max_stars: usize,
 ) {
     while let Some(items) = next_batch(&frames, batch) {
-        let (indices, decoded): (Vec<usize>, Vec<Decoded>) = items.into_iter().unzip();
+        let (indices, decoded): (Vec<usize>, Vec<Decoded<'static>>) = items.into_iter().unzip();
         let inputs: Vec<Input> = decoded
             .iter()
             .map(|d| Input {
@@ -382,7 +466,7 @@ fn until_stop<'a, T>(rx: &'a Receiver<T>, stop: &'a AtomicBool) -> impl Iterator
 fn write_in_order(
     done: Receiver<(usize, Record)>,
     tickets: Sender<()>,
-    writer: &mut RecordWriter,
+    mut writer: Option<&mut RecordWriter>,
     opts: &RunOptions,
     stop: &AtomicBool,
     replay: &std::collections::HashSet<usize>,
@@ -391,12 +475,15 @@ fn write_in_order(
     let flush_every = opts.flush_every;
     let mut summary = RunSummary::default();
     let mut linker = opts.tracklets.then(crate::streaks::tracklet::Linker::new);
-    let mut emit = |r: Record, w: &mut RecordWriter, summary: &mut RunSummary, n: &mut usize| {
-        summary.counts.add(&r);
-        w.write(&r);
-        on_record(&r, &summary.counts);
-        *n += 1;
-    };
+    let mut emit =
+        |r: Record, w: Option<&mut RecordWriter>, summary: &mut RunSummary, n: &mut usize| {
+            summary.counts.add(&r);
+            if let Some(w) = w {
+                w.write(&r);
+            }
+            on_record(&r, &summary.counts);
+            *n += 1;
+        };
     let mut waiting: BTreeMap<usize, Record> = BTreeMap::new();
     let mut next = 0usize;
     let mut last_flush = Instant::now();
@@ -417,7 +504,7 @@ fn write_in_order(
                     None => Some(r),
                 };
                 if let Some(r) = ready {
-                    emit(r, writer, &mut summary, &mut unflushed);
+                    emit(r, writer.as_deref_mut(), &mut summary, &mut unflushed);
                 }
             }
             next += 1;
@@ -427,12 +514,12 @@ fn write_in_order(
         let stopping = stop.load(Ordering::SeqCst);
         // Nothing more comes before a flush forced by a stop: the held record goes too.
         if stopping && let Some(r) = linker.as_mut().and_then(|l| l.finish()) {
-            emit(r, writer, &mut summary, &mut unflushed);
+            emit(r, writer.as_deref_mut(), &mut summary, &mut unflushed);
         }
         if unflushed > 0
             && (stopping || unflushed >= FLUSH_RECORDS || last_flush.elapsed() >= flush_every)
         {
-            if let Err(e) = writer.flush() {
+            if let Some(Err(e)) = writer.as_deref_mut().map(RecordWriter::flush) {
                 // Returning drops the channels: the workers and the feeder end.
                 summary.write_error = Some(format!("{e:#}"));
                 return Ok(summary);
@@ -442,9 +529,9 @@ fn write_in_order(
         }
     }
     if let Some(r) = linker.as_mut().and_then(|l| l.finish()) {
-        emit(r, writer, &mut summary, &mut unflushed);
+        emit(r, writer.as_deref_mut(), &mut summary, &mut unflushed);
     }
-    if let Err(e) = writer.flush() {
+    if let Some(Err(e)) = writer.map(RecordWriter::flush) {
         summary.write_error = Some(format!("{e:#}"));
     }
     Ok(summary)

@@ -25,14 +25,17 @@ pub enum Darks {
     #[default]
     None,
     /// One dark frame for every input.
-    File { path: PathBuf, frame: Frame },
+    File {
+        path: PathBuf,
+        frame: Frame<'static>,
+    },
     /// The median of each directory's frames of the same size, made on first use.
     DirectoryMedian(Mutex<HashMap<DarkKey, Arc<OnceLock<DarkResult>>>>),
 }
 
 /// A directory and a frame size: frames of other sizes in the directory get their own dark.
 type DarkKey = (PathBuf, u32, u32);
-type DarkResult = Result<Arc<Frame>, String>;
+type DarkResult = Result<Arc<Frame<'static>>, String>;
 
 impl Darks {
     /// Read the dark frame of `--dark FILE`.
@@ -50,13 +53,13 @@ impl Darks {
 
     /// The frame of `path` with the dark subtracted, or why that cannot be done (a person can
     /// act on the message: wrong dark size, too few frames for a median).
-    pub fn apply(&self, path: &Path, frame: Frame) -> crate::Result<Frame> {
+    pub fn apply<'a>(&self, path: &Path, frame: Frame<'a>) -> crate::Result<Frame<'a>> {
         self.subtract(path, frame).map_err(crate::Error::Input)
     }
 
     /// [`Darks::apply`], its message as text (a directory's failed median is shared by its
     /// frames).
-    fn subtract(&self, path: &Path, frame: Frame) -> Result<Frame, String> {
+    fn subtract<'a>(&self, path: &Path, frame: Frame<'a>) -> Result<Frame<'a>, String> {
         match self {
             Darks::None => Ok(frame),
             Darks::File { path: dp, frame: d } => {
@@ -91,13 +94,13 @@ impl Darks {
 /// `frame − dark`, shifted back up by the dark's median so the background keeps its noise on
 /// both sides (clipping at 0 would halve it and bias the thresholds). Saturated pixels stay
 /// saturated: they are saturated whatever the dark holds.
-pub fn subtract_dark(frame: &Frame, dark: &Frame) -> Frame {
-    let offset = i32::from(median(dark.pixels.clone()));
+pub fn subtract_dark(frame: &Frame, dark: &Frame) -> Frame<'static> {
+    let offset = i32::from(median(dark.pixels.to_vec()));
     let sat = frame.saturation;
     let pixels = frame
         .pixels
         .iter()
-        .zip(&dark.pixels)
+        .zip(dark.pixels.iter())
         .map(|(&p, &d)| {
             if p >= sat {
                 sat
@@ -107,8 +110,10 @@ pub fn subtract_dark(frame: &Frame, dark: &Frame) -> Frame {
         })
         .collect();
     Frame {
+        width: frame.width,
+        height: frame.height,
         pixels,
-        ..frame.clone()
+        saturation: sat,
     }
 }
 
@@ -123,7 +128,7 @@ fn median_of_directory(dir: &Path, width: u32, height: u32) -> DarkResult {
     // Evenly spaced picks, so a long sequence of one pointing does not fill the median.
     let step = (files.len() as f64 / MEDIAN_FRAMES as f64).max(1.0);
     let picks = (0..MEDIAN_FRAMES.min(files.len())).map(|k| &files[(k as f64 * step) as usize]);
-    let frames: Vec<Frame> = picks
+    let frames: Vec<Frame<'static>> = picks
         .filter_map(|p| Frame::read(p).ok())
         .filter(|f| (f.width, f.height) == (width, height))
         .collect();
@@ -146,7 +151,7 @@ fn median_of_directory(dir: &Path, width: u32, height: u32) -> DarkResult {
 }
 
 /// Per-pixel median of frames of one size (the lower middle value for an even count).
-pub fn median_frame(frames: &[Frame]) -> Frame {
+pub fn median_frame(frames: &[Frame]) -> Frame<'static> {
     let n = frames[0].pixels.len();
     let mut column = Vec::with_capacity(frames.len());
     let pixels = (0..n)
@@ -158,13 +163,14 @@ pub fn median_frame(frames: &[Frame]) -> Frame {
         })
         .collect();
     Frame {
+        width: frames[0].width,
+        height: frames[0].height,
         pixels,
         saturation: frames
             .iter()
             .map(|f| f.saturation)
             .max()
             .unwrap_or(u16::MAX),
-        ..frames[0].clone()
     }
 }
 
@@ -180,11 +186,11 @@ fn median(mut v: Vec<u16>) -> u16 {
 mod tests {
     use super::*;
 
-    fn frame(pixels: Vec<u16>) -> Frame {
+    fn frame(pixels: Vec<u16>) -> Frame<'static> {
         Frame {
             width: pixels.len() as u32,
             height: 1,
-            pixels,
+            pixels: pixels.into(),
             saturation: 255,
         }
     }

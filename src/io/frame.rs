@@ -2,16 +2,19 @@
 
 use crate::error::{Context, Error, Result, error, fail};
 use image::{DynamicImage, ImageDecoder, ImageError, ImageFormat, ImageReader, Limits};
+use std::borrow::Cow;
 use std::io::{BufRead, Cursor, Seek};
 use std::path::Path;
 
-/// A decoded grey frame.
+/// A decoded grey frame. Its pixels are its own when decoded from a file, or borrowed from the
+/// caller's buffer when that holds them as they are ([`Frame::from_samples`] of u16 values):
+/// a frame solved where it lies is not copied.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Frame {
+pub struct Frame<'a> {
     pub width: u32,
     pub height: u32,
     /// Row-major pixels.
-    pub pixels: Vec<u16>,
+    pub pixels: Cow<'a, [u16]>,
     /// The largest value the file's format can hold (255 or 65535): pixels there are saturated.
     pub saturation: u16,
 }
@@ -43,33 +46,46 @@ pub fn is_image_path(path: &Path) -> bool {
 pub(crate) const MAX_SIDE: u32 = 32768;
 const MAX_ALLOC: u64 = 2 << 30;
 
-impl Frame {
+impl Frame<'_> {
+    /// The same frame owning its pixels (copied when they are borrowed).
+    pub fn into_owned(self) -> Frame<'static> {
+        Frame {
+            pixels: Cow::Owned(self.pixels.into_owned()),
+            ..self
+        }
+    }
+}
+
+impl Frame<'static> {
     /// Decode an image file. Colour images become luma; alpha is ignored.
     ///
     /// Every failure is an error that names the file and the problem: a link that leads
     /// nowhere, something that is not a regular file (a FIFO would block the read forever),
     /// an empty or truncated file (JPEG decoders fill in missing data, so a JPEG must reach its
     /// end-of-image marker), an image larger than gpustar reads, or not enough memory.
-    pub fn read(path: &Path) -> Result<Frame> {
+    pub fn read(path: &Path) -> Result<Frame<'static>> {
         Frame::read_dated(path).map(|(f, _)| f)
     }
 
     /// Decode an image file, with its observation epoch (Julian year) when the file says
     /// (FITS `DATE-OBS` or `MJD-OBS`). FITS files are recognised by their first card, whatever
     /// their name.
-    pub fn read_dated(path: &Path) -> Result<(Frame, Option<f64>)> {
+    pub fn read_dated(path: &Path) -> Result<(Frame<'static>, Option<f64>)> {
         Frame::read_info(path).map(|(f, info)| (f, info.epoch))
     }
 
     /// Decode an image file, with what its header says ([`FileInfo`]).
-    pub fn read_info(path: &Path) -> Result<(Frame, FileInfo)> {
+    pub fn read_info(path: &Path) -> Result<(Frame<'static>, FileInfo)> {
         Frame::read_info_sized(path, None)
     }
 
     /// [`Frame::read_info`] for frames that must be `expect` (width, height) pixels, a camera
     /// file's size: a PNG, JPEG or TIFF of another size is refused from its header, before its
     /// pixels take memory (a 30000² PNG is 0.9 MB on disk, 1.8 GB decoded).
-    pub fn read_info_sized(path: &Path, expect: Option<(u32, u32)>) -> Result<(Frame, FileInfo)> {
+    pub fn read_info_sized(
+        path: &Path,
+        expect: Option<(u32, u32)>,
+    ) -> Result<(Frame<'static>, FileInfo)> {
         let shown = path.display().to_string();
         // Follows links: a dangling or looping one fails here, with where it leads.
         let meta = std::fs::metadata(path).map_err(|e| match std::fs::read_link(path) {
@@ -140,7 +156,7 @@ impl Frame {
     }
 
     /// Convert a decoded image (grey or colour, 8 or 16 bits) into a frame.
-    pub fn from_image(img: DynamicImage) -> Result<Frame> {
+    pub fn from_image(img: DynamicImage) -> Result<Frame<'static>> {
         let (width, height) = (img.width(), img.height());
         if width == 0 || height == 0 {
             fail!(Input, "the image is empty ({width}x{height})");
@@ -158,7 +174,7 @@ impl Frame {
         Ok(Frame {
             width,
             height,
-            pixels,
+            pixels: pixels.into(),
             saturation,
         })
     }
@@ -177,7 +193,7 @@ fn is_fits(path: &Path) -> Result<bool> {
 }
 
 /// A FITS file's primary image (or first image extension), with its DATE-OBS.
-fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, FileInfo)> {
+fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame<'static>, FileInfo)> {
     if file_len > MAX_ALLOC {
         fail!(
             Input,
@@ -192,7 +208,7 @@ fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame, FileInfo
         Frame {
             width: f.width,
             height: f.height,
-            pixels: f.pixels,
+            pixels: f.pixels.into(),
             saturation: f.saturation,
         },
         FileInfo {
@@ -211,7 +227,7 @@ fn read_grey_png(
     shown: &str,
     file_len: u64,
     expect: Option<(u32, u32)>,
-) -> Result<Option<Frame>> {
+) -> Result<Option<Frame<'static>>> {
     // Read whole (one system call; a fifth faster than through a BufReader) unless huge.
     if file_len > 256 << 20 {
         return Ok(None);
@@ -269,7 +285,7 @@ fn read_grey_png(
         e => error!(Input, "cannot decode {shown}: {e}"),
     })?;
     let (pixels, saturation) = if depth == png::BitDepth::Eight {
-        (buf.into_iter().map(u16::from).collect(), 255)
+        (buf.into_iter().map(u16::from).collect::<Vec<u16>>(), 255)
     } else {
         (
             buf.chunks_exact(2)
@@ -281,7 +297,7 @@ fn read_grey_png(
     Ok(Some(Frame {
         width: w,
         height: h,
-        pixels,
+        pixels: pixels.into(),
         saturation,
     }))
 }

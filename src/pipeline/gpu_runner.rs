@@ -125,7 +125,7 @@ impl GpuRunner {
     pub fn detect(
         &mut self,
         solvers: &Solvers,
-        frames: Vec<Decoded>,
+        frames: Vec<Decoded<'static>>,
         max_stars: usize,
     ) -> Vec<Detected> {
         let by_size = size_groups(&frames);

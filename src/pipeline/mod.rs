@@ -60,7 +60,7 @@ pub type SharedSolver = Arc<std::result::Result<Solver, String>>;
 
 /// Frames of one size and bit depth (they share the detection parameters), with their
 /// positions in the batch.
-type SizeGroup = (DetectKey, Vec<(usize, Decoded)>);
+type SizeGroup<'a> = (DetectKey, Vec<(usize, Decoded<'a>)>);
 
 /// Frame width, height and saturation level: frames alike in these share detection's
 /// parameters.
@@ -86,15 +86,16 @@ pub struct Solvers {
 /// A frame after its pixel stages (the sequence stage's input): its detections, or the
 /// message of its error record.
 pub struct Detected {
-    pub decoded: Decoded,
+    pub decoded: Decoded<'static>,
     pub detections: std::result::Result<Vec<crate::solve::detect::Detection>, String>,
     pub detect_ms: f64,
     /// The `backend` field of its record.
     pub backend: String,
 }
 
-/// A frame read from its file (or why it could not be).
-pub struct Decoded {
+/// A frame read from its file (or why it could not be), or held by the caller
+/// ([`Decoded::in_memory`]: its pixels may be borrowed for `'a`).
+pub struct Decoded<'a> {
     pub name: String,
     pub path: PathBuf,
     /// The frame's own observation epoch (FITS DATE-OBS), if the file has one.
@@ -104,11 +105,11 @@ pub struct Decoded {
     /// Warnings from reading the file, for its record.
     pub warnings: Vec<String>,
     /// The decoded frame, or the message its error record carries.
-    pub frame: std::result::Result<Frame, String>,
+    pub frame: std::result::Result<Frame<'a>, String>,
     pub decode_ms: f64,
 }
 
-impl Decoded {
+impl<'a> Decoded<'a> {
     /// A frame the caller holds in memory (from [`Frame::from_samples`]) under the record name
     /// `name`, with its epoch (Julian year) and header keywords (a streak frame's times and
     /// station) when the caller has them; without an epoch, the keywords' time gives it as a
@@ -116,10 +117,10 @@ impl Decoded {
     /// carries, as an unreadable file's does.
     pub fn in_memory(
         name: &str,
-        frame: Result<(Frame, Vec<String>)>,
+        frame: Result<(Frame<'a>, Vec<String>)>,
         epoch: Option<f64>,
         keywords: std::collections::BTreeMap<String, String>,
-    ) -> Decoded {
+    ) -> Decoded<'a> {
         let (frame, mut warnings) = match frame {
             Ok((f, w)) => (Ok(f), w),
             Err(e) => (Err(format!("{e:#}")), Vec::new()),
@@ -169,7 +170,7 @@ impl Solvers {
     }
 
     /// Read and decode one file, and remove its fixed pattern when asked.
-    pub fn decode(&self, path: &Path, name: &str) -> Decoded {
+    pub fn decode(&self, path: &Path, name: &str) -> Decoded<'static> {
         // Fault injection (tests/it/faults.rs): the input of this name never finishes, as a
         // frame stuck in a bug would; the stop request must end the run all the same.
         if std::env::var_os("GPUSTAR_FAULT_STALL").is_some_and(|v| v == name) {
@@ -296,7 +297,7 @@ impl Solvers {
     }
 
     /// The pixel stages alone on the CPU (`--sequence`), keeping the brightest `max_stars`.
-    pub fn detect_cpu(&self, decoded: Decoded, max_stars: usize) -> Detected {
+    pub fn detect_cpu(&self, decoded: Decoded<'static>, max_stars: usize) -> Detected {
         let t0 = Instant::now();
         let s = self.settings.detect.for_sequence(max_stars);
         let detections = match &decoded.frame {
@@ -479,7 +480,7 @@ pub fn solve_cpu_many(solvers: &Solvers, frames: Vec<Decoded>, threads: usize) -
 }
 
 /// The frame of a decoded input that was grouped for solving (only decoded ones are).
-fn decoded_frame(d: &Decoded) -> &Frame {
+fn decoded_frame<'d>(d: &'d Decoded) -> &'d Frame<'d> {
     d.frame.as_ref().expect("grouped frames decoded")
 }
 

@@ -126,7 +126,7 @@ fn records_carry_a_calibrated_attitude_sigma_and_orthonormality() {
         let frame = gpustar::io::frame::Frame {
             width: camera.width,
             height: camera.height,
-            pixels,
+            pixels: pixels.into(),
             saturation: 255,
         };
         let (sol, _, _) = solver.solve_frame_at(&frame, None);

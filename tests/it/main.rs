@@ -21,6 +21,7 @@ mod end_to_end;
 mod faults;
 mod fits;
 mod formats;
+mod frames;
 mod gpu_pipeline;
 mod hint;
 mod layout;

@@ -75,7 +75,7 @@ fn radial_gpu_matches_cpu() {
 /// Frames solved within 60″ of the truth by a method (and none beyond it).
 fn solved_by(
     method: Method,
-    frames: &[(gpustar::io::frame::Frame, gpustar::simulate::Truth)],
+    frames: &[(gpustar::io::frame::Frame<'static>, gpustar::simulate::Truth)],
 ) -> usize {
     let s = sim();
     let settings = Settings {

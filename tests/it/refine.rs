@@ -26,7 +26,7 @@ fn odd_camera() -> Camera {
     c
 }
 
-fn frames(camera: &Camera, n: usize) -> Vec<(Frame, Truth)> {
+fn frames(camera: &Camera, n: usize) -> Vec<(Frame<'static>, Truth)> {
     let s = SimSettings {
         camera: Some(camera.clone()),
         seed: 7,

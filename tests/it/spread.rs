@@ -50,7 +50,7 @@ fn spread_order_takes_the_brightest_of_each_cell_in_turn() {
 }
 
 /// 10 simulated 1024² frames at 14° (Hp ≤ 6) with 90 bright spots crowding one corner.
-fn crowded() -> Vec<(Frame, Truth)> {
+fn crowded() -> Vec<(Frame<'static>, Truth)> {
     let s = SimSettings {
         fov_x_deg: 14.0,
         mag_limit: 6.0,

@@ -38,7 +38,7 @@ fn erf(x: f64) -> f64 {
 
 /// A 16-bit frame: flat sky, Gaussian noise of NOISE ADU, the things drawn analytically
 /// (PSF σ 1.2 px).
-fn frame(w: u32, h: u32, things: &[Thing], seed: u64) -> Frame {
+fn frame(w: u32, h: u32, things: &[Thing], seed: u64) -> Frame<'static> {
     let sg = 1.2f64;
     let mut v = vec![SKY; (w * h) as usize];
     let mut sat = vec![false; (w * h) as usize];
@@ -166,8 +166,8 @@ fn streak_rows_and_filter_smooth_the_residual_as_written() {
     // One bright pixel on a flat frame: its 2×2 block holds it, and the smoothed sum around
     // that block is the binomial kernel.
     let mut f = frame(64, 64, &[], 1);
-    f.pixels.fill(100);
-    f.pixels[(21 * 64 + 30) as usize] = 100 + 1000;
+    f.pixels.to_mut().fill(100);
+    f.pixels.to_mut()[(21 * 64 + 30) as usize] = 100 + 1000;
     let p = params(&f);
     let tiles = tile_stats(&f.pixels, &p);
     assert!(tiles.iter().all(|t| t.background == 100));
@@ -401,11 +401,11 @@ fn streak_mask_gpu_equals_cpu() {
         Thing::Column(200, 0, 100, 90.0),
     ];
     for (w, h, bits8) in [(333, 211, false), (256, 256, true)] {
-        let frames: Vec<Frame> = (0..3u64)
+        let frames: Vec<Frame<'static>> = (0..3u64)
             .map(|k| {
                 let mut f = frame(w, h, &things, 70 + k);
                 if bits8 {
-                    for v in &mut f.pixels {
+                    for v in f.pixels.to_mut() {
                         *v = (*v / 8).min(255);
                     }
                     f.saturation = 255;

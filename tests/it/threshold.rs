@@ -143,7 +143,7 @@ fn gpu_equals_cpu_on_odd_sizes_and_one_pixel_frames() {
         let f = gpustar::io::frame::Frame {
             width: w,
             height: h,
-            pixels: vec![v; (w * h) as usize],
+            pixels: vec![v; (w * h) as usize].into(),
             saturation: 65535,
         };
         common::assert_detect_stages_equal(&g, &[f], 4);
@@ -204,7 +204,7 @@ fn matched_filter_finds_a_faint_star_and_drops_a_hot_pixel() {
     let frame = gpustar::io::frame::Frame {
         width: w,
         height: h,
-        pixels: px,
+        pixels: px.into(),
         saturation: 255,
     };
     let detect = |filter: bool| {
@@ -246,7 +246,7 @@ fn gpu_equals_cpu_with_the_matched_filter() {
         let f = gpustar::io::frame::Frame {
             width: w,
             height: h,
-            pixels: vec![v; (w * h) as usize],
+            pixels: vec![v; (w * h) as usize].into(),
             saturation: 65535,
         };
         common::assert_detect_stages_equal_with(&g, &[f], 4, true);

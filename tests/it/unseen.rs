@@ -46,7 +46,7 @@ fn the_detection_retry_solves_frames_of_faint_stars() {
         let frame = gpustar::io::frame::Frame {
             width: camera.width,
             height: camera.height,
-            pixels,
+            pixels: pixels.into(),
             saturation: 255,
         };
         let right = |o: &Outcome| match o {

@@ -68,7 +68,7 @@ pub fn sim_frames(
     fov: f64,
     bits: u8,
     seed: u64,
-) -> Vec<gpustar::io::frame::Frame> {
+) -> Vec<gpustar::io::frame::Frame<'static>> {
     let s = gpustar::simulate::SimSettings {
         width: size.0,
         height: size.1,
@@ -148,7 +148,7 @@ pub fn assert_detect_stages_equal_with(
 }
 
 /// A 64×48 frame with '#' drawn as bright pixels (200) on a dark sky (10) from the top left.
-pub fn drawn(rows: &[&str]) -> gpustar::io::frame::Frame {
+pub fn drawn(rows: &[&str]) -> gpustar::io::frame::Frame<'static> {
     let (w, h) = (64u32, 48u32);
     let mut pixels = vec![10u16; (w * h) as usize];
     for (y, r) in rows.iter().enumerate() {
@@ -161,7 +161,7 @@ pub fn drawn(rows: &[&str]) -> gpustar::io::frame::Frame {
     gpustar::io::frame::Frame {
         width: w,
         height: h,
-        pixels,
+        pixels: pixels.into(),
         saturation: 255,
     }
 }
@@ -170,7 +170,7 @@ pub fn drawn(rows: &[&str]) -> gpustar::io::frame::Frame {
 pub fn rendered(
     s: &gpustar::simulate::SimSettings,
     n: usize,
-) -> Vec<(gpustar::io::frame::Frame, gpustar::simulate::Truth)> {
+) -> Vec<(gpustar::io::frame::Frame<'static>, gpustar::simulate::Truth)> {
     let cat = gpustar::catalog::Catalog::builtin();
     let camera = s.camera().unwrap();
     (0..n)
@@ -179,7 +179,7 @@ pub fn rendered(
             let frame = gpustar::io::frame::Frame {
                 width: camera.width,
                 height: camera.height,
-                pixels,
+                pixels: pixels.into(),
                 saturation: if s.bits == 8 { 255 } else { 65535 },
             };
             (frame, truth)
@@ -236,7 +236,7 @@ pub fn crowd_corner(frame: &mut gpustar::io::frame::Frame, n: usize, seed: u64) 
         for y in (cy as i64 - 5).max(0)..(cy as i64 + 6).min(h as i64) {
             for x in (cx as i64 - 5).max(0)..(cx as i64 + 6).min(w as i64) {
                 let r2 = (x as f64 - cx).powi(2) + (y as f64 - cy).powi(2);
-                let p = &mut frame.pixels[(y * w as i64 + x) as usize];
+                let p = &mut frame.pixels.to_mut()[(y * w as i64 + x) as usize];
                 *p = (*p as f64 + peak * (-r2 / (2.0 * 1.44)).exp()).min(255.0) as u16;
             }
         }
@@ -247,7 +247,7 @@ pub fn crowd_corner(frame: &mut gpustar::io::frame::Frame, n: usize, seed: u64) 
 /// `wrong_deg` from the truth.
 pub fn solved_and_wrong(
     solver: &gpustar::solve::Solver,
-    set: &[(gpustar::io::frame::Frame, gpustar::simulate::Truth)],
+    set: &[(gpustar::io::frame::Frame<'_>, gpustar::simulate::Truth)],
     wrong_deg: f64,
 ) -> (usize, usize) {
     let (mut solved, mut wrong) = (0, 0);
