@@ -294,7 +294,7 @@ mod tests {
         Frame {
             width: w,
             height: h,
-            pixels,
+            pixels: pixels.into(),
             saturation: 65535,
         }
     }
