@@ -277,7 +277,7 @@ mod tests {
 
     /// A frame of background 100 with Gaussian sources (x, y, flux, sigma) and uniform noise
     /// of ±5 (σ 2.9) from a fixed hash of the pixel.
-    fn frame(sources: &[(f64, f64, f64, f64)]) -> Frame {
+    fn frame(sources: &[(f64, f64, f64, f64)]) -> Frame<'static> {
         let (w, h) = (96u32, 96u32);
         let mut pixels = vec![0u16; (w * h) as usize];
         for y in 0..h {
