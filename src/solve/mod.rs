@@ -6,7 +6,6 @@
 
 pub mod attitude;
 mod bands;
-pub mod deblend;
 pub mod detect;
 pub mod hinted;
 pub mod identify;

@@ -552,6 +552,14 @@ mod tests {
     }
 
     #[test]
+    fn the_detection_retrys_same_star_is_the_radius_floor() {
+        assert_eq!(
+            crate::solve::detect::SAME_STAR_PX,
+            CONFIDENCE_RADIUS_FLOOR_PX
+        );
+    }
+
+    #[test]
     fn false_match_probability_needs_three_stars() {
         assert_eq!(false_match_probability(2, 10, 1e-4, 1, 2), 1.0);
         assert!(false_match_probability(6, 10, 1e-4, 1000, 2) < 1e-9);
