@@ -282,6 +282,10 @@ class Solver:
         window = 1
         put = done = 0
         for im in images:
+            for what, given in (("names", names), ("epochs", epochs)):
+                if given is not None and put >= len(given):
+                    run.close()
+                    raise InputError(f"more images than {what} ({len(given)}): give one per image")
             run.put(im, names[put] if names is not None else f"image_{put:05d}",
                     None if epochs is None else epochs[put])
             if put == 0:  # a 2-D array: put takes no other

@@ -287,6 +287,9 @@ def test_solve_many_streams_in_order(cpu_solver, frames):
     assert r.solved
     with pytest.raises(gpustar.InputError, match="2 images, 1 names"):
         list(cpu_solver.solve_many(images[:2], names=["a"]))
+    # A generator has no length to check first: refused when it outruns them.
+    with pytest.raises(gpustar.InputError, match=r"more images than epochs \(1\)"):
+        list(cpu_solver.solve_many((im for im in images[:2]), epochs=[None]))
 
 
 def test_batch_shard_resume_and_progress(tmp_path, frames):
