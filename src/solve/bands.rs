@@ -192,18 +192,60 @@ fn check_table_size(refs: &RefCatalog, max_sep_rad: f64) -> Result<()> {
 /// date: a frame that carries its own date used to make its own selection (sorting the
 /// catalog), a fifth of a 12-degree frame's time with the field searched, and kept it.
 pub(crate) struct Deeper {
-    pub(crate) catalog: Catalog,
-    pub(crate) selections: Mutex<HashMap<i64, Option<Arc<Dated>>>>,
+    catalog: Catalog,
+    selections: Mutex<HashMap<i64, Option<Arc<Dated>>>>,
+}
+
+impl Deeper {
+    pub(crate) fn new(catalog: &Catalog) -> Deeper {
+        Deeper {
+            catalog: catalog.clone(),
+            selections: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// The stars a solution's fitted field `camera` calls for (about
+    /// [`AUTO_STARS_IN_VIEW`](super::AUTO_STARS_IN_VIEW) in view), at the frame's `epoch`;
+    /// None when that is no deeper than `voted_with`, the selection the frame was identified
+    /// with, or the selection fails.
+    pub(crate) fn refs_for(
+        &self,
+        camera: &Camera,
+        sky_sr: f64,
+        voted_with: Selection,
+        epoch: Option<f64>,
+    ) -> Option<Arc<RefCatalog>> {
+        let mag_limit = auto_mag_limit_in(&self.catalog, camera, sky_sr);
+        if mag_limit <= voted_with.mag_limit {
+            return None;
+        }
+        let selected = self
+            .selections
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .entry((mag_limit * 10.0).round() as i64)
+            .or_insert_with(|| {
+                let selection = Selection {
+                    mag_limit,
+                    ..voted_with
+                };
+                RefCatalog::select(&self.catalog, selection)
+                    .ok()
+                    .map(|refs| Arc::new(Dated::new(refs)))
+            })
+            .clone()?;
+        Some(selected.refs_at(epoch))
+    }
 }
 
 /// A selection and the days it was moved to.
-pub(crate) struct Dated {
+struct Dated {
     refs: Arc<RefCatalog>,
     days: Days,
 }
 
 impl Dated {
-    pub(crate) fn new(refs: RefCatalog) -> Dated {
+    fn new(refs: RefCatalog) -> Dated {
         Dated {
             refs: Arc::new(refs),
             days: Days::default(),
@@ -211,7 +253,7 @@ impl Dated {
     }
 
     /// The stars at a frame's own epoch (see [`Days::refs_at`]).
-    pub(crate) fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
+    fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
         self.days.refs_at(&self.refs, epoch)
     }
 }

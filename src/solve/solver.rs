@@ -9,23 +9,22 @@
 
 use super::attitude::wahba;
 use super::bands::{
-    Band, Dated, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SCALE_STEP, SPREAD_TRIANGLE_STARS,
-    STAGES, WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, scale_bands, scale_hypotheses,
-    scaled, spread_order,
+    Band, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SCALE_STEP, SPREAD_TRIANGLE_STARS, STAGES,
+    WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, scale_bands, scale_hypotheses, scaled,
+    spread_order,
 };
 use super::detect::{self, DetectSettings, Detection};
 use super::identify::{self, IdentifySettings};
-use super::mag_limit::{FULL_SKY_SR, SHALLOW_STARS_IN_VIEW, auto_mag_limit_in, mag_limit_in};
+use super::mag_limit::{FULL_SKY_SR, SHALLOW_STARS_IN_VIEW, mag_limit_in};
 use super::refine::{self, RefineSettings, Refined};
 use super::triangle;
 use crate::camera::Camera;
-use crate::catalog::{Catalog, DoubleStars, RefCatalog, Selection};
+use crate::catalog::{Catalog, DoubleStars, RefCatalog};
 use crate::error::Result;
 use crate::io::frame::Frame;
 use crate::solve::radial::Method;
 use nalgebra::Vector3;
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Everything that shapes a run besides the camera.
@@ -286,12 +285,8 @@ impl Solver {
             bands,
             scales,
             passes,
-            deeper: (settings.scale_range.is_some() && settings.mag_limit.is_none()).then(|| {
-                Deeper {
-                    catalog: catalog.clone(),
-                    selections: Mutex::new(HashMap::new()),
-                }
-            }),
+            deeper: (settings.scale_range.is_some() && settings.mag_limit.is_none())
+                .then(|| Deeper::new(catalog)),
         })
     }
 
@@ -583,28 +578,12 @@ impl Solver {
         hypotheses: u64,
         fixed: usize,
     ) -> Option<(Refined, Arc<RefCatalog>)> {
-        let deeper = self.deeper.as_ref()?;
-        let mag_limit = auto_mag_limit_in(&deeper.catalog, &accepted.camera, self.settings.sky_sr);
-        let voted_with = self.bands[band].refs.selection;
-        if mag_limit <= voted_with.mag_limit {
-            return None;
-        }
-        let selected = deeper
-            .selections
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .entry((mag_limit * 10.0).round() as i64)
-            .or_insert_with(|| {
-                let selection = Selection {
-                    mag_limit,
-                    ..voted_with
-                };
-                RefCatalog::select(&deeper.catalog, selection)
-                    .ok()
-                    .map(|refs| Arc::new(Dated::new(refs)))
-            })
-            .clone()?;
-        let refs = selected.refs_at(epoch);
+        let refs = self.deeper.as_ref()?.refs_for(
+            &accepted.camera,
+            self.settings.sky_sr,
+            self.bands[band].refs.selection,
+            epoch,
+        )?;
         let refined = refine::refine(
             accepted.r,
             detections,
