@@ -524,6 +524,17 @@ fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
     out
 }
 
+/// What a cache made from the selection `cat` depends on, as the text its key hashes: the
+/// catalog's content hash and the selection (the distance table and the pattern index add
+/// their own parts around it).
+pub(crate) fn selection_key_text(cat: &RefCatalog, catalog_hash: u64) -> String {
+    let s = cat.selection;
+    format!(
+        "{:016x}|{}|{}|{:?}|{}",
+        catalog_hash, s.epoch, s.mag_limit, s.double_stars, s.double_sep_rad
+    )
+}
+
 /// 64-bit FNV-1a: a stable hash for cache keys (std's hasher may change between releases).
 pub fn fnv1a(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;

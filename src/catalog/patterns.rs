@@ -197,15 +197,10 @@ impl PatternIndex {
 
 /// What an index depends on, hashed into its cache file name.
 pub fn cache_key(cat: &RefCatalog, catalog_hash: u64, levels: &[f64]) -> u64 {
-    let s = cat.selection;
     let text = format!(
-        "gpustar-patterns-v{}|{:016x}|{}|{}|{:?}|{}|{}|{:?}|{}|{}|{}",
+        "gpustar-patterns-v{}|{}|{}|{:?}|{}|{}|{}",
         FORMAT_VERSION,
-        catalog_hash,
-        s.epoch,
-        s.mag_limit,
-        s.double_stars,
-        s.double_sep_rad,
+        super::selection_key_text(cat, catalog_hash),
         cat.stars.len(),
         levels,
         BINS,

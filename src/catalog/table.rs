@@ -191,15 +191,10 @@ fn build_kvector(keys: &[u32], shift: u32, max_key: u32) -> Vec<u32> {
 
 /// What a table depends on, hashed into its cache file name.
 pub fn cache_key(cat: &RefCatalog, catalog_hash: u64, max_sep_rad: f64) -> u64 {
-    let s = cat.selection;
     let text = format!(
-        "gpustar-table-v{}|{:016x}|{}|{}|{:?}|{}|{}|{}",
+        "gpustar-table-v{}|{}|{}|{}",
         FORMAT_VERSION,
-        catalog_hash,
-        s.epoch,
-        s.mag_limit,
-        s.double_stars,
-        s.double_sep_rad,
+        super::selection_key_text(cat, catalog_hash),
         max_sep_rad,
         cat.stars.len()
     );
