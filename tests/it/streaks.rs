@@ -36,6 +36,38 @@ fn erf(x: f64) -> f64 {
     libm::erf(x)
 }
 
+/// Add a track from (x0, y0) to (x1, y1) of peak SNR `snr` (PSF σ 1.2 px) to `v`, its
+/// brightness along it the sum of uniform `pieces` (from, to, brightness; fractions of the
+/// track), each blurred at its ends as a whole streak is.
+fn track(
+    v: &mut [f64],
+    (w, h): (u32, u32),
+    (x0, y0, x1, y1): (f64, f64, f64, f64),
+    snr: f64,
+    pieces: &[(f64, f64, f64)],
+) {
+    let sg = 1.2f64;
+    let (dx, dy) = (x1 - x0, y1 - y0);
+    let len = (dx * dx + dy * dy).sqrt();
+    let (ux, uy) = (dx / len, dy / len);
+    let k = 1.0 / (2f64.sqrt() * sg);
+    for y in 0..h {
+        for x in 0..w {
+            let (px, py) = (x as f64 - x0, y as f64 - y0);
+            let t = px * ux + py * uy;
+            let d = -px * uy + py * ux;
+            if d.abs() > 8.0 || t < -8.0 || t > len + 8.0 {
+                continue;
+            }
+            let along: f64 = pieces
+                .iter()
+                .map(|&(a, b, m)| m * 0.5 * (erf((t - a * len) * k) - erf((t - b * len) * k)))
+                .sum();
+            v[(y * w + x) as usize] += snr * NOISE * (-d * d / (2.0 * sg * sg)).exp() * along;
+        }
+    }
+}
+
 /// A 16-bit frame: flat sky, Gaussian noise of NOISE ADU, the things drawn analytically
 /// (PSF σ 1.2 px).
 fn frame(w: u32, h: u32, things: &[Thing], seed: u64) -> Frame<'static> {
@@ -45,50 +77,10 @@ fn frame(w: u32, h: u32, things: &[Thing], seed: u64) -> Frame<'static> {
     for t in things {
         match *t {
             Thing::Tumbling(x0, y0, x1, y1, snr, ref pieces) => {
-                // The sum of uniform pieces, each blurred at its ends as a whole streak is.
-                let (dx, dy) = (x1 - x0, y1 - y0);
-                let len = (dx * dx + dy * dy).sqrt();
-                let (ux, uy) = (dx / len, dy / len);
-                let k = 1.0 / (2f64.sqrt() * sg);
-                for y in 0..h {
-                    for x in 0..w {
-                        let (px, py) = (x as f64 - x0, y as f64 - y0);
-                        let t = px * ux + py * uy;
-                        let d = -px * uy + py * ux;
-                        if d.abs() > 8.0 || t < -8.0 || t > len + 8.0 {
-                            continue;
-                        }
-                        let along: f64 = pieces
-                            .iter()
-                            .map(|&(a, b, m)| {
-                                m * 0.5 * (erf((t - a * len) * k) - erf((t - b * len) * k))
-                            })
-                            .sum();
-                        v[(y * w + x) as usize] +=
-                            snr * NOISE * (-d * d / (2.0 * sg * sg)).exp() * along;
-                    }
-                }
+                track(&mut v, (w, h), (x0, y0, x1, y1), snr, pieces)
             }
             Thing::Streak(x0, y0, x1, y1, snr) => {
-                let (dx, dy) = (x1 - x0, y1 - y0);
-                let len = (dx * dx + dy * dy).sqrt();
-                let (ux, uy) = (dx / len, dy / len);
-                let k = 1.0 / (2f64.sqrt() * sg);
-                for y in 0..h {
-                    for x in 0..w {
-                        let (px, py) = (x as f64 - x0, y as f64 - y0);
-                        let t = px * ux + py * uy;
-                        let d = -px * uy + py * ux;
-                        if d.abs() > 8.0 || t < -8.0 || t > len + 8.0 {
-                            continue;
-                        }
-                        let a = snr * NOISE;
-                        v[(y * w + x) as usize] += a
-                            * (-d * d / (2.0 * sg * sg)).exp()
-                            * 0.5
-                            * (erf(t * k) - erf((t - len) * k));
-                    }
-                }
+                track(&mut v, (w, h), (x0, y0, x1, y1), snr, &[(0.0, 1.0, 1.0)])
             }
             Thing::Star(sx, sy, snr) => {
                 for y in 0..h {
