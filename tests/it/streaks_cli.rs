@@ -5,7 +5,7 @@
 use crate::common;
 
 use common::formats::{parse_iod_line, parse_tdm, sattools_decode, trusat_format_test};
-use common::{gpustar, run_ok, run_records, truths};
+use common::{gpustar, run_records, truths};
 use gpustar::camera::Camera;
 use gpustar::io::frame::Frame;
 use nalgebra::Matrix3;
@@ -14,23 +14,7 @@ use std::path::{Path, PathBuf};
 
 /// Eight 512² frames of 12° with streaks, in `tmp/sim`.
 fn simulated(tmp: &Path) -> PathBuf {
-    let dir = tmp.join("sim");
-    let d = dir.to_str().unwrap();
-    run_ok(&[
-        "simulate",
-        "--streaks",
-        "--out",
-        d,
-        "-n",
-        "8",
-        "--size",
-        "512x512",
-        "--fov-deg",
-        "12",
-        "--mag-limit",
-        "7.5",
-    ]);
-    dir
+    common::simulated_streaks(tmp, 8)
 }
 
 /// `batch DIR --streaks --camera DIR/camera.toml` on `backend`.

@@ -4,7 +4,7 @@
 
 use crate::common;
 
-use common::{gpustar, run_ok, run_records};
+use common::{gpustar, run_records};
 use std::path::Path;
 
 /// One LEO object (checksums valid), nowhere near the simulated frames' streaks.
@@ -15,22 +15,8 @@ const TLE: &str = "ISS (ZARYA)\n\
 #[test]
 fn tle_runs_flag_uncorrelated_streaks_and_tracklets() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("sim");
+    let dir = common::simulated_streaks(tmp.path(), 4);
     let d = dir.to_str().unwrap();
-    run_ok(&[
-        "simulate",
-        "--streaks",
-        "--out",
-        d,
-        "-n",
-        "4",
-        "--size",
-        "512x512",
-        "--fov-deg",
-        "12",
-        "--mag-limit",
-        "7.5",
-    ]);
     let tle = tmp.path().join("objects.tle");
     std::fs::write(&tle, TLE).unwrap();
     let (tdm, iod) = (tmp.path().join("out.tdm"), tmp.path().join("out.iod"));

@@ -3,7 +3,7 @@
 
 pub mod formats;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// `../shared` beside the project (real frames, Hipparcos-2), if present. A user's clone has
 /// none: the caller's test is then skipped with a printed reason. In CI (`CI=true`) a missing
@@ -357,6 +357,27 @@ pub fn run_ok(args: &[&str]) -> std::process::Output {
         String::from_utf8_lossy(&out.stderr)
     );
     out
+}
+
+/// `n` 512² frames of 12° with streaks (`simulate --streaks`, stars to 7.5), in `tmp/sim`.
+pub fn simulated_streaks(tmp: &Path, n: usize) -> PathBuf {
+    let dir = tmp.join("sim");
+    let n = n.to_string();
+    run_ok(&[
+        "simulate",
+        "--streaks",
+        "--out",
+        dir.to_str().unwrap(),
+        "-n",
+        &n,
+        "--size",
+        "512x512",
+        "--fov-deg",
+        "12",
+        "--mag-limit",
+        "7.5",
+    ]);
+    dir
 }
 
 /// `gpustar simulate --out DIR ARGS…`, which must succeed.
