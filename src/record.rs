@@ -123,6 +123,34 @@ pub struct StreakRecord {
 }
 
 impl StreakRecord {
+    /// A streak of the streak modules' tests: these ends (and the other way along,
+    /// `reversed`), a nominal width, flux and SNR, nothing linked or named yet.
+    #[cfg(test)]
+    pub(crate) fn for_tests(
+        ends: [StreakEnd; 2],
+        reversed: [StreakEnd; 2],
+        length_px: f64,
+        exposure_utc: Option<[String; 2]>,
+    ) -> StreakRecord {
+        StreakRecord {
+            ends,
+            direction_known: false,
+            mid: None,
+            length_px,
+            width_px: 3.0,
+            flux: 1e4,
+            snr: 50.0,
+            fit_rms_px: 0.2,
+            station: None,
+            tracklet: None,
+            tracklet_index: None,
+            satellite: None,
+            uncorrelated: None,
+            reversed: Some(Box::new(reversed)),
+            exposure_utc,
+        }
+    }
+
     /// Turn the streak the other way along (ends swapped, times kept); false when it cannot
     /// be (no reversed ends were made).
     pub fn reverse(&mut self) -> bool {

@@ -425,24 +425,13 @@ mod chain_tests {
         let streak = |shift: f64| {
             let (a, b) = (t0.add_seconds(shift), t1.add_seconds(shift));
             let (p0, p1) = (at(&a), at(&b));
-            StreakRecord {
-                // Written end first, as one frame may have it.
-                ends: [end(p1, &t0.iso()), end(p0, &t1.iso())],
-                direction_known: false,
-                mid: None,
-                length_px: 100.0,
-                width_px: 3.0,
-                flux: 1e4,
-                snr: 50.0,
-                fit_rms_px: 0.2,
-                station: None,
-                tracklet: None,
-                tracklet_index: None,
-                satellite: None,
-                uncorrelated: None,
-                reversed: Some(Box::new([end(p0, &t0.iso()), end(p1, &t1.iso())])),
-                exposure_utc: None,
-            }
+            // Written end first, as one frame may have it.
+            StreakRecord::for_tests(
+                [end(p1, &t0.iso()), end(p0, &t1.iso())],
+                [end(p0, &t0.iso()), end(p1, &t1.iso())],
+                100.0,
+                None,
+            )
         };
         let mut s = [streak(0.0), streak(20.0)];
         sky.identify(&mut s, &IdentifySettings::default());

@@ -284,23 +284,12 @@ mod tests {
             end(phi0, across, edge0, Some(times[1])),
         ];
         let (ends, reversed) = if swap { (rev, fwd) } else { (fwd, rev) };
-        StreakRecord {
-            length_px: (phi1 - phi0).abs().to_degrees() * 100.0,
+        StreakRecord::for_tests(
             ends,
-            direction_known: false,
-            mid: None,
-            width_px: 3.0,
-            flux: 1e4,
-            snr: 50.0,
-            fit_rms_px: 0.2,
-            station: None,
-            tracklet: None,
-            tracklet_index: None,
-            satellite: None,
-            uncorrelated: None,
-            reversed: Some(Box::new(reversed)),
-            exposure_utc: Some(times.map(str::to_string)),
-        }
+            reversed,
+            (phi1 - phi0).abs().to_degrees() * 100.0,
+            Some(times.map(str::to_string)),
+        )
     }
 
     fn frame(name: &str, streaks: Vec<StreakRecord>) -> Record {
