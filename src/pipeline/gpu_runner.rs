@@ -13,7 +13,7 @@ use crate::gpu::vote::{GpuTable, VoteJob};
 use crate::io::frame::Frame;
 use crate::record::{Record, Timing};
 use crate::solve::detect::{self, DetectSettings, Detection};
-use crate::solve::{Outcome, Prepared, Solution, Solver};
+use crate::solve::{Outcome, Solution, Solver};
 use crate::solve::{radial, scale_free};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use std::collections::HashMap;
@@ -411,15 +411,9 @@ impl GpuRunner {
         let Some(sf) = &solver.scale_free else {
             return Ok(());
         };
-        let lookups: Vec<(usize, scale_free::Lookup)> = detections
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
-            .filter_map(|(i, d)| {
-                let rounds = scale_free::rounds_for(d.len());
-                solver.scale_free_lookup(d, 0..rounds).map(|l| (i, l))
-            })
-            .collect();
+        let lookups = for_unsolved(detections, outcomes, |d| {
+            solver.scale_free_lookup(d, 0..scale_free::rounds_for(d.len()))
+        });
         if lookups.is_empty() {
             return Ok(());
         }
@@ -454,12 +448,7 @@ impl GpuRunner {
         outcomes: &mut [Outcome],
     ) -> Result<()> {
         for h in 0..solver.passes.len() {
-            let prepared: Vec<(usize, Prepared)> = detections
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
-                .filter_map(|(i, d)| solver.prepare(d, h).map(|p| (i, p)))
-                .collect();
+            let prepared = for_unsolved(detections, outcomes, |d| solver.prepare(d, h));
             if prepared.is_empty() {
                 continue;
             }
@@ -576,4 +565,19 @@ fn uploaded<K: std::hash::Hash + Eq, T>(
         Ok(t) => Ok(t),
         Err(e) => fail!(Gpu, "{e}"),
     }
+}
+
+/// What `f` makes of each frame not solved yet, with the frame's index (frames it makes
+/// nothing of left out).
+fn for_unsolved<T>(
+    detections: &[Vec<Detection>],
+    outcomes: &[Outcome],
+    f: impl Fn(&[Detection]) -> Option<T>,
+) -> Vec<(usize, T)> {
+    detections
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
+        .filter_map(|(i, d)| f(d).map(|t| (i, t)))
+        .collect()
 }
