@@ -209,7 +209,7 @@ class Solver:
     import`` made (default: the built-in Hipparcos-2, Hp <= 8). ``backend``: "auto", "gpu"
     or "cpu", as ``--backend``.
 
-    ``**options`` are the command line's, with ``_`` for ``-``: ``fov_tolerance``, ``fit``
+    ``**options`` are the command line's, with ``_`` for ``-``: ``fov_tolerance``, ``fov_walk``, ``fit``
     ("none", "scale", "distortion"), ``mag_limit``, ``epoch``, ``centroid`` ("ml", "cog"),
     ``method`` ("vote", "radial", "triangle"), ``detect_filter`` ("none", "binomial"),
     ``sigma``, ``vote_stars``, ``pair_tol_px``, ``scale_tol``, ``match_radius_px``,

@@ -93,6 +93,7 @@ struct Built {
 /// The options' names (with [`STREAK_OPTIONS`]), for the message that refuses any other.
 const OPTIONS: &[&str] = &[
     "fov_tolerance",
+    "fov_walk",
     "fit",
     "mag_limit",
     "epoch",
@@ -326,6 +327,7 @@ fn build(
         s.refine.fit = f;
     }
     s.scale_range = scale_range;
+    s.walk_wide = o.get::<bool>("fov_walk")?.unwrap_or(false);
     let mut solvers = Solvers::new(cat, s, camera);
     if let Some(h) = o.get::<String>("hint")? {
         solvers = solvers.with_hints(gpustar::sky::hint::parse_hint(&h).map_err(py_err)?);

@@ -141,6 +141,11 @@ pub struct CameraOpts {
     /// the scale within it and fit it.
     #[arg(long)]
     pub fov_tolerance: Option<f64>,
+    /// With a searched field wider than ±5 % (`--fov-deg LOW..HIGH`): a frame the scale-free
+    /// pass does not solve is also voted at every 0.1 % step of the scale (seconds to a minute
+    /// a frame, off by default; see docs/speed.md, "The end of the walk").
+    #[arg(long)]
+    pub fov_walk: bool,
     /// What refinement fits besides the attitude: nothing, the scale (field of view), or the
     /// scale and radial distortion k1 (reported as distortion_k1).
     #[arg(long, value_enum, default_value_t = CameraFit::None)]

@@ -75,6 +75,7 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
     };
     let s = Settings {
         scale_range,
+        walk_wide: c.fov_walk,
         ..settings(o, camera_mag)
     };
     writeln!(
@@ -168,6 +169,22 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
             radial.ring_rad.to_degrees() * 3600.0,
             radial.radius_rad.to_degrees(),
             t0.elapsed().as_secs_f64() * 1e3
+        )?;
+    }
+    if let Some(sf) = &solver.scale_free {
+        writeln!(
+            out,
+            "pattern index (the scale-free pass, first): {} quads of {} levels, {} in {:.1} ms",
+            sf.index.keys.len(),
+            sf.index.levels.len(),
+            if sf.built { "built" } else { "read from cache" },
+            sf.seconds * 1e3
+        )?;
+    }
+    if solver.passes.is_empty() {
+        writeln!(
+            out,
+            "scale walk: off (the searched range is wider than ±5 %; --fov-walk walks it)"
         )?;
     }
     print_all(&out)

@@ -98,6 +98,7 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
     s.refine.max_false_prob = o.max_false_prob;
     s.refine.fit = o.camera.fit;
     s.scale_range = scale_range;
+    s.walk_wide = o.camera.fov_walk;
     let so = &o.streaks;
     // Read before the run, so that a bad file stops it before any frame is done.
     let tle = match &so.tle {

@@ -430,9 +430,9 @@ impl GpuRunner {
         for (i, l) in &lookups {
             let own = &rows[at..at + l.queries.len()];
             at += l.queries.len();
-            if let Some(o) = solver.finish_scale_free(&detections[*i], l, own, epochs[*i]) {
-                outcomes[*i] = o;
-            }
+            outcomes[*i] = solver
+                .finish_scale_free(&detections[*i], l, own, epochs[*i])
+                .unwrap_or_else(|| solver.unsolved_before_walk(&detections[*i]));
         }
         Ok(())
     }

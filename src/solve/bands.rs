@@ -286,6 +286,13 @@ pub const SCALE_STEP: f64 = 0.001;
 /// of the time: 26 s instead of 45 s with `--fov-deg 10..30`, 6.5 s instead of 11.5 s with `16..20`.
 pub const WIDE_SCALE_STEP: f64 = 0.01;
 
+/// The widest searched scale (`hi / lo` of the focal-length range, here ±5 %: about 100 steps
+/// of [`SCALE_STEP`]) that is walked, scale by scale, when the scale-free pass does not solve
+/// a frame. A wider one (`--fov-deg LOW..HIGH`) is walked only when asked (`--fov-walk`): the
+/// walk of 8..20° takes 7 s to a minute a frame, and on the frames of docs/speed.md ("The end
+/// of the walk") it solved none that the pass had not.
+pub const WALK_MAX_RATIO: f64 = 1.05 / 0.95;
+
 /// The focal-length factors covering [lo, hi] at most `step` apart (relative), from the one
 /// nearest 1 outward.
 pub fn scale_hypotheses(lo: f64, hi: f64, step: f64) -> Vec<f64> {
@@ -422,6 +429,42 @@ pub fn scaled(camera: &Camera, factor: f64) -> Camera {
 mod tests {
     use super::*;
     use crate::catalog::DoubleStars;
+    use crate::solve::Settings;
+    use crate::solve::radial::Method;
+
+    /// The walk runs for a known scale and a range within ±5 %, not for a wider one unless
+    /// asked, and always without the scale-free pass.
+    #[test]
+    fn only_narrow_ranges_are_walked_after_the_scale_free_pass() {
+        let at = |range: Option<(f64, f64)>| Settings {
+            scale_range: range,
+            ..Settings::default()
+        };
+        assert!(at(None).walks());
+        assert!(at(Some((0.99, 1.01))).walks());
+        assert!(at(Some((0.951, 1.049))).walks());
+        let wide = at(Some((0.8, 1.25)));
+        assert!(!wide.walks());
+        assert!(
+            Settings {
+                walk_wide: true,
+                ..wide
+            }
+            .walks()
+        );
+        for off in [
+            Settings {
+                scale_free: false,
+                ..wide
+            },
+            Settings {
+                method: Method::Radial,
+                ..wide
+            },
+        ] {
+            assert!(off.walks());
+        }
+    }
 
     /// One selection serves frames of every date: moved to each frame's day, the same day's
     /// frames share it, and only a few days are kept.

@@ -48,6 +48,9 @@ pub fn regional_solver(
         sky_sr: 2.0 * std::f64::consts::PI * (1.0 - radius.min(std::f64::consts::PI).cos()),
         searches: 2,
         table_cache: false,
+        // A known scale's region is voted alone: its pattern index would be built for every
+        // hint, and the region's vote is quick.
+        scale_free: settings.scale_free && settings.scale_range.is_some(),
         ..*settings
     };
     Solver::new(&region, camera.clone(), s)

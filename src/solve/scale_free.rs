@@ -42,6 +42,32 @@ pub const ROUND_STARS: [usize; 4] = [10, 15, 20, 30];
 /// its 10 stars, would go on to the walk (seconds) to be solved there.
 pub const SCALE_FREE_SHARE: u64 = 2;
 
+/// With a known scale the pass comes first as well, for its speed: the quads of an easy frame's
+/// brightest stars are looked up in microseconds where the vote scans thousands of table rows
+/// per pair. There the vote is the stronger identifier on frames of few stars, and today's
+/// verdicts should stand: the pass takes only `1 / KNOWN_SCALE_SHARE` of the budget, so a
+/// vote's verdict moves only where its false-match probability lay within 0.0015 % of the
+/// bound. On 1,400 simulated frames the pass still took 96 % of the frames it took with 1/64
+/// (a share which had lost a sparse 10° frame, 0.5 % from the bound); the others go on to
+/// the vote.
+pub const KNOWN_SCALE_SHARE: u64 = 1 << 16;
+
+/// With a known scale, a solution of the pass must match at least this share of the stars it
+/// could (the fewer of the catalog stars in view and the detections); one that passes the test
+/// with fewer is not an easy frame, and the pass leaves it to the vote and its retries. On 18°
+/// frames with 1.5 px of centroid noise the pass had accepted solutions matching 8 of 27 stars
+/// (the default match radius misses most): identities right, attitudes 0.1° off in roll, where
+/// the wide retry matches 29. Clean frames' solutions match 55 % or more (docs/speed.md).
+pub const KNOWN_SCALE_MIN_COMPLETENESS: f64 = 0.5;
+
+/// How a round of the pass ended.
+enum RoundEnd {
+    Solved(Box<Outcome>),
+    /// A solution passed the test but matched too few stars: the frame is left to the vote.
+    LeftToVote,
+    Nothing,
+}
+
 /// Queries (key bins) one image quad may take; a quad whose ratios are vaguer is not looked up.
 pub const MAX_QUERIES: usize = 32;
 
@@ -70,7 +96,7 @@ impl ScaleFree {
         bands: &[Band],
         band: usize,
     ) -> ScaleFree {
-        let range = settings.scale_range.expect("a searched scale");
+        let range = settings.scale_range.unwrap_or((1.0, 1.0));
         let levels = patterns::levels_for(short_side(camera, range.1), short_side(camera, range.0));
         let (index, built, seconds) = patterns::load_or_build(
             &bands[band].refs,
@@ -259,7 +285,24 @@ fn permutations() -> Vec<[usize; 4]> {
 const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
 
 impl Solver {
-    /// The scale-free pass (a searched scale only) round by round: a round's lookup only when
+    /// The share of the false-match budget the scale-free pass takes is `1 / share`; None
+    /// without the pass.
+    pub fn scale_free_share(&self) -> Option<u64> {
+        self.scale_free.as_ref()?;
+        Some(if self.settings.scale_range.is_some() {
+            SCALE_FREE_SHARE
+        } else {
+            KNOWN_SCALE_SHARE
+        })
+    }
+
+    /// The focal-length factors the pass looks quads up for: the searched range, or the
+    /// camera's own (1, 1).
+    fn pattern_range(&self) -> (f64, f64) {
+        self.settings.scale_range.unwrap_or((1.0, 1.0))
+    }
+
+    /// The scale-free pass round by round: a round's lookup only when
     /// the ones before it did not solve (the GPU looks them all up at once; the records are
     /// the same). The outcome when it solved.
     pub fn identify_scale_free(
@@ -279,9 +322,13 @@ impl Solver {
     }
 
     /// Whether a frame goes through the scale-free pass on both detection stages before any
-    /// scale walk ([`Solver::solve_frame_scale_free_first`]).
+    /// scale walk ([`Solver::solve_frame_scale_free_first`]): with a searched scale, whose walk
+    /// takes seconds. A known scale's passes take milliseconds: each detection stage has the
+    /// pass and then the vote, as `solve_frame_with` runs them.
     pub fn scale_free_first(&self) -> bool {
-        self.scale_free.is_some() && self.detection_stages() > 1
+        self.scale_free.is_some()
+            && self.settings.scale_range.is_some()
+            && self.detection_stages() > 1
     }
 
     /// Detect with this solver's settings and identify with `id`, the scale-free pass first on
@@ -349,7 +396,7 @@ impl Solver {
         rounds: std::ops::Range<usize>,
     ) -> Option<Lookup> {
         self.scale_free.as_ref()?;
-        let range = self.settings.scale_range?;
+        let range = self.pattern_range();
         if detections.len() < 4 {
             return None;
         }
@@ -380,8 +427,10 @@ impl Solver {
             if quads.peek().is_none() {
                 continue;
             }
-            if let Some(o) = self.scale_free_round(detections, quads, rows, rounds, epoch, &perms) {
-                return Some(o);
+            match self.scale_free_round(detections, quads, rows, rounds, epoch, &perms) {
+                RoundEnd::Solved(o) => return Some(*o),
+                RoundEnd::LeftToVote => return None,
+                RoundEnd::Nothing => {}
             }
         }
         None
@@ -397,9 +446,11 @@ impl Solver {
         rounds: usize,
         epoch: Option<f64>,
         perms: &[[usize; 4]],
-    ) -> Option<Outcome> {
-        let sf = self.scale_free.as_ref()?;
-        let (lo, hi) = self.settings.scale_range?;
+    ) -> RoundEnd {
+        let (Some(sf), Some(share)) = (self.scale_free.as_ref(), self.scale_free_share()) else {
+            return RoundEnd::Nothing;
+        };
+        let (lo, hi) = self.pattern_range();
         let refs = &self.bands[sf.band].refs;
         let mut hyps: Vec<Hypothesis> = Vec::new();
         for quad in quads.clone() {
@@ -435,12 +486,12 @@ impl Solver {
             hyps.len()
         );
         if hyps.is_empty() {
-            return None;
+            return RoundEnd::Nothing;
         }
         // Every hypothesis of the round, times its rounds, judged against the pass's share of
         // the budget (of each search and detection stage of the frame, as the vote's are).
         let hypotheses = (hyps.len() as u64).saturating_mul(
-            rounds as u64 * SCALE_FREE_SHARE * self.settings.searches * self.detection_stages(),
+            rounds as u64 * share * self.settings.searches * self.detection_stages(),
         );
         for h in hyps.iter().take(MAX_REFINED) {
             let p = self.scale_free_prepared(h.scale);
@@ -460,20 +511,38 @@ impl Solver {
                 refined.false_match_prob
             );
             if refined.false_match_prob <= self.settings.refine.max_false_prob {
-                return Some(self.conclude(detections, &p, (refined, hypotheses, 4), epoch));
+                let could = refined.in_view.min(detections.len());
+                if self.settings.scale_range.is_none()
+                    && (refined.matches.len() as f64) < KNOWN_SCALE_MIN_COMPLETENESS * could as f64
+                {
+                    tracing::debug!(
+                        "scale-free: {} of {could} stars matched, left to the vote",
+                        refined.matches.len()
+                    );
+                    return RoundEnd::LeftToVote;
+                }
+                return RoundEnd::Solved(Box::new(self.conclude(
+                    detections,
+                    &p,
+                    (refined, hypotheses, 4),
+                    epoch,
+                )));
             }
         }
-        None
+        RoundEnd::Nothing
     }
 
     /// The pass settings at a quad's focal length, as the scale walk's at that scale: its
-    /// band, the scale step's tolerance, the focal length fitted.
+    /// band, the scale step's tolerance, the focal length fitted (a searched scale), or the
+    /// vote's (a known one).
     fn scale_free_prepared(&self, scale: f64) -> Prepared {
         let mut s = self.settings.identify;
         let mut rs = self.settings.refine;
-        s.scale_tol += SCALE_STEP / 2.0;
-        if rs.fit == CameraFit::None {
-            rs.fit = CameraFit::Scale;
+        if self.settings.scale_range.is_some() {
+            s.scale_tol += SCALE_STEP / 2.0;
+            if rs.fit == CameraFit::None {
+                rs.fit = CameraFit::Scale;
+            }
         }
         Prepared {
             camera: scaled(&self.camera, scale),
@@ -549,6 +618,13 @@ impl Solver {
         if !(scale >= lo / margin && scale <= hi * margin) {
             return None;
         }
+        // A known scale is the camera's: the chords are checked at it, within the vote's
+        // tolerance, which holds the scale's own.
+        let scale = if self.settings.scale_range.is_some() {
+            scale
+        } else {
+            1.0
+        };
         let camera = scaled(&self.camera, scale);
         let img = at(scale);
         let s = &self.settings.identify;

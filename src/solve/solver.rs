@@ -10,8 +10,8 @@
 use super::attitude::wahba;
 use super::bands::{
     Band, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SCALE_STEP, SPREAD_TRIANGLE_STARS, STAGES,
-    WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, scale_bands, scale_hypotheses, scaled,
-    spread_order,
+    WALK_MAX_RATIO, WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, scale_bands,
+    scale_hypotheses, scaled, spread_order,
 };
 use super::detect::{self, DetectSettings, Detection};
 use super::identify::{self, IdentifySettings};
@@ -49,6 +49,9 @@ pub struct Settings {
     /// When the scale is searched, look the frame's star quads up in a pattern index first
     /// (`scale_free.rs`); the scale walk then takes only the frames that does not solve.
     pub scale_free: bool,
+    /// Walk a searched scale wider than [`WALK_MAX_RATIO`] too, when the scale-free pass does
+    /// not solve a frame (`--fov-walk`).
+    pub walk_wide: bool,
     /// Frames that do not solve are tried again: with more voting stars
     /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`](super::SPREAD_CELLS)), then
     /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
@@ -80,12 +83,31 @@ impl Default for Settings {
             table_cache: true,
             scale_range: None,
             scale_free: true,
+            walk_wide: false,
             retry: true,
             detect_retry: true,
             method: Method::Vote,
             sky_sr: FULL_SKY_SR,
             searches: 1,
         }
+    }
+}
+
+impl Settings {
+    /// Whether frames go through the scale-free pass first ([`super::scale_free`]).
+    pub fn scale_free_on(&self) -> bool {
+        self.scale_free && self.method == Method::Vote
+    }
+
+    /// Whether a frame the scale-free pass does not solve is voted scale by scale (the walk):
+    /// always without the pass; with it, where the scale is known or searched within
+    /// [`WALK_MAX_RATIO`], or where `walk_wide` asks.
+    pub fn walks(&self) -> bool {
+        !self.scale_free_on()
+            || self.walk_wide
+            || self
+                .scale_range
+                .is_none_or(|(lo, hi)| hi / lo <= WALK_MAX_RATIO)
     }
 }
 
@@ -101,7 +123,8 @@ pub struct Solver {
     /// (when `retry`) every scale with more voting stars, with voters spread over the frame,
     /// the shallow pass (when there is one), and with wide tolerances; all of these for each
     /// of the method's identifiers in turn (`--method radial`: radial features, then the
-    /// vote).
+    /// vote). None when the scale-free pass searches a scale wider than [`WALK_MAX_RATIO`]
+    /// alone (see [`Settings::walk_wide`]).
     pub passes: Vec<Pass>,
     /// When the scale is searched and the magnitude limit left to the solver: the catalog,
     /// to check each solution against as deep a selection as its fitted field calls for.
@@ -173,9 +196,7 @@ impl Solver {
         };
         // With a scale-free pass most frames never vote: the bands' tables are loaded when the
         // first frame does (the pattern index is about a fifth of their size).
-        let scale_free_on = settings.scale_range.is_some()
-            && settings.scale_free
-            && settings.method == Method::Vote;
+        let scale_free_on = settings.scale_free_on();
         let mut bands = edges
             .iter()
             .map(|&e| {
@@ -264,6 +285,7 @@ impl Solver {
             .iter()
             .flat_map(|&method| passes.iter().map(move |&p| Pass { method, ..p }))
             .collect();
+        let passes = if settings.walks() { passes } else { Vec::new() };
         let shallow_band = (bands.len() > main_bands).then_some(main_bands);
         let scale_free = if scale_free_on {
             // The quads name the stars of the narrowest field's band, the deepest.
@@ -299,6 +321,12 @@ impl Solver {
         let mut rs = self.settings.refine;
         if detections.len() < 3 {
             return None;
+        }
+        if self.settings.scale_range.is_none()
+            && let Some(share) = self.scale_free_share()
+        {
+            // A known scale's pass took 1 / share of the budget: the passes keep the rest.
+            rs.max_false_prob *= 1.0 - 1.0 / share as f64;
         }
         if pass.kind == PassKind::MoreStars {
             if detections.len() <= s.vote_stars || s.vote_stars >= RETRY_VOTE_STARS {
@@ -356,27 +384,18 @@ impl Solver {
     /// How many passes of identifier `method` a frame of `n` detections can be tried with:
     /// the retries with more voting stars and with voters spread over the frame need more
     /// detections than vote (`prepare` passes them over otherwise), so they add no hypothesis
-    /// to such a frame. With the scale-free pass, which takes half the false-match budget (see
-    /// [`SCALE_FREE_SHARE`](super::scale_free::SCALE_FREE_SHARE)), the passes count twice: they
-    /// share the other half.
+    /// to such a frame.
     pub fn passes_for(&self, n: usize, method: Method) -> usize {
         let vote = self.settings.identify.vote_stars;
-        let share = if self.scale_free.is_some() {
-            super::scale_free::SCALE_FREE_SHARE as usize
-        } else {
-            1
-        };
-        share
-            * self
-                .passes
-                .iter()
-                .filter(|p| p.method == method)
-                .filter(|p| match p.kind {
-                    PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
-                    PassKind::Spread => n > vote,
-                    _ => true,
-                })
-                .count()
+        self.passes
+            .iter()
+            .filter(|p| p.method == method)
+            .filter(|p| match p.kind {
+                PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
+                PassKind::Spread => n > vote,
+                _ => true,
+            })
+            .count()
     }
 
     /// What the false-match test multiplies the hypotheses of one stage of a pass of
@@ -386,17 +405,26 @@ impl Solver {
     /// back from them take half each), the identifier's passes, and the stages of a pass that
     /// can accept (the vote and its triangle fallback, see `STAGES`; radial features alone).
     /// So the chance that any of them accepts a wrong attitude stays within the whole. The
-    /// triangle method, the vote's fallback stage on its own, keeps that stage's share.
+    /// triangle method, the vote's fallback stage on its own, keeps that stage's share. With a
+    /// searched scale's scale-free pass, which takes half of the budget
+    /// ([`SCALE_FREE_SHARE`](super::scale_free::SCALE_FREE_SHARE)), the passes count twice:
+    /// they share the other half. (A known scale's pass takes a far smaller share, which
+    /// `prepare` takes off the passes' `max_false_prob` instead: as a count of hypotheses it
+    /// would be rounded.)
     pub fn hypothesis_factor(&self, n: usize, method: Method) -> u64 {
         let stages = match method {
             Method::Radial => 1,
             Method::Vote | Method::Triangle => STAGES,
         };
-        stages
+        let factor = stages
             * self.settings.method.identifiers().len() as u64
             * self.settings.searches
             * self.detection_stages()
-            * self.passes_for(n, method) as u64
+            * self.passes_for(n, method) as u64;
+        match self.settings.scale_range.and(self.scale_free_share()) {
+            Some(share) => factor * share / (share - 1),
+            None => factor,
+        }
     }
 
     /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
@@ -415,7 +443,7 @@ impl Solver {
     /// The passes of identification after the scale-free pass: the vote (or radial features,
     /// or triangles) at each scale of the walk.
     pub fn identify_walk(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-        let mut outcome = Outcome::Unsolved("too_few_stars");
+        let mut outcome = self.unsolved_before_walk(&detections);
         for h in 0..self.passes.len() {
             let Some(p) = self.prepare(&detections, h) else {
                 continue;
@@ -446,6 +474,16 @@ impl Solver {
             detections,
             outcome,
             epoch,
+        }
+    }
+
+    /// A frame's outcome before any pass of the walk: no consistent match when the scale-free
+    /// pass looked it up (four stars or more), too few stars otherwise.
+    pub fn unsolved_before_walk(&self, detections: &[Detection]) -> Outcome {
+        if self.scale_free.is_some() && detections.len() >= 4 {
+            Outcome::Unsolved("no_consistent_match")
+        } else {
+            Outcome::Unsolved("too_few_stars")
         }
     }
 
@@ -533,7 +571,6 @@ impl Solver {
             // Found against the shallow selection: the automatic one matches the fainter stars
             // too, judged by the same test.
             let main = self.bands[0].refs_at(epoch);
-            let s = &self.settings.refine;
             return match refine::refine(
                 refined.r,
                 detections,
@@ -544,7 +581,7 @@ impl Solver {
                 &p.refine,
             ) {
                 Some(r)
-                    if r.false_match_prob <= s.max_false_prob
+                    if r.false_match_prob <= p.refine.max_false_prob
                         && r.matches.len() >= refined.matches.len() =>
                 {
                     Outcome::Solved(r, main)
@@ -594,7 +631,7 @@ impl Solver {
             rs,
         )?;
         (refined.matches.len() >= accepted.matches.len()
-            && refined.false_match_prob <= self.settings.refine.max_false_prob)
+            && refined.false_match_prob <= rs.max_false_prob)
             .then_some((refined, refs))
     }
 
@@ -608,7 +645,6 @@ impl Solver {
         voted: &identify::VoteResult,
         refs: &RefCatalog,
     ) -> Result<(Refined, u64, usize), &'static str> {
-        let s = &self.settings;
         let vectors = &p.vectors;
         let n_vote = voted.candidates.len() / voted.k.max(1);
         let ids = identify::verify(
@@ -634,7 +670,7 @@ impl Solver {
             .saturating_mul(self.hypothesis_factor(detections.len(), p.method));
         let refined = refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
             .ok_or("no_consistent_match")?;
-        if refined.false_match_prob > s.refine.max_false_prob {
+        if refined.false_match_prob > p.refine.max_false_prob {
             tracing::debug!(
                 "low confidence: {} of {} catalog stars in view matched, false-match \
                  probability {:.2e} (scale {:.4})",
@@ -687,7 +723,7 @@ impl Solver {
             let r0 = wahba(&cam, &icrs)?;
             let refined =
                 refine::refine(r0, detections, refs, &p.camera, hypotheses, 3, &p.refine)?;
-            (refined.false_match_prob <= self.settings.refine.max_false_prob)
+            (refined.false_match_prob <= p.refine.max_false_prob)
                 .then_some((refined, hypotheses, 3))
         })
     }

@@ -130,6 +130,79 @@ fn unknown_fields_solve_in_the_scale_free_pass() {
     assert_eq!(solved, frames, "{solved} of {frames} solved");
 }
 
+/// With a known scale the pass comes first too: easy 15° frames solve in it, the camera kept
+/// as given (no focal length fitted), judged against the pass's 1/64 of the budget.
+#[test]
+fn known_fields_solve_in_the_pass_with_the_camera_given() {
+    let camera = Camera::from_fov(1024, 1024, 15.0).unwrap();
+    let settings = Settings {
+        mag_limit: Some(6.5),
+        table_cache: false,
+        ..Settings::default()
+    };
+    let solver = Solver::new(&Catalog::builtin(), camera.clone(), settings).unwrap();
+    let sf = solver
+        .scale_free
+        .as_ref()
+        .expect("a known scale has the pass");
+    assert_eq!(
+        solver.scale_free_share(),
+        Some(scale_free::KNOWN_SCALE_SHARE)
+    );
+    assert!(
+        !solver.passes.is_empty(),
+        "a known scale is voted after the pass"
+    );
+    let mut solved = 0;
+    let frames = common::rendered(&sim(15.0, 63), 4);
+    for (frame, truth) in &frames {
+        let dets = gpustar::solve::detect::detect(frame, &solver.settings.detect);
+        let lookup = solver
+            .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
+            .unwrap();
+        let rows = scale_free::rows_cpu(sf, &lookup);
+        let Some(Outcome::Solved(r, _)) = solver.finish_scale_free(&dets, &lookup, &rows, None)
+        else {
+            continue;
+        };
+        let err = gpustar::solve::attitude::attitude_error(
+            &r.r,
+            &nalgebra::Matrix3::from_fn(|i, j| truth.rotation_matrix[i][j]),
+        );
+        assert!(err.to_degrees() * 3600.0 < 60.0, "{err} rad from the truth");
+        assert_eq!(r.camera.fx, camera.fx, "the focal length was fitted");
+        solved += 1;
+    }
+    assert_eq!(solved, frames.len(), "{solved} of {} solved", frames.len());
+}
+
+/// A range wider than ±5 % is not walked scale by scale (`--fov-walk` asks for it): a frame
+/// the pass cannot solve, eight stars at places no sky has, is unsolved after the pass and
+/// says why.
+#[test]
+fn a_wide_range_is_not_walked_after_the_pass() {
+    let solver = &*SOLVER;
+    assert!(solver.passes.is_empty(), "10..20° is walked");
+    // A regular grid: every quad's ratios are those of a few shapes, none a sky quad's.
+    let dets: Vec<gpustar::solve::detect::Detection> = (0..8)
+        .map(|i| gpustar::solve::detect::Detection {
+            x: 100.0 + 250.0 * (i % 4) as f64,
+            y: 300.0 + 400.0 * (i / 4) as f64,
+            flux: 1000.0 - i as f64,
+            area: 9,
+            peak: 500,
+            saturated: false,
+            sigma_px: None,
+        })
+        .collect();
+    let sol = solver.identify(dets, None);
+    assert!(
+        matches!(sol.outcome, Outcome::Unsolved("no_consistent_match")),
+        "{:?}",
+        sol.outcome
+    );
+}
+
 #[test]
 fn unknown_fields_give_the_same_records_on_both_backends() {
     let Some(g) = common::gpu("unknown_fields_give_the_same_records_on_both_backends") else {
