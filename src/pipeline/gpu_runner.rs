@@ -13,8 +13,8 @@ use crate::gpu::vote::{GpuTable, VoteJob};
 use crate::io::frame::Frame;
 use crate::record::{Record, Timing};
 use crate::solve::detect::{self, DetectSettings, Detection};
+use crate::solve::radial;
 use crate::solve::{Outcome, Solution, Solver};
-use crate::solve::{radial, scale_free};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -412,7 +412,7 @@ impl GpuRunner {
             return Ok(());
         };
         let lookups = for_unsolved(detections, outcomes, |d| {
-            solver.scale_free_lookup(d, 0..scale_free::rounds_for(d.len()))
+            solver.scale_free_lookup(d, 0..solver.scale_free_rounds(d.len()))
         });
         if lookups.is_empty() {
             return Ok(());

@@ -75,6 +75,18 @@ pub const MAX_QUERIES: usize = 32;
 /// the false-match test counts them all.
 pub const MAX_REFINED: usize = 100;
 
+/// With a known scale, at most this many quad hypotheses are refined per frame, over all
+/// rounds: an easy frame's first quads are right, and one whose first are not (false stars
+/// among the brightest) is the vote's. Refining up to [`MAX_REFINED`] a round had cost 18° frames
+/// with 25 false stars 20 ms each before the vote solved them in 4.
+pub const KNOWN_SCALE_MAX_REFINED: usize = 8;
+
+/// With a known scale the pass has only its first round (the brightest [`ROUND_STARS`]`[0]`
+/// detections' quads): the later rounds are for false stars that outshine the real ones,
+/// which the vote's retries handle at a known scale in milliseconds, and they had cost those
+/// frames 20 ms each.
+pub const KNOWN_SCALE_ROUNDS: usize = 2;
+
 /// A solver's pattern index and the band whose reference stars its quads name.
 pub struct ScaleFree {
     pub index: PatternIndex,
@@ -296,6 +308,16 @@ impl Solver {
         })
     }
 
+    /// The rounds of the pass for a frame of `n` detections (see [`rounds_for`],
+    /// [`KNOWN_SCALE_ROUNDS`]).
+    pub fn scale_free_rounds(&self, n: usize) -> usize {
+        if self.settings.scale_range.is_some() {
+            rounds_for(n)
+        } else {
+            rounds_for(n).min(KNOWN_SCALE_ROUNDS)
+        }
+    }
+
     /// The focal-length factors the pass looks quads up for: the searched range, or the
     /// camera's own (1, 1).
     fn pattern_range(&self) -> (f64, f64) {
@@ -311,7 +333,7 @@ impl Solver {
         epoch: Option<f64>,
     ) -> Option<Outcome> {
         let sf = self.scale_free.as_ref()?;
-        for round in 0..rounds_for(detections.len()) {
+        for round in 0..self.scale_free_rounds(detections.len()) {
             let lookup = self.scale_free_lookup(detections, round..round + 1)?;
             let rows = rows_cpu(sf, &lookup);
             if let Some(o) = self.finish_scale_free(detections, &lookup, &rows, epoch) {
@@ -421,13 +443,28 @@ impl Solver {
         epoch: Option<f64>,
     ) -> Option<Outcome> {
         let perms = permutations();
-        let rounds = rounds_for(detections.len());
+        let rounds = self.scale_free_rounds(detections.len());
+        let mut refinable = if self.settings.scale_range.is_some() {
+            usize::MAX
+        } else {
+            KNOWN_SCALE_MAX_REFINED
+        };
         for round in 0..rounds {
             let mut quads = lookup.quads.iter().filter(|q| q.round == round).peekable();
             if quads.peek().is_none() {
                 continue;
             }
-            match self.scale_free_round(detections, quads, rows, rounds, epoch, &perms) {
+            if refinable == 0 {
+                break;
+            }
+            match self.scale_free_round(
+                detections,
+                quads,
+                rows,
+                (rounds, &mut refinable),
+                epoch,
+                &perms,
+            ) {
                 RoundEnd::Solved(o) => return Some(*o),
                 RoundEnd::LeftToVote => return None,
                 RoundEnd::Nothing => {}
@@ -437,13 +474,14 @@ impl Solver {
     }
 
     /// One round of the pass: its quads' hypotheses that pass the geometric checks, judged
-    /// against the round's share of the false-match budget.
+    /// against the round's share of the false-match budget; at most `refinable` of them
+    /// refined (and counted off it), of the frame's `rounds`.
     fn scale_free_round<'a>(
         &self,
         detections: &[Detection],
         quads: impl Iterator<Item = &'a Quad> + Clone,
         rows: &[Rows],
-        rounds: usize,
+        (rounds, refinable): (usize, &mut usize),
         epoch: Option<f64>,
         perms: &[[usize; 4]],
     ) -> RoundEnd {
@@ -493,7 +531,8 @@ impl Solver {
         let hypotheses = (hyps.len() as u64).saturating_mul(
             rounds as u64 * share * self.settings.searches * self.detection_stages(),
         );
-        for h in hyps.iter().take(MAX_REFINED) {
+        for h in hyps.iter().take(MAX_REFINED.min(*refinable)) {
+            *refinable -= 1;
             let p = self.scale_free_prepared(h.scale);
             let refs = self.bands[p.band].refs_at(epoch);
             let Some(refined) =

@@ -62,7 +62,7 @@ fn pattern_gpu_matches_cpu() {
             let dets = gpustar::solve::detect::detect(&frame, &solver.settings.detect);
             queries.extend(
                 solver
-                    .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
+                    .scale_free_lookup(&dets, 0..solver.scale_free_rounds(dets.len()))
                     .unwrap()
                     .queries,
             );
@@ -102,7 +102,7 @@ fn unknown_fields_solve_in_the_scale_free_pass() {
             frames += 1;
             let dets = gpustar::solve::detect::detect(&frame, &solver.settings.detect);
             let lookup = solver
-                .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
+                .scale_free_lookup(&dets, 0..solver.scale_free_rounds(dets.len()))
                 .unwrap();
             let rows = scale_free::rows_cpu(sf, &lookup);
             let Some(Outcome::Solved(r, _)) = solver.finish_scale_free(&dets, &lookup, &rows, None)
@@ -158,7 +158,7 @@ fn known_fields_solve_in_the_pass_with_the_camera_given() {
     for (frame, truth) in &frames {
         let dets = gpustar::solve::detect::detect(frame, &solver.settings.detect);
         let lookup = solver
-            .scale_free_lookup(&dets, 0..scale_free::rounds_for(dets.len()))
+            .scale_free_lookup(&dets, 0..solver.scale_free_rounds(dets.len()))
             .unwrap();
         let rows = scale_free::rows_cpu(sf, &lookup);
         let Some(Outcome::Solved(r, _)) = solver.finish_scale_free(&dets, &lookup, &rows, None)
