@@ -627,6 +627,18 @@ impl Solver {
         // The image's chords at the camera's own focal length, and the scale that brings
         // their sum to the catalog's.
         let k = sum_cat / img1.iter().sum::<f64>();
+        // Image chords shrink about as the focal length grows: from 1 / k, a few fixed-point
+        // steps. The sums do not depend on the order of the stars: most catalog quads of a
+        // key are of another size, and are refused here before their order is sought.
+        let mut scale = 1.0 / k;
+        for _ in 0..3 {
+            let sum_img: f64 = patterns::chords(&at(scale)).iter().sum();
+            scale *= sum_img / sum_cat;
+        }
+        let margin = 1.0 + SCALE_STEP;
+        if !(scale >= lo / margin && scale <= hi * margin) {
+            return None;
+        }
         // The order of the catalog stars: the closest chords up to that scale factor (the
         // first of the least largest error; an order is left as soon as its error reaches the
         // best's, since it cannot then be chosen).
@@ -646,17 +658,6 @@ impl Solver {
         let cat = p.map(|i| cat[i]);
         let refs_in_order = p.map(|i| ids[i]);
         let cat_chords = patterns::chords(&cat);
-        // Image chords shrink about as the focal length grows: from 1 / k, a few fixed-point
-        // steps.
-        let mut scale = 1.0 / k;
-        for _ in 0..3 {
-            let sum_img: f64 = patterns::chords(&at(scale)).iter().sum();
-            scale *= sum_img / sum_cat;
-        }
-        let margin = 1.0 + SCALE_STEP;
-        if !(scale >= lo / margin && scale <= hi * margin) {
-            return None;
-        }
         // A known scale is the camera's: the chords are checked at it, within the vote's
         // tolerance, which holds the scale's own.
         let scale = if self.settings.scale_range.is_some() {
