@@ -347,6 +347,26 @@ pub(crate) fn read_cache(
     key: u64,
     heads: usize,
 ) -> Result<(Vec<u64>, Vec<u32>)> {
+    let (head, buf) = read_cache_bytes(path, magic, key, heads)?;
+    Ok((head, words(&buf[16 + 8 * heads..buf.len() - 4])))
+}
+
+/// Little-endian words of `bytes` (a multiple of 4 long).
+fn words(bytes: &[u8]) -> Vec<u32> {
+    bytes
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
+        .collect()
+}
+
+/// [`read_cache`] before the body is made words: the head values and the whole file, checked
+/// (a table's body goes straight into its three vectors: a copy fewer of tens of MB).
+fn read_cache_bytes(
+    path: &Path,
+    magic: &[u8; 8],
+    key: u64,
+    heads: usize,
+) -> Result<(Vec<u64>, Vec<u8>)> {
     let buf = std::fs::read(path)?;
     let fixed = 16 + 8 * heads;
     if buf.len() < fixed + 4 || !(buf.len() - fixed - 4).is_multiple_of(4) {
@@ -367,30 +387,33 @@ pub(crate) fn read_cache(
         );
     }
     let head = (0..heads).map(|i| u64_at(16 + 8 * i)).collect();
-    let body = data[fixed..]
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
-        .collect();
-    Ok((head, body))
+    Ok((head, buf))
 }
 
 /// The table of a cache file, checked whole: the checksum, then every bound the range
 /// queries and the GPU rely on (a file that passes cannot make a frame fail).
 fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<PairTable> {
-    let (head, words) = read_cache(path, MAGIC, key, 4)?;
+    let (head, buf) = read_cache_bytes(path, MAGIC, key, 4)?;
+    let body = &buf[16 + 8 * 4..buf.len() - 4];
     let (rows, kvlen) = (head[0] as usize, head[1] as usize);
-    if words.len() != 3 * rows + kvlen {
+    if body.len() / 4 != rows.saturating_mul(3).saturating_add(kvlen) {
         fail!(
             Catalog,
             "{} words where {rows} rows and a k-vector of {kvlen} need {}",
-            words.len(),
-            3 * rows + kvlen
+            body.len() / 4,
+            rows.saturating_mul(3).saturating_add(kvlen)
         );
     }
     let t = PairTable {
-        keys: words[..rows].to_vec(),
-        pairs: bytemuck::cast_slice(&words[rows..3 * rows]).to_vec(),
-        kvector: words[3 * rows..].to_vec(),
+        keys: words(&body[..4 * rows]),
+        pairs: body[4 * rows..12 * rows]
+            .chunks_exact(8)
+            .map(|c| {
+                let w = |i: usize| u32::from_le_bytes(c[i..i + 4].try_into().expect("4 bytes"));
+                [w(0), w(4)]
+            })
+            .collect(),
+        kvector: words(&body[12 * rows..]),
         shift: u32::try_from(head[2]).into_kind(Error::Catalog)?,
         max_sep_rad,
         max_key: u32::try_from(head[3]).into_kind(Error::Catalog)?,
