@@ -5,7 +5,13 @@
 //! length (its chords against the image's) and an attitude (Wahba on its four stars); the
 //! first that refinement accepts, with the false-match test counting every quad hypothesis of
 //! the frame, is the solution. A frame it does not solve goes on to the scale walk (the vote
-//! at each scale), which stays the identifier for known scales.
+//! at each scale) where the range is within ±5 % (or `--fov-walk` asks); a wider range's frame
+//! is left unsolved (docs/speed.md, "The end of the walk").
+//!
+//! A known scale goes through the pass first too, as a shortcut for easy frames: its own small
+//! share of the budget, its first two rounds, a few refinements, and a solution that matches
+//! at least half the stars it could (see [`KNOWN_SCALE_SHARE`] and the constants after it);
+//! every other frame goes on to the vote, which stays the identifier for known scales.
 //!
 //! Frame side: the image quads' keys come from the stars' directions under the shortest and
 //! longest focal lengths of the range; the true ratios lie between (they change with the focal

@@ -2,8 +2,8 @@
 //! refine → accept, producing one result record.
 //!
 //! Scale bands and passes are in `bands.rs`, the automatic magnitude limits in `mag_limit.rs`,
-//! the record of a solution in `report.rs`, the scale-free pass of a searched scale in
-//! `scale_free.rs`. About 770 lines: the passes of one frame (vote, triangles, radial, the
+//! the record of a solution in `report.rs`, the scale-free pass (first, at any scale) in
+//! `scale_free.rs`. About 810 lines: the passes of one frame (vote, triangles, radial, the
 //! deeper check) share the `Prepared` state and the false-match budget, and the `Solver`'s
 //! construction (bands, shallow pass, pattern index) is one piece.
 
@@ -46,8 +46,8 @@ pub struct Settings {
     /// When the scale is uncertain: the range of the true focal length relative to the
     /// camera's, (lower, upper). The solver tries scales across it.
     pub scale_range: Option<(f64, f64)>,
-    /// When the scale is searched, look the frame's star quads up in a pattern index first
-    /// (`scale_free.rs`); the scale walk then takes only the frames that does not solve.
+    /// Look the frame's star quads up in a pattern index first (`scale_free.rs`; the vote
+    /// only): the passes then take only the frames that does not solve.
     pub scale_free: bool,
     /// Walk a searched scale wider than [`WALK_MAX_RATIO`] too, when the scale-free pass does
     /// not solve a frame (`--fov-walk`).
@@ -123,8 +123,8 @@ pub struct Solver {
     /// (when `retry`) every scale with more voting stars, with voters spread over the frame,
     /// the shallow pass (when there is one), and with wide tolerances; all of these for each
     /// of the method's identifiers in turn (`--method radial`: radial features, then the
-    /// vote). None when the scale-free pass searches a scale wider than [`WALK_MAX_RATIO`]
-    /// alone (see [`Settings::walk_wide`]).
+    /// vote). Empty when the scale-free pass searches a scale wider than [`WALK_MAX_RATIO`]
+    /// alone (see [`Settings::walks`]).
     pub passes: Vec<Pass>,
     /// When the scale is searched and the magnitude limit left to the solver: the catalog,
     /// to check each solution against as deep a selection as its fitted field calls for.
