@@ -87,10 +87,10 @@ pub const MAX_REFINED: usize = 100;
 /// with 25 false stars 20 ms each before the vote solved them in 4.
 pub const KNOWN_SCALE_MAX_REFINED: usize = 8;
 
-/// With a known scale the pass has only its first round (the brightest [`ROUND_STARS`]`[0]`
-/// detections' quads): the later rounds are for false stars that outshine the real ones,
-/// which the vote's retries handle at a known scale in milliseconds, and they had cost those
-/// frames 20 ms each.
+/// With a known scale the pass has only its first two rounds (the quads of the brightest
+/// [`ROUND_STARS`]`[1]` detections): the later rounds are for false stars that outshine the
+/// real ones, which the vote's retries handle at a known scale in milliseconds, and they had
+/// cost those frames 20 ms each.
 pub const KNOWN_SCALE_ROUNDS: usize = 2;
 
 /// A solver's pattern index and the band whose reference stars its quads name.
