@@ -10,7 +10,7 @@
 //!
 //! A known scale goes through the pass first too, as a shortcut for easy frames: its own small
 //! share of the budget, its first two rounds, a few refinements, and a solution that matches
-//! at least half the stars it could (see [`KNOWN_SCALE_SHARE`] and the constants after it);
+//! at least half the stars it could (see [`PassLimits`]);
 //! every other frame goes on to the vote, which stays the identifier for known scales.
 //!
 //! Frame side: the image quads' keys come from the stars' directions under the shortest and
@@ -24,14 +24,18 @@ use super::bands::{SCALE_STEP, scaled};
 use super::detect::{self, Detection};
 use super::refine::{self, CameraFit};
 use super::{Outcome, Prepared, Settings, Solution, Solver};
-use crate::camera::{Camera, angle};
+use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::catalog::patterns::{self, BINS, PatternIndex};
 use crate::cpu::pattern::{Buckets, Rows};
 use crate::io::frame::Frame;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use std::sync::OnceLock;
 use std::time::Instant;
+
+mod check;
+pub use check::Hypothesis;
+use check::permutations;
 
 /// The rounds of the pass: round r looks up the quads of the brightest `ROUND_STARS[r]`
 /// detections not looked up before (210, then 1155, 3480 and 22,560 more). False stars (satellites,
@@ -93,10 +97,56 @@ pub const KNOWN_SCALE_MAX_REFINED: usize = 8;
 /// cost those frames 20 ms each.
 pub const KNOWN_SCALE_ROUNDS: usize = 2;
 
+/// What the pass may spend and accept: chosen once, for a searched scale (the pass stands for a
+/// walk of seconds) or a known one (a shortcut before the vote).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PassLimits {
+    /// The pass takes `1 / share` of the false-match budget; the passes after it, the rest.
+    pub share: u64,
+    /// How the passes after it keep the rest: their hypotheses counted `share / (share − 1)`
+    /// times (exact for half), or their `max_false_prob` scaled by `1 − 1 / share` (a count
+    /// would be rounded up, by 5 % for a frame of few passes).
+    pub rest_by_count: bool,
+    /// Rounds at most (see [`ROUND_STARS`]).
+    pub rounds: usize,
+    /// Quad hypotheses refined per frame at most, over all rounds.
+    pub max_refined: usize,
+    /// A solution must match at least this share of the stars it could (the fewer of the
+    /// catalog stars in view and the detections), or the frame is left to the vote.
+    pub min_completeness: f64,
+}
+
+impl PassLimits {
+    pub const SEARCHED: PassLimits = PassLimits {
+        share: SCALE_FREE_SHARE,
+        rest_by_count: true,
+        rounds: ROUND_STARS.len(),
+        max_refined: usize::MAX,
+        min_completeness: 0.0,
+    };
+    pub const KNOWN: PassLimits = PassLimits {
+        share: KNOWN_SCALE_SHARE,
+        rest_by_count: false,
+        rounds: KNOWN_SCALE_ROUNDS,
+        max_refined: KNOWN_SCALE_MAX_REFINED,
+        min_completeness: KNOWN_SCALE_MIN_COMPLETENESS,
+    };
+
+    /// The limits for `settings`' scale: searched or known.
+    pub fn for_settings(settings: &Settings) -> PassLimits {
+        if settings.scale_range.is_some() {
+            PassLimits::SEARCHED
+        } else {
+            PassLimits::KNOWN
+        }
+    }
+}
+
 /// A solver's pattern index and the band whose reference stars its quads name.
 pub struct ScaleFree {
     pub index: PatternIndex,
     pub band: usize,
+    pub limits: PassLimits,
     /// Built now (false: read from the cache), and the seconds that took.
     pub built: bool,
     pub seconds: f64,
@@ -105,8 +155,8 @@ pub struct ScaleFree {
 }
 
 impl ScaleFree {
-    /// The pattern index of a searched scale `settings.scale_range`, from the stars of
-    /// `bands[band]` (loaded from the cache or built).
+    /// The pattern index of `settings.scale_range` (or the camera's own scale), from the stars
+    /// of `bands[band]` (loaded from the cache or built).
     pub(crate) fn build(
         catalog: &Catalog,
         camera: &Camera,
@@ -125,6 +175,7 @@ impl ScaleFree {
         ScaleFree {
             index,
             band,
+            limits: PassLimits::for_settings(settings),
             built,
             seconds,
             buckets: OnceLock::new(),
@@ -272,56 +323,21 @@ pub fn lookup(
     out
 }
 
-/// A quad hypothesis that passed the geometric checks: image stars `stars[i]` are reference
-/// stars `refs[i]` at focal-length factor `scale`, attitude `r`.
-#[derive(Clone, Copy, Debug)]
-pub struct Hypothesis {
-    pub stars: [usize; 4],
-    pub refs: [u32; 4],
-    pub scale: f64,
-    pub r: Matrix3<f64>,
-}
-
-/// The 24 orders of four items.
-fn permutations() -> Vec<[usize; 4]> {
-    let mut out = Vec::with_capacity(24);
-    for a in 0..4 {
-        for b in 0..4 {
-            for c in 0..4 {
-                for d in 0..4 {
-                    let p = [a, b, c, d];
-                    if (0..4).all(|i| p.contains(&i)) {
-                        out.push(p);
-                    }
-                }
-            }
-        }
-    }
-    out
-}
-
-const PAIRS: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
-
 impl Solver {
     /// The share of the false-match budget the scale-free pass takes is `1 / share`; None
     /// without the pass.
     pub fn scale_free_share(&self) -> Option<u64> {
-        self.scale_free.as_ref()?;
-        Some(if self.settings.scale_range.is_some() {
-            SCALE_FREE_SHARE
-        } else {
-            KNOWN_SCALE_SHARE
-        })
+        self.scale_free.as_ref().map(|sf| sf.limits.share)
     }
 
     /// The rounds of the pass for a frame of `n` detections (see [`rounds_for`],
-    /// [`KNOWN_SCALE_ROUNDS`]).
+    /// [`PassLimits::rounds`]).
     pub fn scale_free_rounds(&self, n: usize) -> usize {
-        if self.settings.scale_range.is_some() {
-            rounds_for(n)
-        } else {
-            rounds_for(n).min(KNOWN_SCALE_ROUNDS)
-        }
+        let most = self
+            .scale_free
+            .as_ref()
+            .map_or(usize::MAX, |sf| sf.limits.rounds);
+        rounds_for(n).min(most)
     }
 
     /// The focal-length factors the pass looks quads up for: the searched range, or the
@@ -450,11 +466,8 @@ impl Solver {
     ) -> Option<Outcome> {
         let perms = permutations();
         let rounds = self.scale_free_rounds(detections.len());
-        let mut refinable = if self.settings.scale_range.is_some() {
-            usize::MAX
-        } else {
-            KNOWN_SCALE_MAX_REFINED
-        };
+        let sf = self.scale_free.as_ref()?;
+        let mut refinable = sf.limits.max_refined;
         for round in 0..rounds {
             let mut quads = lookup.quads.iter().filter(|q| q.round == round).peekable();
             if quads.peek().is_none() {
@@ -491,9 +504,10 @@ impl Solver {
         epoch: Option<f64>,
         perms: &[[usize; 4]],
     ) -> RoundEnd {
-        let (Some(sf), Some(share)) = (self.scale_free.as_ref(), self.scale_free_share()) else {
+        let Some(sf) = self.scale_free.as_ref() else {
             return RoundEnd::Nothing;
         };
+        let share = sf.limits.share;
         let (lo, hi) = self.pattern_range();
         let refs = &self.bands[sf.band].refs;
         let mut hyps: Vec<Hypothesis> = Vec::new();
@@ -557,9 +571,7 @@ impl Solver {
             );
             if refined.false_match_prob <= self.settings.refine.max_false_prob {
                 let could = refined.in_view.min(detections.len());
-                if self.settings.scale_range.is_none()
-                    && (refined.matches.len() as f64) < KNOWN_SCALE_MIN_COMPLETENESS * could as f64
-                {
+                if (refined.matches.len() as f64) < sf.limits.min_completeness * could as f64 {
                     tracing::debug!(
                         "scale-free: {} of {could} stars matched, left to the vote",
                         refined.matches.len()
@@ -601,99 +613,6 @@ impl Solver {
             refine: rs,
             method: crate::solve::radial::Method::Vote,
         }
-    }
-
-    /// A catalog quad against an image quad: the order of its stars whose chords best match
-    /// the image's up to scale, the focal length that matches them (within `lo..hi`), every
-    /// chord then within twice the pair tolerance, and the attitude of the four stars
-    /// (Wahba) placing each within that tolerance (which refuses a mirror image).
-    #[allow(clippy::too_many_arguments)]
-    fn check_quad(
-        &self,
-        detections: &[Detection],
-        stars: [usize; 4],
-        img1: &[f64; 6],
-        ids: [u32; 4],
-        refs: &crate::catalog::RefCatalog,
-        (lo, hi): (f64, f64),
-        perms: &[[usize; 4]],
-    ) -> Option<Hypothesis> {
-        let cat = ids.map(|id| refs.stars[id as usize].v);
-        let at = |s: f64| {
-            let c = scaled(&self.camera, s);
-            stars.map(|i| c.pixel_to_vector(detections[i].x, detections[i].y))
-        };
-        // The catalog chords, each pair once; every order of the stars reads them.
-        let mut d = [[0.0; 4]; 4];
-        for &(i, j) in &PAIRS {
-            d[i][j] = (cat[i] - cat[j]).norm();
-            d[j][i] = d[i][j];
-        }
-        let sum_cat: f64 = PAIRS.iter().map(|&(i, j)| d[i][j]).sum();
-        // The image's chords at the camera's own focal length, and the scale that brings
-        // their sum to the catalog's.
-        let k = sum_cat / img1.iter().sum::<f64>();
-        // Image chords shrink about as the focal length grows: from 1 / k, a few fixed-point
-        // steps. The sums do not depend on the order of the stars: most catalog quads of a
-        // key are of another size, and are refused here before their order is sought.
-        let mut scale = 1.0 / k;
-        for _ in 0..3 {
-            let sum_img: f64 = patterns::chords(&at(scale)).iter().sum();
-            scale *= sum_img / sum_cat;
-        }
-        let margin = 1.0 + SCALE_STEP;
-        if !(scale >= lo / margin && scale <= hi * margin) {
-            return None;
-        }
-        // The order of the catalog stars: the closest chords up to that scale factor (the
-        // first of the least largest error; an order is left as soon as its error reaches the
-        // best's, since it cannot then be chosen).
-        let mut best: Option<(f64, [usize; 4])> = None;
-        'orders: for p in perms {
-            let mut err = 0.0f64;
-            for (&(i, j), x) in PAIRS.iter().zip(img1) {
-                let c = d[p[i]][p[j]];
-                err = err.max((x * k - c).abs() / c.max(1e-12));
-                if best.is_some_and(|(b, _)| err >= b) {
-                    continue 'orders;
-                }
-            }
-            best = Some((err, *p));
-        }
-        let (_, p) = best?;
-        let cat = p.map(|i| cat[i]);
-        let refs_in_order = p.map(|i| ids[i]);
-        let cat_chords = patterns::chords(&cat);
-        // A known scale is the camera's: the chords are checked at it, within the vote's
-        // tolerance, which holds the scale's own.
-        let scale = if self.settings.scale_range.is_some() {
-            scale
-        } else {
-            1.0
-        };
-        let camera = scaled(&self.camera, scale);
-        let img = at(scale);
-        let s = &self.settings.identify;
-        let img_chords = patterns::chords(&img);
-        for e in 0..6 {
-            let d = crate::catalog::table::angle_of_chord(cat_chords[e]);
-            let tol = 2.0 * s.tolerance(&camera, d);
-            let di = crate::catalog::table::angle_of_chord(img_chords[e]);
-            if (di - d).abs() > tol {
-                return None;
-            }
-        }
-        let r = super::attitude::wahba(&img, &cat)?;
-        let tol = 2.0 * s.pair_tol_px * camera.ifov_rad();
-        if (0..4).any(|i| angle(&(r * cat[i]), &img[i]) > tol) {
-            return None;
-        }
-        Some(Hypothesis {
-            stars,
-            refs: refs_in_order,
-            scale,
-            r,
-        })
     }
 }
 

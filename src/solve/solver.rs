@@ -322,11 +322,11 @@ impl Solver {
         if detections.len() < 3 {
             return None;
         }
-        if self.settings.scale_range.is_none()
-            && let Some(share) = self.scale_free_share()
+        if let Some(l) = self.scale_free.as_ref().map(|sf| sf.limits)
+            && !l.rest_by_count
         {
-            // A known scale's pass took 1 / share of the budget: the passes keep the rest.
-            rs.max_false_prob *= 1.0 - 1.0 / share as f64;
+            // The pass took 1 / share of the budget: the passes keep the rest.
+            rs.max_false_prob *= 1.0 - 1.0 / l.share as f64;
         }
         if pass.kind == PassKind::MoreStars {
             if detections.len() <= s.vote_stars || s.vote_stars >= RETRY_VOTE_STARS {
@@ -405,12 +405,10 @@ impl Solver {
     /// back from them take half each), the identifier's passes, and the stages of a pass that
     /// can accept (the vote and its triangle fallback, see `STAGES`; radial features alone).
     /// So the chance that any of them accepts a wrong attitude stays within the whole. The
-    /// triangle method, the vote's fallback stage on its own, keeps that stage's share. With a
-    /// searched scale's scale-free pass, which takes half of the budget
-    /// ([`SCALE_FREE_SHARE`](super::scale_free::SCALE_FREE_SHARE)), the passes count twice:
-    /// they share the other half. (A known scale's pass takes a far smaller share, which
-    /// `prepare` takes off the passes' `max_false_prob` instead: as a count of hypotheses it
-    /// would be rounded.)
+    /// triangle method, the vote's fallback stage on its own, keeps that stage's share. With the
+    /// scale-free pass, which takes `1 / share` of the budget, the passes keep the rest
+    /// ([`PassLimits`](super::scale_free::PassLimits)): a searched scale's count twice (the
+    /// pass takes half); a known scale's have `prepare` scale their `max_false_prob` instead.
     pub fn hypothesis_factor(&self, n: usize, method: Method) -> u64 {
         let stages = match method {
             Method::Radial => 1,
@@ -421,9 +419,9 @@ impl Solver {
             * self.settings.searches
             * self.detection_stages()
             * self.passes_for(n, method) as u64;
-        match self.settings.scale_range.and(self.scale_free_share()) {
-            Some(share) => factor * share / (share - 1),
-            None => factor,
+        match self.scale_free.as_ref().map(|sf| sf.limits) {
+            Some(l) if l.rest_by_count => factor * l.share / (l.share - 1),
+            _ => factor,
         }
     }
 
