@@ -213,7 +213,7 @@ class Solver:
     ("none", "scale", "distortion"), ``mag_limit``, ``epoch``, ``centroid`` ("ml", "cog"),
     ``method`` ("vote", "radial", "triangle"), ``detect_filter`` ("none", "binomial"),
     ``sigma``, ``vote_stars``, ``pair_tol_px``, ``scale_tol``, ``match_radius_px``,
-    ``max_false_prob``, ``retry`` (False = ``--no-retry``), ``double_stars``,
+    ``max_false_prob``, ``retry`` (False = ``--no-retry``), ``wide_min_stars``, ``double_stars``,
     ``double_star_px``, ``cache`` (False = ``--no-cache``), ``hint`` ("RA,DEC[,R]" or
     "header[,R]"), ``streaks`` (True = ``--streaks``) with ``station`` ("LAT,LON,HEIGHT_M"),
     ``astrometry``, ``dut1``, ``streak_sigma``, ``tle`` (a TLE or OMM file naming each

@@ -107,6 +107,7 @@ const OPTIONS: &[&str] = &[
     "match_radius_px",
     "max_false_prob",
     "retry",
+    "wide_min_stars",
     "double_stars",
     "double_star_px",
     "cache",
@@ -311,6 +312,9 @@ fn build(
         s.identify.vote_stars = v;
     }
     s.retry = o.get::<bool>("retry")?.unwrap_or(true);
+    if let Some(v) = o.count("wide_min_stars", 0, usize::MAX)? {
+        s.wide_min_stars = v;
+    }
     if let Some(v) = o.within("pair_tol_px", 0.01, 5.0)? {
         s.identify.pair_tol_px = v;
     }

@@ -279,6 +279,11 @@ pub struct SolveOpts {
     /// with wide tolerances (pair 4 px, match radius 5 px).
     #[arg(long)]
     pub no_retry: bool,
+    /// The retry with wide tolerances only for frames of at least this many detections: on
+    /// sparse frames it costs 20-170 ms and solved none of 156 with 8 or fewer (docs/speed.md,
+    /// "The wide retry's stars"); 0 tries it on every frame.
+    #[arg(long, default_value_t = gpustar::solve::WIDE_MIN_STARS)]
+    pub wide_min_stars: usize,
     /// Pair distance tolerance from focal-length and distortion errors, relative.
     #[arg(long, default_value_t = 0.0002, value_parser = within(0.0, 0.05))]
     pub scale_tol: f64,

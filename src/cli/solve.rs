@@ -92,6 +92,7 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
     s.method = o.method;
     s.identify.vote_stars = o.vote_stars;
     s.retry = !o.no_retry;
+    s.wide_min_stars = o.wide_min_stars;
     s.identify.pair_tol_px = o.pair_tol_px;
     s.identify.scale_tol = o.scale_tol;
     s.refine.match_radius_px = o.match_radius_px;

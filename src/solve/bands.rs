@@ -358,6 +358,15 @@ pub const RETRY_VOTE_STARS: usize = 60;
 pub const WIDE_PAIR_TOL_PX: f64 = 4.0;
 pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
 
+/// The wide retry needs this many detections (`Settings::wide_min_stars`, `--wide-min-stars`).
+/// Its 4 px sides match thousands of catalog triangles in a sparse frame, which its triangle
+/// fallback enumerates and refines: 20-170 ms a frame. On 1,200 independent frames (ten sets
+/// of 8-18°, two with 1-1.5 px of position noise) and the 60 real ones it ran 156 times on
+/// frames of 8 detections or fewer and solved none; on frames of 9 or more it solved 178 of
+/// 213 (docs/speed.md, "The wide retry's stars"). Fewer detections than this are not tried
+/// with it, and the false-match test no longer counts its hypotheses for them.
+pub const WIDE_MIN_STARS: usize = 9;
+
 /// The stages that can accept a frame, the vote and the triangle fallback, share the
 /// false-match budget (`max_false_prob`) evenly: each judges its own hypotheses against half
 /// of it, so the chance that either accepts a wrong attitude stays within the whole. A

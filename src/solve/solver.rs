@@ -10,7 +10,7 @@
 use super::attitude::wahba;
 use super::bands::{
     Band, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SCALE_STEP, SPREAD_TRIANGLE_STARS, STAGES,
-    WALK_MAX_RATIO, WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, scale_bands,
+    WALK_MAX_RATIO, WIDE_MATCH_RADIUS_PX, WIDE_MIN_STARS, WIDE_PAIR_TOL_PX, band_for, scale_bands,
     scale_hypotheses, scaled, spread_order,
 };
 use super::detect::{self, DetectSettings, Detection};
@@ -56,6 +56,9 @@ pub struct Settings {
     /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`](super::SPREAD_CELLS)), then
     /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
     pub retry: bool,
+    /// The wide retry (with `retry`) only for frames of at least this many detections
+    /// ([`WIDE_MIN_STARS`]).
+    pub wide_min_stars: usize,
     /// Frames that do not solve are detected again with the matched filter (fainter stars)
     /// and tried again, when the filter is not on already and `retry` is, and it finds a star
     /// the first detection did not ([`detect::adds_stars`]).
@@ -85,6 +88,7 @@ impl Default for Settings {
             scale_free: true,
             walk_wide: false,
             retry: true,
+            wide_min_stars: WIDE_MIN_STARS,
             detect_retry: true,
             method: Method::Vote,
             sky_sr: FULL_SKY_SR,
@@ -338,6 +342,9 @@ impl Solver {
         if pass.kind == PassKind::Spread && detections.len() <= s.vote_stars {
             return None;
         }
+        if pass.kind == PassKind::Wide && detections.len() < self.settings.wide_min_stars {
+            return None;
+        }
         let camera = scaled(&self.camera, pass.scale);
         if self.scales.len() > 1 {
             // Each hypothesis stands for half a step either side of its focal length, and
@@ -383,8 +390,8 @@ impl Solver {
 
     /// How many passes of identifier `method` a frame of `n` detections can be tried with:
     /// the retries with more voting stars and with voters spread over the frame need more
-    /// detections than vote (`prepare` passes them over otherwise), so they add no hypothesis
-    /// to such a frame.
+    /// detections than vote, the wide retry `wide_min_stars` (`prepare` passes them over
+    /// otherwise), so they add no hypothesis to such a frame.
     pub fn passes_for(&self, n: usize, method: Method) -> usize {
         let vote = self.settings.identify.vote_stars;
         self.passes
@@ -393,6 +400,7 @@ impl Solver {
             .filter(|p| match p.kind {
                 PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
                 PassKind::Spread => n > vote,
+                PassKind::Wide => n >= self.settings.wide_min_stars,
                 _ => true,
             })
             .count()

@@ -1,6 +1,7 @@
 //! Centroid noise: `simulate --centroid-noise-px` draws stars off their true places and keeps the
 //! truth; the retries solve frames whose centroids are off by a pixel or more, which the
-//! default tolerances (tuned for sub-pixel centroids) reject, without wrong answers.
+//! default tolerances (tuned for sub-pixel centroids) reject, without wrong answers; the wide
+//! retry takes frames of enough stars only.
 
 use crate::common;
 
@@ -8,7 +9,8 @@ use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::io::frame::Frame;
 use gpustar::simulate::{SimSettings, Truth};
-use gpustar::solve::{PassKind, Settings, Solver};
+use gpustar::solve::radial::Method;
+use gpustar::solve::{PassKind, Settings, Solver, WIDE_MIN_STARS};
 
 fn sim(noise: f64) -> SimSettings {
     SimSettings {
@@ -85,4 +87,38 @@ fn the_wide_retry_searches_the_scale_on_its_own_grid() {
     println!("±2.5 % search, 1.5 px noise: {solved}/12 solved ({first} scales, {wide} wide)");
     assert_eq!(wrong, 0);
     assert!(solved >= 11, "{solved}/12 solved");
+}
+
+/// The wide retry only takes frames of `wide_min_stars` detections or more, and the
+/// false-match test counts its hypotheses only for them; 0 tries it on every frame.
+#[test]
+fn the_wide_retry_needs_its_stars() {
+    let solver_with = |wide_min_stars| {
+        let settings = Settings {
+            mag_limit: Some(6.0),
+            table_cache: false,
+            wide_min_stars,
+            ..Settings::default()
+        };
+        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
+        Solver::new(&Catalog::builtin(), camera, settings).unwrap()
+    };
+    let solver = solver_with(WIDE_MIN_STARS);
+    let set = common::rendered(&sim(1.5), 1);
+    let dets = gpustar::solve::detect::detect(&set[0].0, &solver.settings.detect);
+    assert!(dets.len() > WIDE_MIN_STARS, "{} detections", dets.len());
+    let wide = (solver.passes.iter())
+        .position(|p| p.kind == PassKind::Wide)
+        .unwrap();
+    let (few, enough) = (&dets[..WIDE_MIN_STARS - 1], &dets[..WIDE_MIN_STARS]);
+    assert!(solver.prepare(few, wide).is_none());
+    assert!(solver.prepare(enough, wide).is_some());
+    let passes = |s: &Solver, n| s.passes_for(n, Method::Vote);
+    assert_eq!(
+        passes(&solver, few.len()) + 1,
+        passes(&solver, enough.len())
+    );
+    let every = solver_with(0);
+    assert!(every.prepare(few, wide).is_some());
+    assert_eq!(passes(&every, few.len()), passes(&every, enough.len()));
 }
