@@ -28,14 +28,17 @@ pub struct Triangle {
     pub refs: [u32; 3],
 }
 
-/// Catalog pairs of one image pair: each catalog star's partners on this side, sorted, each
-/// with its direction; and the side's key range, to test any two stars by their chord. A side
-/// with wide tolerances holds thousands of pairs and is tested millions of times: with the
-/// directions beside the ids, walking the stars in order reads each side front to back, where
-/// fetching every partner's direction from the catalog missed the cache each time (3-4× the
-/// time). The lists are built by a counting sort.
+/// Catalog pairs of one image pair: the catalog stars on this side (`owners`, rising), each
+/// with its partners, sorted, and their directions; and the side's key range, to test any two
+/// stars by their chord. A side with wide tolerances holds thousands of pairs and is tested
+/// millions of times: with the directions beside the ids, walking the stars in order reads each
+/// side front to back, where fetching every partner's direction from the catalog missed the
+/// cache each time (3-4× the time). A side with tight tolerances holds a few hundred: walking
+/// its own stars, not the whole catalog, is what keeps it cheap.
 struct Side {
-    /// Star `a`'s partners are `partners[start[a]..start[a + 1]]`.
+    /// The stars with partners on this side, rising.
+    owners: Vec<u32>,
+    /// `owners[t]`'s partners are `partners[start[t]..start[t + 1]]`.
     start: Vec<u32>,
     partners: Vec<u32>,
     /// The direction of each of `partners`.
@@ -52,36 +55,57 @@ struct Side {
 impl Side {
     fn new(table: &PairTable, r: &PairRange, dirs_of: &[Vector3<f64>]) -> Side {
         let rows = table.range(r.lo, r.hi);
-        let mut start = vec![0u32; dirs_of.len() + 1];
-        for row in rows.clone() {
-            let (a, b) = table.pair(row);
-            start[a as usize + 1] += 1;
-            start[b as usize + 1] += 1;
-        }
-        for s in 1..start.len() {
-            start[s] += start[s - 1];
-        }
-        let mut next = start.clone();
-        let mut partners = vec![0u32; 2 * rows.len()];
-        for row in rows {
-            let (a, b) = table.pair(row);
-            partners[next[a as usize] as usize] = b;
-            next[a as usize] += 1;
-            partners[next[b as usize] as usize] = a;
-            next[b as usize] += 1;
-        }
-        for w in start.windows(2) {
-            let list = &mut partners[w[0] as usize..w[1] as usize];
-            if list.len() > 1 {
+        // Each pair both ways round as `star << 32 | partner`, sorted: by a comparison sort
+        // when the side is small against the catalog, else by counting its stars' partners.
+        let mut pairs: Vec<u64> = Vec::with_capacity(2 * rows.len());
+        if 8 * rows.len() < dirs_of.len() {
+            for row in rows {
+                let (a, b) = table.pair(row);
+                pairs.push(u64::from(a) << 32 | u64::from(b));
+                pairs.push(u64::from(b) << 32 | u64::from(a));
+            }
+            pairs.sort_unstable();
+        } else {
+            let mut at = vec![0u32; dirs_of.len() + 1];
+            for row in rows.clone() {
+                let (a, b) = table.pair(row);
+                at[a as usize + 1] += 1;
+                at[b as usize + 1] += 1;
+            }
+            for s in 1..at.len() {
+                at[s] += at[s - 1];
+            }
+            pairs.resize(2 * rows.len(), 0);
+            for row in rows {
+                let (a, b) = table.pair(row);
+                pairs[at[a as usize] as usize] = u64::from(a) << 32 | u64::from(b);
+                at[a as usize] += 1;
+                pairs[at[b as usize] as usize] = u64::from(b) << 32 | u64::from(a);
+                at[b as usize] += 1;
+            }
+            // Each star's partners are together, in table order: sort within each.
+            for list in pairs.chunk_by_mut(|x, y| x >> 32 == y >> 32) {
                 list.sort_unstable();
             }
         }
+        let mut owners = Vec::new();
+        let mut start = Vec::new();
+        for (k, &pair) in pairs.iter().enumerate() {
+            let star = (pair >> 32) as u32;
+            if owners.last() != Some(&star) {
+                owners.push(star);
+                start.push(k as u32);
+            }
+        }
+        start.push(pairs.len() as u32);
+        let partners: Vec<u32> = pairs.iter().map(|&p| p as u32).collect();
         let dirs = partners.iter().map(|&b| dirs_of[b as usize]).collect();
         // key = floor(chord · KEY_SCALE), KEY_SCALE a power of two: key >= lo_key exactly when
         // chord >= lo_key / KEY_SCALE, and key <= hi_key when chord < (hi_key + 1) / KEY_SCALE.
         let lo = f64::from(r.lo) / KEY_SCALE;
         let hi = ((f64::from(r.hi) + 1.0) / KEY_SCALE).min(chord_of_angle(table.max_sep_rad));
         Side {
+            owners,
             start,
             partners,
             dirs,
@@ -92,12 +116,32 @@ impl Side {
         }
     }
 
-    /// The partners of catalog star `a` on this side, in rising order, and their directions.
+    /// The partners of `owners[t]`, rising, and their directions.
     #[inline]
-    fn of(&self, a: u32) -> (&[u32], &[Vector3<f64>]) {
-        let a = a as usize;
-        let at = self.start[a] as usize..self.start[a + 1] as usize;
+    fn at(&self, t: usize) -> (&[u32], &[Vector3<f64>]) {
+        let at = self.start[t] as usize..self.start[t + 1] as usize;
         (&self.partners[at.clone()], &self.dirs[at])
+    }
+
+    /// The partners of catalog star `a` on this side, rising, and their directions (none when
+    /// it has none).
+    fn of(&self, a: u32) -> (&[u32], &[Vector3<f64>]) {
+        match self.owners.binary_search(&a) {
+            Ok(t) => self.at(t),
+            Err(_) => (&[], &[]),
+        }
+    }
+
+    /// [`Side::of`] for `a` rising from call to call: `cursor` (from 0) walks `owners` once.
+    #[inline]
+    fn of_rising(&self, a: u32, cursor: &mut usize) -> (&[u32], &[Vector3<f64>]) {
+        while self.owners.get(*cursor).is_some_and(|&x| x < a) {
+            *cursor += 1;
+        }
+        match self.owners.get(*cursor) {
+            Some(&x) if x == a => self.at(*cursor),
+            _ => (&[], &[]),
+        }
     }
 
     /// Whether two catalog stars in directions `a` and `b` are a pair of this side: the
@@ -169,12 +213,10 @@ pub fn triangles(
             .filter_map(|l| Some([side(i, l)?, side(j, l)?, side(k, l)?]))
             .collect();
         // Each pair both ways round, in rising order of both stars: deterministic.
-        for p in 0..refs.len() as u32 {
-            let (rs, r_dirs) = ik.of(p);
-            if rs.is_empty() {
-                continue;
-            }
-            let (qs, q_dirs) = ij.of(p);
+        let mut cursor = 0;
+        for (t, &p) in ik.owners.iter().enumerate() {
+            let (rs, r_dirs) = ik.at(t);
+            let (qs, q_dirs) = ij.of_rising(p, &mut cursor);
             for (&q, vq) in qs.iter().zip(q_dirs) {
                 for (&r, vr) in rs.iter().zip(r_dirs) {
                     if r == q || !jk.holds(vq, vr) {

@@ -154,45 +154,52 @@ fn triangles_by_definition(
     (out, matched)
 }
 
-/// With the wide retry's tolerances (4 px sides) every side holds thousands of catalog pairs:
-/// the adjacency lists find the same hypotheses, in the same order, with the same count of
-/// matched triangles as the plain definition, true stars or false.
+/// With the wide retry's tolerances (4 px sides) every side holds thousands of catalog pairs,
+/// with the first pass's (0.4 px) a few hundred (`Side` sorts the two differently): either
+/// way the hypotheses, their order and the count of matched triangles are the plain
+/// definition's, true stars or false.
 #[test]
 fn triangles_are_those_of_the_definition_in_its_order() {
     let solver = common::solver(10.0, (1024, 1024));
     let cam = &solver.camera;
     let band = &solver.bands[0];
-    let mut s = solver.settings.identify;
-    s.pair_tol_px = 4.0;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-    let mut frames = 0;
-    let mut hypotheses = 0;
-    while frames < 4 {
-        let r = random_rotation(&mut rng);
-        let view = stars_in_view(&r, &band.refs, cam);
-        if view.len() < 5 {
-            continue;
+    for (pair_tol_px, least) in [(4.0, 20), (0.4, 4)] {
+        let mut s = solver.settings.identify;
+        s.pair_tol_px = pair_tol_px;
+        let (mut frames, mut hypotheses) = (0, 0);
+        while frames < 4 {
+            let r = random_rotation(&mut rng);
+            let view = stars_in_view(&r, &band.refs, cam);
+            if view.len() < 5 {
+                continue;
+            }
+            frames += 1;
+            // Two false stars among the five brightest true ones, centroids off by up to a
+            // quarter of the tolerance.
+            let e = pair_tol_px / 4.0;
+            let mut vectors: Vec<Vector3<f64>> = view
+                .iter()
+                .take(5)
+                .map(|&(_, x, y)| {
+                    let (dx, dy) = (rng.random_range(-e..e), rng.random_range(-e..e));
+                    cam.pixel_to_vector(x + dx, y + dy)
+                })
+                .collect();
+            for at in [1, 4] {
+                let (x, y) = (rng.random_range(0.0..1023.0), rng.random_range(0.0..1023.0));
+                vectors.insert(at, cam.pixel_to_vector(x, y));
+            }
+            let ranges = pair_ranges(&vectors, cam, &s);
+            let fast = triangles(band.table(), &ranges, &vectors, &band.refs);
+            let plain = triangles_by_definition(band.table(), &ranges, &vectors, &band.refs);
+            assert_eq!(fast, plain, "{pair_tol_px} px, frame {frames}");
+            hypotheses += fast.0.len();
         }
-        frames += 1;
-        // Two false stars among the five brightest true ones, 1 px centroid errors.
-        let mut vectors: Vec<Vector3<f64>> = view
-            .iter()
-            .take(5)
-            .map(|&(_, x, y)| {
-                let (dx, dy) = (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
-                cam.pixel_to_vector(x + dx, y + dy)
-            })
-            .collect();
-        for at in [1, 4] {
-            let (x, y) = (rng.random_range(0.0..1023.0), rng.random_range(0.0..1023.0));
-            vectors.insert(at, cam.pixel_to_vector(x, y));
-        }
-        let ranges = pair_ranges(&vectors, cam, &s);
-        let fast = triangles(band.table(), &ranges, &vectors, &band.refs);
-        let plain = triangles_by_definition(band.table(), &ranges, &vectors, &band.refs);
-        assert_eq!(fast, plain, "frame {frames}");
-        hypotheses += fast.0.len();
+        // Not a vacuous comparison: the true triangles at least are confirmed.
+        assert!(
+            hypotheses >= least,
+            "{pair_tol_px} px: {hypotheses} hypotheses in 4 frames"
+        );
     }
-    // Not a vacuous comparison: the wide sides confirm many triangles.
-    assert!(hypotheses >= 20, "{hypotheses} hypotheses in 4 frames");
 }
