@@ -176,6 +176,19 @@ fn kvector_shift(max_key: u32, rows: usize) -> u32 {
     shift
 }
 
+/// Whether `kv` is what [`build_kvector`] makes of `keys` (sorted): its length, and each entry
+/// the first row whose bin is at least the entry's (the row before it in a lower bin), without
+/// building a second k-vector of megabytes to compare.
+fn kvector_indexes(kv: &[u32], keys: &[u32], shift: u32, max_key: u32) -> bool {
+    let bins = (max_key >> shift) as usize + 1;
+    let bin = |r: usize| (keys[r] >> shift) as usize;
+    kv.len() == bins + 1
+        && kv.iter().enumerate().all(|(b, &r)| {
+            let r = r as usize;
+            r <= keys.len() && (r == keys.len() || bin(r) >= b) && (r == 0 || bin(r - 1) < b)
+        })
+}
+
 fn build_kvector(keys: &[u32], shift: u32, max_key: u32) -> Vec<u32> {
     let bins = (max_key >> shift) as usize + 1;
     let mut kv = vec![0u32; bins + 1];
@@ -347,77 +360,118 @@ pub(crate) fn read_cache(
     key: u64,
     heads: usize,
 ) -> Result<(Vec<u64>, Vec<u32>)> {
-    let (head, buf) = read_cache_bytes(path, magic, key, heads)?;
-    Ok((head, words(&buf[16 + 8 * heads..buf.len() - 4])))
+    let (head, mut body) = CacheReader::open(path, magic, key, heads)?;
+    let words = body.read(body.words_left)?;
+    body.finish()?;
+    Ok((head, words))
 }
 
-/// Little-endian words of `bytes` (a multiple of 4 long).
-fn words(bytes: &[u8]) -> Vec<u32> {
-    bytes
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
-        .collect()
+/// A cache file written by [`write_cache`], its header read and checked, its body read
+/// straight into the caller's vectors (a table's tens of MB: reading the whole file first and
+/// copying it out cost twice the memory and more than the read itself), its checksum taken on
+/// the way and checked by [`CacheReader::finish`] before anything read is used.
+struct CacheReader {
+    file: std::fs::File,
+    crc: crc32fast::Hasher,
+    /// Body words not read yet.
+    words_left: usize,
 }
 
-/// [`read_cache`] before the body is made words: the head values and the whole file, checked
-/// (a table's body goes straight into its three vectors: a copy fewer of tens of MB).
-fn read_cache_bytes(
-    path: &Path,
-    magic: &[u8; 8],
-    key: u64,
-    heads: usize,
-) -> Result<(Vec<u64>, Vec<u8>)> {
-    let buf = std::fs::read(path)?;
-    let fixed = 16 + 8 * heads;
-    if buf.len() < fixed + 4 || !(buf.len() - fixed - 4).is_multiple_of(4) {
-        fail!(Catalog, "truncated ({} bytes)", buf.len());
+impl CacheReader {
+    fn open(path: &Path, magic: &[u8; 8], key: u64, heads: usize) -> Result<(Vec<u64>, Self)> {
+        use std::io::Read;
+        let mut file = std::fs::File::open(path)?;
+        let len = file.metadata()?.len();
+        let fixed = 16 + 8 * heads as u64;
+        if len < fixed + 4 || !(len - fixed - 4).is_multiple_of(4) {
+            fail!(Catalog, "truncated ({len} bytes)");
+        }
+        let mut head = vec![0u8; fixed as usize];
+        file.read_exact(&mut head)?;
+        if &head[..8] != magic.as_slice() {
+            fail!(Catalog, "not a gpustar cache file of this version");
+        }
+        let u64_at = |o: usize| u64::from_le_bytes(head[o..o + 8].try_into().expect("8 bytes"));
+        if u64_at(8) != key {
+            fail!(Catalog, "key mismatch");
+        }
+        let mut crc = crc32fast::Hasher::new();
+        crc.update(&head);
+        let words_left = usize::try_from((len - fixed - 4) / 4).into_kind(Error::Catalog)?;
+        let values = (0..heads).map(|i| u64_at(16 + 8 * i)).collect();
+        Ok((
+            values,
+            CacheReader {
+                file,
+                crc,
+                words_left,
+            },
+        ))
     }
-    if &buf[..8] != magic.as_slice() {
-        fail!(Catalog, "not a gpustar cache file of this version");
+
+    /// The next `n` values of the body (each a whole number of little-endian words).
+    fn read<T: bytemuck::Pod>(&mut self, n: usize) -> Result<Vec<T>> {
+        use std::io::Read;
+        let words = n.saturating_mul(std::mem::size_of::<T>() / 4);
+        if words > self.words_left {
+            fail!(
+                Catalog,
+                "truncated (the body is shorter than its header says)"
+            );
+        }
+        let mut v = vec![T::zeroed(); n];
+        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut v);
+        self.file.read_exact(bytes)?;
+        self.crc.update(bytes);
+        if cfg!(target_endian = "big") {
+            for w in bytemuck::cast_slice_mut::<T, u32>(&mut v) {
+                *w = u32::from_le(*w);
+            }
+        }
+        self.words_left -= words;
+        Ok(v)
     }
-    let u64_at = |o: usize| u64::from_le_bytes(buf[o..o + 8].try_into().expect("8 bytes"));
-    if u64_at(8) != key {
-        fail!(Catalog, "key mismatch");
+
+    /// The whole body read, and the checksum the file ends with is that of what was read.
+    fn finish(mut self) -> Result<()> {
+        use std::io::Read;
+        if self.words_left != 0 {
+            fail!(Catalog, "{} words left over", self.words_left);
+        }
+        let mut crc = [0u8; 4];
+        self.file.read_exact(&mut crc)?;
+        if self.crc.finalize() != u32::from_le_bytes(crc) {
+            fail!(
+                Catalog,
+                "checksum mismatch (the file was changed or damaged)"
+            );
+        }
+        Ok(())
     }
-    let (data, crc) = buf.split_at(buf.len() - 4);
-    if crc32fast::hash(data) != u32::from_le_bytes(crc.try_into().expect("4 bytes")) {
-        fail!(
-            Catalog,
-            "checksum mismatch (the file was changed or damaged)"
-        );
-    }
-    let head = (0..heads).map(|i| u64_at(16 + 8 * i)).collect();
-    Ok((head, buf))
 }
 
 /// The table of a cache file, checked whole: the checksum, then every bound the range
 /// queries and the GPU rely on (a file that passes cannot make a frame fail).
 fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<PairTable> {
-    let (head, buf) = read_cache_bytes(path, MAGIC, key, 4)?;
-    let body = &buf[16 + 8 * 4..buf.len() - 4];
+    let (head, mut body) = CacheReader::open(path, MAGIC, key, 4)?;
     let (rows, kvlen) = (head[0] as usize, head[1] as usize);
-    if body.len() / 4 != rows.saturating_mul(3).saturating_add(kvlen) {
+    if body.words_left != rows.saturating_mul(3).saturating_add(kvlen) {
         fail!(
             Catalog,
             "{} words where {rows} rows and a k-vector of {kvlen} need {}",
-            body.len() / 4,
+            body.words_left,
             rows.saturating_mul(3).saturating_add(kvlen)
         );
     }
     let t = PairTable {
-        keys: words(&body[..4 * rows]),
-        pairs: body[4 * rows..12 * rows]
-            .chunks_exact(8)
-            .map(|c| {
-                let w = |i: usize| u32::from_le_bytes(c[i..i + 4].try_into().expect("4 bytes"));
-                [w(0), w(4)]
-            })
-            .collect(),
-        kvector: words(&body[12 * rows..]),
+        keys: body.read(rows)?,
+        pairs: body.read(rows)?,
+        kvector: body.read(kvlen)?,
         shift: u32::try_from(head[2]).into_kind(Error::Catalog)?,
         max_sep_rad,
         max_key: u32::try_from(head[3]).into_kind(Error::Catalog)?,
     };
+    body.finish()?;
     if t.max_key != chord_key(chord_of_angle(max_sep_rad))
         || t.shift != kvector_shift(t.max_key, rows)
     {
@@ -429,8 +483,38 @@ fn read_table(path: &Path, key: u64, stars: usize, max_sep_rad: f64) -> Result<P
     if !t.pairs.iter().all(|&[a, b]| a < b && (b as usize) < stars) {
         fail!(Catalog, "a pair names a star the catalog does not have");
     }
-    if t.kvector != build_kvector(&t.keys, t.shift, t.max_key) {
+    if !kvector_indexes(&t.kvector, &t.keys, t.shift, t.max_key) {
         fail!(Catalog, "the k-vector does not index the keys");
     }
     Ok(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The check of a cached k-vector accepts the one `build_kvector` makes and refuses it with
+    /// any entry moved by one row, or with an entry more or fewer.
+    #[test]
+    fn the_kvector_check_is_the_rebuild() {
+        // Sorted keys with gaps, repeats, empty bins and keys at bin edges.
+        let keys: Vec<u32> = vec![0, 0, 3, 4, 4, 4, 15, 16, 17, 40, 63, 63, 64];
+        let (shift, max_key) = (2, 70);
+        let kv = build_kvector(&keys, shift, max_key);
+        assert!(kvector_indexes(&kv, &keys, shift, max_key));
+        for b in 0..kv.len() {
+            for moved in [kv[b].wrapping_sub(1), kv[b] + 1] {
+                let mut bad = kv.clone();
+                bad[b] = moved;
+                assert!(!kvector_indexes(&bad, &keys, shift, max_key), "entry {b}");
+            }
+        }
+        assert!(!kvector_indexes(&kv[..kv.len() - 1], &keys, shift, max_key));
+        let mut longer = kv.clone();
+        longer.push(keys.len() as u32);
+        assert!(!kvector_indexes(&longer, &keys, shift, max_key));
+        // No keys at all: every entry is row 0.
+        let none = build_kvector(&[], shift, max_key);
+        assert!(kvector_indexes(&none, &[], shift, max_key));
+    }
 }
