@@ -53,12 +53,17 @@ struct Side {
 }
 
 impl Side {
-    fn new(table: &PairTable, r: &PairRange, dirs_of: &[Vector3<f64>]) -> Side {
+    fn new(
+        table: &PairTable,
+        r: &PairRange,
+        stars: usize,
+        dir: impl Fn(u32) -> Vector3<f64>,
+    ) -> Side {
         let rows = table.range(r.lo, r.hi);
         // Each pair both ways round as `star << 32 | partner`, sorted: by a comparison sort
         // when the side is small against the catalog, else by counting its stars' partners.
         let mut pairs: Vec<u64> = Vec::with_capacity(2 * rows.len());
-        if 8 * rows.len() < dirs_of.len() {
+        if 8 * rows.len() < stars {
             for row in rows {
                 let (a, b) = table.pair(row);
                 pairs.push(u64::from(a) << 32 | u64::from(b));
@@ -66,7 +71,7 @@ impl Side {
             }
             pairs.sort_unstable();
         } else {
-            let mut at = vec![0u32; dirs_of.len() + 1];
+            let mut at = vec![0u32; stars + 1];
             for row in rows.clone() {
                 let (a, b) = table.pair(row);
                 at[a as usize + 1] += 1;
@@ -99,7 +104,7 @@ impl Side {
         }
         start.push(pairs.len() as u32);
         let partners: Vec<u32> = pairs.iter().map(|&p| p as u32).collect();
-        let dirs = partners.iter().map(|&b| dirs_of[b as usize]).collect();
+        let dirs = partners.iter().map(|&b| dir(b)).collect();
         // key = floor(chord · KEY_SCALE), KEY_SCALE a power of two: key >= lo_key exactly when
         // chord >= lo_key / KEY_SCALE, and key <= hi_key when chord < (hi_key + 1) / KEY_SCALE.
         let lo = f64::from(r.lo) / KEY_SCALE;
@@ -191,13 +196,25 @@ pub fn triangles(
     refs: &RefCatalog,
 ) -> (Vec<Triangle>, u64) {
     let n = vectors.len();
-    let dirs_of: Vec<Vector3<f64>> = refs.stars.iter().map(|s| s.v).collect();
+    // With wide sides (tens of thousands of partners each) the directions are fetched from a
+    // packed copy, which stays in cache; tight ones fetch few and take them from the catalog.
+    let rows: usize = ranges
+        .iter()
+        .filter(|r| (r.i as usize) < n && (r.j as usize) < n)
+        .map(|r| table.range(r.lo, r.hi).len())
+        .sum();
+    let packed: Option<Vec<Vector3<f64>>> =
+        (2 * rows > refs.len()).then(|| refs.stars.iter().map(|s| s.v).collect());
+    let dir = |id: u32| match &packed {
+        Some(p) => p[id as usize],
+        None => refs.stars[id as usize].v,
+    };
     let sides: HashMap<(usize, usize), Side> = ranges
         .iter()
         .filter(|r| (r.i as usize) < n && (r.j as usize) < n)
         .map(|r| {
             let (i, j) = (r.i.min(r.j) as usize, r.i.max(r.j) as usize);
-            ((i, j), Side::new(table, r, &dirs_of))
+            ((i, j), Side::new(table, r, refs.len(), dir))
         })
         .collect();
     let side = |a: usize, b: usize| sides.get(&(a.min(b), a.max(b)));
@@ -222,7 +239,7 @@ pub fn triangles(
                     if r == q || !jk.holds(vq, vr) {
                         continue;
                     }
-                    let vp = &dirs_of[p as usize];
+                    let vp = &dir(p);
                     if (vp.cross(vq).dot(vr) > 0.0) != handed {
                         continue;
                     }
