@@ -8,6 +8,7 @@ use gpustar::io::inputs::{self, Input};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+mod alloc;
 mod args;
 mod calibrate;
 mod catalog;
@@ -267,6 +268,7 @@ where
     I: IntoIterator<Item = T>,
     T: Into<std::ffi::OsString> + Clone,
 {
+    alloc::keep_frame_buffers();
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
