@@ -32,9 +32,9 @@ pub struct Triangle {
 /// with its partners, sorted, and their directions; and the side's key range, to test any two
 /// stars by their chord. A side with wide tolerances holds thousands of pairs and is tested
 /// millions of times: with the directions beside the ids, walking the stars in order reads each
-/// side front to back, where fetching every partner's direction from the catalog missed the
-/// cache each time (3-4× the time). A side with tight tolerances holds a few hundred: walking
-/// its own stars, not the whole catalog, is what keeps it cheap.
+/// side front to back, where a hash probe per pair missed the cache each time. A side with
+/// tight tolerances holds a few hundred: walking its own stars, not the whole catalog, is what
+/// keeps it cheap.
 struct Side {
     /// The stars with partners on this side, rising.
     owners: Vec<u32>,
@@ -265,4 +265,41 @@ pub fn triangles(
         }
     }
     (out, matched)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Ids are 32-bit (deep catalogs): a side keeps both ids of a pair whole, both ways round.
+    /// (A 16-bit packing once made (1, 65541) and (2, 5) the same pair.)
+    #[test]
+    fn sides_keep_large_ids_apart() {
+        let keys = vec![10u32, 20];
+        let max_key = 31;
+        let kvector = (0..=max_key + 1)
+            .map(|b| keys.iter().filter(|&&k| k < b).count() as u32)
+            .collect();
+        let table = PairTable {
+            keys,
+            pairs: vec![[1, 65_541], [2, 5]],
+            kvector,
+            shift: 0,
+            max_sep_rad: 1.0,
+            max_key,
+        };
+        let all = PairRange {
+            i: 0,
+            j: 1,
+            lo: 0,
+            hi: max_key,
+        };
+        let side = Side::new(&table, &all, 65_542, |_| Vector3::zeros());
+        assert_eq!(side.owners, vec![1, 2, 5, 65_541]);
+        assert_eq!(side.of(1).0, &[65_541]);
+        assert_eq!(side.of(65_541).0, &[1]);
+        assert_eq!(side.of(2).0, &[5]);
+        assert_eq!(side.of(5).0, &[2]);
+        assert!(side.of(3).0.is_empty());
+    }
 }
