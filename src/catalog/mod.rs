@@ -29,6 +29,11 @@ pub const BUILTIN_CSV: &str = include_str!("../../catalog/hip2_hp8.csv");
 /// Name of the compiled-in catalog, as `gpustar info` prints it.
 pub const BUILTIN_NAME: &str = "builtin:hip2_hp8.csv";
 
+/// [`fnv1a`] of [`BUILTIN_CSV`], written down: hashing its 2 MB a byte at a time took an eighth
+/// of a one-frame run (rustc refuses to compute it as a constant). A test checks it against the
+/// file: a new catalog file needs the new value, which the test prints.
+const BUILTIN_HASH: u64 = 0x3989_1ee3_075c_4bcc;
+
 /// Epoch of the Hipparcos-2 positions (Julian year).
 pub const HIPPARCOS_EPOCH: f64 = 1991.25;
 
@@ -123,7 +128,8 @@ pub struct Catalog {
 impl Catalog {
     /// The catalog compiled into the binary.
     pub fn builtin() -> Catalog {
-        Catalog::parse(BUILTIN_CSV, BUILTIN_NAME).expect("the built-in catalog parses")
+        Catalog::parse_hashed(BUILTIN_CSV, BUILTIN_NAME, BUILTIN_HASH)
+            .expect("the built-in catalog parses")
     }
 
     /// A catalog of these stars; the sky index is built when first needed.
@@ -241,6 +247,11 @@ impl Catalog {
     /// Parse gpustar's catalog CSV (`hip,ra_rad,dec_rad,pmra_mas_yr,pmdec_mas_yr,hp_mag`,
     /// `#` comment lines, one header line).
     pub fn parse(text: &str, source: &str) -> Result<Catalog> {
+        Catalog::parse_hashed(text, source, fnv1a(text.as_bytes()))
+    }
+
+    /// [`Catalog::parse`] with the text's [`fnv1a`] already known.
+    fn parse_hashed(text: &str, source: &str, content_hash: u64) -> Result<Catalog> {
         let mut stars = Vec::new();
         let mut header_seen = false;
         for (n, line) in text.lines().enumerate() {
@@ -303,12 +314,7 @@ impl Catalog {
         if stars.is_empty() {
             fail!(Catalog, "{source}: no stars");
         }
-        Ok(Catalog::new(
-            stars,
-            Vec::new(),
-            source,
-            fnv1a(text.as_bytes()),
-        ))
+        Ok(Catalog::new(stars, Vec::new(), source, content_hash))
     }
 
     /// Faintest magnitude in the catalog.
@@ -569,4 +575,19 @@ pub fn vector_to_radec(v: &Vector3<f64>) -> (f64, f64) {
     let ra = v.y.atan2(v.x).to_degrees().rem_euclid(360.0);
     let dec = v.z.clamp(-1.0, 1.0).asin().to_degrees();
     (ra, dec)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The built-in catalog's hash is its file's (cache keys depend on it).
+    #[test]
+    fn the_builtin_hash_is_the_file_s() {
+        let hash = fnv1a(BUILTIN_CSV.as_bytes());
+        assert_eq!(
+            BUILTIN_HASH, hash,
+            "catalog/hip2_hp8.csv changed: set BUILTIN_HASH to {hash:#018x}"
+        );
+    }
 }
