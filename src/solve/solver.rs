@@ -332,18 +332,11 @@ impl Solver {
             // The pass took 1 / share of the budget: the passes keep the rest.
             rs.max_false_prob *= 1.0 - 1.0 / l.share as f64;
         }
+        if !self.runs_on(pass.kind, detections.len()) {
+            return None;
+        }
         if pass.kind == PassKind::MoreStars {
-            if detections.len() <= s.vote_stars || s.vote_stars >= RETRY_VOTE_STARS {
-                return None;
-            }
             s.vote_stars = RETRY_VOTE_STARS;
-        }
-        // Without more stars than voters, spreading would vote with the same stars.
-        if pass.kind == PassKind::Spread && detections.len() <= s.vote_stars {
-            return None;
-        }
-        if pass.kind == PassKind::Wide && detections.len() < self.settings.wide_min_stars {
-            return None;
         }
         let camera = scaled(&self.camera, pass.scale);
         if self.scales.len() > 1 {
@@ -388,21 +381,25 @@ impl Solver {
         })
     }
 
-    /// How many passes of identifier `method` a frame of `n` detections can be tried with:
-    /// the retries with more voting stars and with voters spread over the frame need more
-    /// detections than vote, the wide retry `wide_min_stars` (`prepare` passes them over
-    /// otherwise), so they add no hypothesis to such a frame.
-    pub fn passes_for(&self, n: usize, method: Method) -> usize {
+    /// Whether a pass of `kind` runs on a frame of `n` detections: the retries with more
+    /// voting stars and with voters spread over the frame need more detections than vote
+    /// (spreading would vote with the same stars), the wide retry `wide_min_stars`.
+    fn runs_on(&self, kind: PassKind, n: usize) -> bool {
         let vote = self.settings.identify.vote_stars;
+        match kind {
+            PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
+            PassKind::Spread => n > vote,
+            PassKind::Wide => n >= self.settings.wide_min_stars,
+            _ => true,
+        }
+    }
+
+    /// How many passes of identifier `method` a frame of `n` detections can be tried with
+    /// (those it runs on, [`Solver::runs_on`]: the others add no hypothesis to it).
+    pub fn passes_for(&self, n: usize, method: Method) -> usize {
         self.passes
             .iter()
-            .filter(|p| p.method == method)
-            .filter(|p| match p.kind {
-                PassKind::MoreStars => n > vote && vote < RETRY_VOTE_STARS,
-                PassKind::Spread => n > vote,
-                PassKind::Wide => n >= self.settings.wide_min_stars,
-                _ => true,
-            })
+            .filter(|p| p.method == method && self.runs_on(p.kind, n))
             .count()
     }
 
