@@ -10,7 +10,7 @@
 //! counts every triangle hypothesis tried, on top of the vote's).
 
 use crate::catalog::RefCatalog;
-use crate::catalog::table::{KEY_SCALE, PairTable, chord_of_angle};
+use crate::catalog::table::{KEY_SCALE, PairTable, RowRange, chord_of_angle};
 use crate::cpu::vote::PairRange;
 use nalgebra::Vector3;
 use std::collections::HashMap;
@@ -53,13 +53,14 @@ struct Side {
 }
 
 impl Side {
+    /// The side of image pair `r`, whose catalog pairs are the table's `rows`.
     fn new(
         table: &PairTable,
         r: &PairRange,
+        rows: RowRange,
         stars: usize,
         dir: impl Fn(u32) -> Vector3<f64>,
     ) -> Side {
-        let rows = table.range(r.lo, r.hi);
         // Each pair both ways round as `star << 32 | partner`, sorted: by a comparison sort
         // when the side is small against the catalog, else by counting its stars' partners.
         let mut pairs: Vec<u64> = Vec::with_capacity(2 * rows.len());
@@ -196,25 +197,26 @@ pub fn triangles(
     refs: &RefCatalog,
 ) -> (Vec<Triangle>, u64) {
     let n = vectors.len();
-    // With wide sides (tens of thousands of partners each) the directions are fetched from a
-    // packed copy, which stays in cache; tight ones fetch few and take them from the catalog.
-    let rows: usize = ranges
+    // The image pairs among these stars, with their table rows.
+    let pairs: Vec<(&PairRange, RowRange)> = ranges
         .iter()
         .filter(|r| (r.i as usize) < n && (r.j as usize) < n)
-        .map(|r| table.range(r.lo, r.hi).len())
-        .sum();
+        .map(|r| (r, table.range(r.lo, r.hi)))
+        .collect();
+    // With wide sides (tens of thousands of partners each) the directions are fetched from a
+    // packed copy, which stays in cache; tight ones fetch few and take them from the catalog.
+    let rows: usize = pairs.iter().map(|(_, rows)| rows.len()).sum();
     let packed: Option<Vec<Vector3<f64>>> =
         (2 * rows > refs.len()).then(|| refs.stars.iter().map(|s| s.v).collect());
     let dir = |id: u32| match &packed {
         Some(p) => p[id as usize],
         None => refs.stars[id as usize].v,
     };
-    let sides: HashMap<(usize, usize), Side> = ranges
-        .iter()
-        .filter(|r| (r.i as usize) < n && (r.j as usize) < n)
-        .map(|r| {
+    let sides: HashMap<(usize, usize), Side> = pairs
+        .into_iter()
+        .map(|(r, rows)| {
             let (i, j) = (r.i.min(r.j) as usize, r.i.max(r.j) as usize);
-            ((i, j), Side::new(table, r, refs.len(), dir))
+            ((i, j), Side::new(table, r, rows, refs.len(), dir))
         })
         .collect();
     let side = |a: usize, b: usize| sides.get(&(a.min(b), a.max(b)));
@@ -294,7 +296,8 @@ mod tests {
             lo: 0,
             hi: max_key,
         };
-        let side = Side::new(&table, &all, 65_542, |_| Vector3::zeros());
+        let rows = table.range(all.lo, all.hi);
+        let side = Side::new(&table, &all, rows, 65_542, |_| Vector3::zeros());
         assert_eq!(side.owners, vec![1, 2, 5, 65_541]);
         assert_eq!(side.of(1).0, &[65_541]);
         assert_eq!(side.of(65_541).0, &[1]);
