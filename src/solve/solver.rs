@@ -395,7 +395,7 @@ impl Solver {
     }
 
     /// How many passes of identifier `method` a frame of `n` detections can be tried with
-    /// (those it runs on, [`Solver::runs_on`]: the others add no hypothesis to it).
+    /// (those it runs on, `Solver::runs_on`: the others add no hypothesis to it).
     pub fn passes_for(&self, n: usize, method: Method) -> usize {
         self.passes
             .iter()
