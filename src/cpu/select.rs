@@ -61,3 +61,50 @@ pub fn select(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64>
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The definition: every candidate with votes, ordered by votes (saturated) then lowest
+    /// id, the first k; rows sparse and dense, with ties and saturated counts.
+    #[test]
+    fn select_keeps_the_best_k_of_the_definition() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for case in 0..300 {
+            let (n_stars, n_ref, k) = (
+                rng.random_range(1..5),
+                rng.random_range(1..400),
+                rng.random_range(1..12),
+            );
+            let density = [0.01, 0.1, 0.5, 1.0][case % 4];
+            let top = [3u32, 40, 0x1_0005][case % 3];
+            let votes: Vec<u32> = (0..n_stars * n_ref)
+                .map(|_| {
+                    if rng.random_bool(density) {
+                        rng.random_range(1..=top)
+                    } else {
+                        0
+                    }
+                })
+                .collect();
+            let got = select(&votes, n_stars, n_ref, k);
+            for s in 0..n_stars {
+                let mut want: Vec<(u32, usize)> = (0..n_ref)
+                    .map(|id| (votes[s * n_ref + id].min(0xFFFF), id))
+                    .filter(|&(v, _)| v > 0)
+                    .collect();
+                want.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+                want.resize(k.min(want.len()), (0, 0));
+                let row: Vec<(u32, usize)> = got[s * k..(s + 1) * k]
+                    .iter()
+                    .map_while(|&p| unpack_candidate(p))
+                    .map(|(v, id)| (v, id as usize))
+                    .collect();
+                assert_eq!(row, want, "case {case} star {s}");
+                assert!(got[s * k + row.len()..(s + 1) * k].iter().all(|&p| p == 0));
+            }
+        }
+    }
+}
