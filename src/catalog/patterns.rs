@@ -49,15 +49,16 @@ pub struct PatternIndex {
 
 /// The six chords of four directions, in the order (0,1), (0,2), (0,3), (1,2), (1,3), (2,3).
 pub fn chords(v: &[Vector3<f64>; 4]) -> [f64; 6] {
-    let mut out = [0.0; 6];
-    let mut e = 0;
-    for i in 0..4 {
-        for j in i + 1..4 {
-            out[e] = (v[i] - v[j]).norm();
-            e += 1;
-        }
-    }
-    out
+    QUAD_EDGES.map(|(i, j)| chord(&v[i], &v[j]))
+}
+
+/// A quad's edges as pairs of its corners, in the order of [`chords`].
+pub const QUAD_EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];
+
+/// The chord between two directions.
+#[inline]
+pub fn chord(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    (a - b).norm()
 }
 
 /// The five edge ratios of six edge lengths: the sorted smaller five over the largest (0 for

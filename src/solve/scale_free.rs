@@ -247,6 +247,8 @@ pub fn lookup(
 ) -> Lookup {
     let n = detections.len().min(ROUND_STARS[ROUND_STARS.len() - 1]);
     let ends = [scaled(camera, lo), scaled(camera, hi)];
+    // A known scale's two ends are one: its ratios are computed once.
+    let n_ends = if lo == hi { 1 } else { 2 };
     let vectors: Vec<[Vector3<f64>; 2]> = detections[..n]
         .iter()
         .map(|d| ends.clone().map(|c| c.pixel_to_vector(d.x, d.y)))
@@ -263,32 +265,39 @@ pub fn lookup(
             .filter(move |q| q[3] >= before)
             .map(move |q| (round, q))
     });
+    // Each pair's chords (at each end) and length in pixels, once: a star is in hundreds of
+    // the quads.
+    let pair = |i: usize, j: usize| i * n + j;
+    let mut chords = vec![[0.0; 2]; n * n];
+    let mut lengths = vec![0.0; n * n];
+    for i in 0..n {
+        for j in i + 1..n {
+            for e in 0..n_ends {
+                chords[pair(i, j)][e] = patterns::chord(&vectors[i][e], &vectors[j][e]);
+            }
+            let (a, b) = (&detections[i], &detections[j]);
+            lengths[pair(i, j)] = (a.x - b.x).hypot(a.y - b.y);
+        }
+    }
     for (round, stars) in rounds {
+        // The quad's edges (its stars are in ascending order), as `patterns::chords` orders them.
+        let edges = patterns::QUAD_EDGES.map(|(a, b)| pair(stars[a], stars[b]));
+        // Pixel lengths of the edges, sorted as the chords are (nearly: the order of two
+        // edges of almost equal length does not matter to their sorted values).
+        let mut px = edges.map(|e| lengths[e]);
+        px.sort_by(f64::total_cmp);
+        if px[0] <= 2.0 * tol_px {
+            continue;
+        }
         let mut r_lo = [f64::MAX; 5];
         let mut r_hi = [f64::MIN; 5];
         // The ratios through the shortest and the longest focal length.
-        let ends =
-            (0..2).map(|e| patterns::ratios(&patterns::chords(&stars.map(|i| vectors[i][e]))));
-        for r in ends {
+        for e in 0..n_ends {
+            let r = patterns::ratios(&edges.map(|k| chords[k][e]));
             for i in 0..5 {
                 r_lo[i] = r_lo[i].min(r[i]);
                 r_hi[i] = r_hi[i].max(r[i]);
             }
-        }
-        // Pixel lengths of the edges, sorted as the chords are (nearly: the order of two
-        // edges of almost equal length does not matter to their sorted values).
-        let mut px = [0.0; 6];
-        let mut k = 0;
-        for i in 0..4 {
-            for j in i + 1..4 {
-                let (a, b) = (&detections[stars[i]], &detections[stars[j]]);
-                px[k] = (a.x - b.x).hypot(a.y - b.y);
-                k += 1;
-            }
-        }
-        px.sort_by(f64::total_cmp);
-        if px[0] <= 2.0 * tol_px {
-            continue;
         }
         // Each ratio's bins: first, and how many.
         let mut bins = [(0u32, 0usize); 5];
@@ -390,7 +399,8 @@ impl Solver {
     ) -> (Solution, f64, f64) {
         let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
-        let dets = detect::detect(frame, &self.settings.detect);
+        let detector = detect::Detector::new(frame, &self.settings.detect);
+        let dets = detector.detect(&self.settings.detect);
         let mut detect_ms = ms(t);
         let t = Instant::now();
         let found = id.identify_scale_free(&dets, epoch);
@@ -404,7 +414,7 @@ impl Solver {
             return (sol, detect_ms, identify_ms);
         }
         let t = Instant::now();
-        let filtered = self.detect_filtered(frame);
+        let filtered = detector.detect(&self.filtered_settings());
         detect_ms += ms(t);
         let t = Instant::now();
         let solution = match id.identify_scale_free(&filtered, epoch) {
