@@ -3,7 +3,7 @@
 use crate::cpu;
 use crate::cpu::centroid::Blob;
 use crate::cpu::psf_fit::{PsfFit, Window};
-use crate::cpu::threshold::DetectParams;
+use crate::cpu::threshold::{DetectParams, TileStats};
 use crate::error::fail;
 use crate::io::frame::Frame;
 use serde::Serialize;
@@ -98,10 +98,15 @@ pub fn params(frame: &Frame, s: &DetectSettings) -> DetectParams {
 
 /// Run the CPU twins of the detection kernels: the blobs in label order.
 pub fn blobs_cpu(frame: &Frame, p: &DetectParams) -> Vec<Blob> {
-    let tiles = cpu::threshold::tile_stats(&frame.pixels, p);
-    let runs = cpu::threshold::threshold(&frame.pixels, &tiles, p);
+    blobs_cpu_with(frame, p, &cpu::threshold::tile_stats(&frame.pixels, p))
+}
+
+/// [`blobs_cpu`] with the frame's tile statistics already computed (under parameters of the
+/// same tile side and threshold).
+fn blobs_cpu_with(frame: &Frame, p: &DetectParams, tiles: &[TileStats]) -> Vec<Blob> {
+    let runs = cpu::threshold::threshold(&frame.pixels, tiles, p);
     let labels = cpu::components::components(&runs, p.width);
-    cpu::centroid::centroid(&frame.pixels, &runs, &labels, &tiles, p)
+    cpu::centroid::centroid(&frame.pixels, &runs, &labels, tiles, p)
 }
 
 /// Smallest component kept with the matched filter: a star of peak SNR 4 sets about five
@@ -194,6 +199,42 @@ pub fn stars_with(
 /// Detect stars in a frame on the CPU.
 pub fn detect(frame: &Frame, s: &DetectSettings) -> Vec<Detection> {
     stars(frame, &blobs_cpu(frame, &params(frame, s)), s)
+}
+
+/// A frame's detection on the CPU that keeps its tile statistics for the detection retry: the
+/// matched filter thresholds against the same tiles (only the comparison differs), which a
+/// sparse frame had computed twice.
+pub struct Detector<'f> {
+    frame: &'f Frame<'f>,
+    tiles: Vec<TileStats>,
+    /// The tile side and threshold the tiles were computed with.
+    tile: u32,
+    k_mad: f32,
+}
+
+impl<'f> Detector<'f> {
+    /// The frame's tile statistics under `s` (its tile side and threshold).
+    pub fn new(frame: &'f Frame<'f>, s: &DetectSettings) -> Self {
+        let p = params(frame, s);
+        Detector {
+            frame,
+            tiles: cpu::threshold::tile_stats(&frame.pixels, &p),
+            tile: p.tile,
+            k_mad: p.k_mad,
+        }
+    }
+
+    /// [`detect`] under `s`, which keeps the tile side and threshold of the settings the
+    /// detector was made with (the matched filter may differ).
+    pub fn detect(&self, s: &DetectSettings) -> Vec<Detection> {
+        let p = params(self.frame, s);
+        debug_assert_eq!(
+            (p.tile, p.k_mad),
+            (self.tile, self.k_mad),
+            "the tiles' settings"
+        );
+        stars(self.frame, &blobs_cpu_with(self.frame, &p, &self.tiles), s)
+    }
 }
 
 /// The matched filter's detection of a star the first detection found moves it by less than

@@ -754,14 +754,15 @@ impl Solver {
         identify: impl Fn(Vec<Detection>) -> Solution,
     ) -> (Solution, f64, f64) {
         let t0 = Instant::now();
-        let dets = detect::detect(frame, &self.settings.detect);
+        let detector = detect::Detector::new(frame, &self.settings.detect);
+        let dets = detector.detect(&self.settings.detect);
         let t1 = Instant::now();
         let sol = identify(dets);
         let t2 = Instant::now();
         let (mut detect_ms, identify_ms) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
         if matches!(sol.outcome, Outcome::Unsolved(_)) && self.detection_stages() > 1 {
             let t3 = Instant::now();
-            let filtered = self.detect_filtered(frame);
+            let filtered = detector.detect(&self.filtered_settings());
             detect_ms += t3.elapsed().as_secs_f64();
             if !detect::adds_stars(&sol.detections, &filtered) {
                 return (sol, detect_ms * 1e3, identify_ms * 1e3);
@@ -796,11 +797,6 @@ impl Solver {
             matched_filter: true,
             ..self.settings.detect
         }
-    }
-
-    /// The frame's detections with the matched filter (the detection retry).
-    pub fn detect_filtered(&self, frame: &Frame) -> Vec<Detection> {
-        detect::detect(frame, &self.filtered_settings())
     }
 
     /// The band (of the scale search; never the shallow pass's) a focal-length factor falls in.

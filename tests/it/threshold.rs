@@ -223,6 +223,18 @@ fn matched_filter_finds_a_faint_star_and_drops_a_hot_pixel() {
     assert!(!near(&raw, sx, sy), "{raw:?}");
     assert!(near(&filtered, sx, sy), "{filtered:?}");
     assert!(!near(&filtered, 45.0, 40.0), "the hot pixel: {filtered:?}");
+    // The detector that keeps the tiles for the detection retry finds the same, both ways.
+    let first = gpustar::solve::detect::DetectSettings {
+        tile: 16,
+        ..Default::default()
+    };
+    let detector = gpustar::solve::detect::Detector::new(&frame, &first);
+    assert_eq!(detector.detect(&first), raw);
+    let retry = gpustar::solve::detect::DetectSettings {
+        matched_filter: true,
+        ..first
+    };
+    assert_eq!(detector.detect(&retry), filtered);
 }
 
 #[test]
