@@ -71,7 +71,7 @@ pub struct TileStats {
 pub fn tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
     let mut out = Vec::with_capacity((p.tiles_x * p.tiles_y) as usize);
     let mut vals: Vec<u16> = Vec::with_capacity((p.tile * p.tile) as usize);
-    let mut hist: Vec<u32> = Vec::with_capacity(HIST_SPAN_MAX);
+    let mut hist: Box<Histograms> = Box::new([[0; HIST_SPAN_MAX]; 4]);
     for ty in 0..p.tiles_y {
         for tx in 0..p.tiles_x {
             let (x0, y0) = (tx * p.tile, ty * p.tile);
@@ -116,13 +116,15 @@ pub fn tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
 }
 
 /// The widest span of values (max − min + 1) a 16-bit tile is counted in a histogram for;
-/// a wider one (a bright star across the tile, a gradient) takes selection instead.
+/// a wider one (a bright star across the tile, a gradient) takes selection instead. A power of
+/// two (see [`median_mad_16bit`]).
 const HIST_SPAN_MAX: usize = 4096;
+const _: () = assert!(HIST_SPAN_MAX.is_power_of_two());
 
 /// Median and MAD of 16-bit values: from a histogram over their span when it is narrow (sky
 /// tiles: selection twice over the values cost a tenth of a frame's time), else by selection.
 /// The same order statistics either way.
-fn median_mad_16bit(v: &mut [u16], hist: &mut Vec<u32>) -> (u16, u16) {
+fn median_mad_16bit(v: &mut [u16], hist: &mut Histograms) -> (u16, u16) {
     let (lo, hi) = v
         .iter()
         .fold((u16::MAX, 0), |(lo, hi), &x| (lo.min(x), hi.max(x)));
@@ -131,25 +133,32 @@ fn median_mad_16bit(v: &mut [u16], hist: &mut Vec<u32>) -> (u16, u16) {
         return median_mad(v);
     }
     // Four histograms, summed after (as the 8-bit path): sky pixels share a few values, and
-    // increments of one counter in a row wait on each other (most of the tile's time).
-    hist.clear();
-    hist.resize(4 * span, 0);
+    // increments of one counter in a row wait on each other (most of the tile's time). Each is
+    // cleared over the span only; the mask is a no-op (values are within the span) that lets
+    // the compiler drop the bounds checks.
+    let bin = |x: u16| (x - lo) as usize & (HIST_SPAN_MAX - 1);
+    let [h0, h1, h2, h3] = hist;
+    for h in [&mut *h0, &mut *h1, &mut *h2, &mut *h3] {
+        h[..span].fill(0);
+    }
     let mut quads = v.chunks_exact(4);
     for q in &mut quads {
-        hist[(q[0] - lo) as usize] += 1;
-        hist[span + (q[1] - lo) as usize] += 1;
-        hist[2 * span + (q[2] - lo) as usize] += 1;
-        hist[3 * span + (q[3] - lo) as usize] += 1;
+        h0[bin(q[0])] += 1;
+        h1[bin(q[1])] += 1;
+        h2[bin(q[2])] += 1;
+        h3[bin(q[3])] += 1;
     }
     for &x in quads.remainder() {
-        hist[(x - lo) as usize] += 1;
+        h0[bin(x)] += 1;
     }
-    let (first, rest) = hist.split_at_mut(span);
-    for (b, h) in first.iter_mut().enumerate() {
-        *h += rest[b] + rest[span + b] + rest[2 * span + b];
+    for b in 0..span {
+        h0[b] += h1[b] + h2[b] + h3[b];
     }
-    median_mad_hist(&hist[..span], lo, v.len())
+    median_mad_hist(&h0[..span], lo, v.len())
 }
+
+/// The four histograms of [`median_mad_16bit`], kept by the caller.
+type Histograms = [[u32; HIST_SPAN_MAX]; 4];
 
 /// Median and MAD by selection (any bit depth).
 fn median_mad(v: &mut [u16]) -> (u16, u16) {
@@ -429,7 +438,7 @@ mod tests {
     #[test]
     fn histogram_median_mad_equals_selection() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let mut hist = Vec::new();
+        let mut hist = Box::new([[0; HIST_SPAN_MAX]; 4]);
         for case in 0..2000 {
             let n = rng.random_range(1..=600);
             let base: u16 = rng.random_range(0..60_000);
