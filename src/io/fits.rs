@@ -184,6 +184,95 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
     })
 }
 
+/// The usual camera frame, read from the file straight into its pixels: a primary image of
+/// BITPIX 16 with BZERO 32768 and BSCALE 1 and no BLANK (every stored value is its pixel
+/// exactly). `head` is the file's beginning, already read, holding the whole header; `rest`
+/// reads on from its end; `file_len` is the file's length. The data are read a chunk at a
+/// time into the pixels' own memory and converted there while in cache: one pass over memory
+/// where reading the file whole and converting it made three, half the time of a 2 MB frame.
+///
+/// None for any other file, and at any irregularity (a header not wholly in `head`, a short
+/// read): the caller then decodes the file whole with [`decode_fits`], which reads every kind
+/// and says what is wrong. Some(frame) is exactly what `decode_fits` returns for the file.
+pub fn read_camera_frame(
+    head: &[u8],
+    rest: &mut impl std::io::Read,
+    file_len: u64,
+    max_pixels: u64,
+) -> Option<FitsFrame> {
+    use std::io::Read;
+    if !head.starts_with(b"SIMPLE  =") {
+        return None;
+    }
+    let image = scan_header(head, 0, "FITS primary HDU".to_string()).ok()?;
+    let dims = &image.naxis;
+    if image.bitpix != 16 || dims.len() < 2 || dims[2..].iter().any(|&d| d != 1) {
+        return None;
+    }
+    let headers = parse_headers(head, &image, None).ok()?;
+    let header = headers.last()?;
+    let (w, h) = (dims[0], dims[1]);
+    let count = w * h;
+    if w == 0 || h == 0 || count > max_pixels || w > u64::from(u32::MAX) || h > u64::from(u32::MAX)
+    {
+        return None;
+    }
+    let need = usize::try_from(count * 2).ok()?;
+    if (image.data_start + need) as u64 > file_len || header.get("BLANK").is_some() {
+        return None;
+    }
+    let scaling = Scaling::new(
+        number(header, "BZERO").ok()?.unwrap_or(0.0),
+        number(header, "BSCALE").ok()?.unwrap_or(1.0),
+    );
+    if scaling.int != Some((32768, 1)) {
+        return None;
+    }
+    let mut pixels = new_pixels(count, 0).ok()?;
+    pixels.resize(count as usize, 0);
+    let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut pixels);
+    // The data in `head`, then the rest (past the header's padding, if `head` ends in it).
+    let mut filled = head.len().saturating_sub(image.data_start).min(need);
+    bytes[..filled].copy_from_slice(&head[image.data_start..image.data_start + filled]);
+    let skip = image.data_start.saturating_sub(head.len()) as u64;
+    if skip > 0 && std::io::copy(&mut rest.by_ref().take(skip), &mut std::io::sink()).ok()? != skip
+    {
+        return None;
+    }
+    // Stored big-endian i16 v is pixel 32768 + v (as `convert_int` maps it).
+    let convert = |p: &mut [u16]| {
+        for v in p {
+            *v = (32768 + i32::from(u16::from_be(*v) as i16)) as u16;
+        }
+    };
+    let mut converted = 0;
+    loop {
+        let whole = filled / 2;
+        convert(&mut bytemuck::cast_slice_mut(&mut pixels)[converted..whole]);
+        converted = whole;
+        if filled == need {
+            break;
+        }
+        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut pixels);
+        let end = (filled + READ_CHUNK).min(need);
+        rest.read_exact(&mut bytes[filled..end]).ok()?;
+        filled = end;
+    }
+    let (epoch, warnings) = epoch(headers.iter().rev());
+    Some(FitsFrame {
+        width: w as u32,
+        height: h as u32,
+        pixels,
+        saturation: u16::MAX,
+        epoch,
+        warnings,
+        keywords: keywords(&headers),
+    })
+}
+
+/// Bytes [`read_camera_frame`] reads and converts at a time: well inside the L2 cache.
+const READ_CHUNK: usize = 64 << 10;
+
 /// The keywords of the headers used, later headers over earlier ones.
 fn keywords(headers: &[Header<Image>]) -> BTreeMap<String, String> {
     let mut out = BTreeMap::new();

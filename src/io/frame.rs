@@ -1,6 +1,7 @@
 //! Decoding image files into a grey frame of u16 pixels (8-bit images keep values 0–255).
 
 use crate::error::{Context, Error, Result, error, fail};
+use crate::io::fits::FitsFrame;
 use image::{DynamicImage, ImageDecoder, ImageError, ImageFormat, ImageReader, Limits};
 use std::borrow::Cow;
 use std::io::{BufRead, Cursor, Seek};
@@ -192,6 +193,23 @@ fn is_fits(path: &Path) -> Result<bool> {
     Ok(n == head.len() && &head == b"SIMPLE  =")
 }
 
+/// The usual camera frame through [`crate::io::fits::read_camera_frame`] (its first 64 KiB
+/// read for the header); None when the file is of another kind or cannot be read so (the
+/// caller reads it whole, and reports what is wrong).
+fn read_camera_fits(path: &Path, file_len: u64, max_pixels: u64) -> Option<FitsFrame> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path).ok()?;
+    let mut head = Vec::with_capacity(HEAD_BYTES);
+    file.by_ref()
+        .take(HEAD_BYTES as u64)
+        .read_to_end(&mut head)
+        .ok()?;
+    crate::io::fits::read_camera_frame(&head, &mut file, file_len, max_pixels)
+}
+
+/// How much of a FITS file is read for its header before its data: a few header blocks.
+const HEAD_BYTES: usize = 64 << 10;
+
 /// A FITS file's primary image (or first image extension), with its DATE-OBS.
 fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame<'static>, FileInfo)> {
     if file_len > MAX_ALLOC {
@@ -200,10 +218,15 @@ fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame<'static>,
             "cannot decode {shown}: the FITS file is larger than gpustar reads (2 GiB)"
         );
     }
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
     let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64).min(MAX_ALLOC / 2);
-    let f = crate::io::fits::decode_fits(&bytes, max_pixels)
-        .with_context(|| format!("cannot decode {shown}"))?;
+    let f = match read_camera_fits(path, file_len, max_pixels) {
+        Some(f) => f,
+        None => {
+            let bytes = std::fs::read(path).with_context(|| format!("cannot read {shown}"))?;
+            crate::io::fits::decode_fits(&bytes, max_pixels)
+                .with_context(|| format!("cannot decode {shown}"))?
+        }
+    };
     Ok((
         Frame {
             width: f.width,

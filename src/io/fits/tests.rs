@@ -545,3 +545,51 @@ fn keywords_of_a_frame_in_memory_give_the_epoch_a_file_would() {
         "{w:?}"
     );
 }
+
+/// [`read_camera_frame`] with the file's first `head` bytes in hand and the rest to read.
+fn camera_frame(bytes: &[u8], head: usize) -> Option<FitsFrame> {
+    let head = head.min(bytes.len());
+    let mut rest = std::io::Cursor::new(&bytes[head..]);
+    read_camera_frame(&bytes[..head], &mut rest, bytes.len() as u64, 1 << 30)
+}
+
+/// The camera frame read straight into its pixels is what `decode_fits` makes of the file,
+/// whatever part of it was read first (the header alone, part of its padding, part of the
+/// data, or all of it) and across read chunks; other kinds and damaged files are left to
+/// `decode_fits`.
+#[test]
+fn camera_frames_read_straight_equal_decode_fits() {
+    let (w, h) = (300u64, 257u64);
+    let stored: Vec<i16> = (0..w * h)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 7) as i16)
+        .collect();
+    let camera = [card("BZERO", 32768), card("BSCALE", 1)];
+    let dated = [
+        card("BZERO", 32768),
+        text_card("DATE-OBS", "2019-07-29T20:47:26.5"),
+        text_card("OBJECT", "M42"),
+    ];
+    for extra in [&camera[..], &dated[..]] {
+        let bytes = image(16, &[w, h], extra, &be16(&stored));
+        let want = decode(&bytes);
+        for head in [BLOCK, BLOCK + 1, 2 * BLOCK - 1, 2 * BLOCK + 3, 100_001, bytes.len()] {
+            assert_eq!(camera_frame(&bytes, head), Some(want.clone()), "head {head}");
+        }
+        // A header not wholly in hand, or data cut short: left to decode_fits.
+        assert_eq!(camera_frame(&bytes, 100), None);
+        let cut = &bytes[..bytes.len() - BLOCK];
+        assert_eq!(camera_frame(cut, BLOCK), None);
+        assert!(error(cut).contains("truncated"));
+    }
+    // Other kinds: signed 16-bit, another BZERO, BLANK, 8-bit, 3-D, an extension.
+    let small = be16(&[0, 5, 1234, 32767]);
+    for bytes in [
+        image(16, &[2, 2], &[], &small),
+        image(16, &[2, 2], &[card("BZERO", 1000)], &small),
+        image(16, &[2, 2], &[card("BZERO", 32768), card("BLANK", 5)], &small),
+        image(8, &[2, 2], &[], &[1, 2, 3, 4]),
+        image(16, &[2, 1, 2], &camera, &small),
+    ] {
+        assert_eq!(camera_frame(&bytes, bytes.len()), None);
+    }
+}
