@@ -292,8 +292,8 @@ pub fn lookup(
         let mut r_lo = [f64::MAX; 5];
         let mut r_hi = [f64::MIN; 5];
         // The ratios through the shortest and the longest focal length.
-        for e in 0..n_ends {
-            let r = patterns::ratios(&edges.map(|k| chords[k][e]));
+        let ends = (0..n_ends).map(|e| patterns::ratios(&edges.map(|k| chords[k][e])));
+        for r in ends {
             for i in 0..5 {
                 r_lo[i] = r_lo[i].min(r[i]);
                 r_hi[i] = r_hi[i].max(r[i]);

@@ -572,8 +572,19 @@ fn camera_frames_read_straight_equal_decode_fits() {
     for extra in [&camera[..], &dated[..]] {
         let bytes = image(16, &[w, h], extra, &be16(&stored));
         let want = decode(&bytes);
-        for head in [BLOCK, BLOCK + 1, 2 * BLOCK - 1, 2 * BLOCK + 3, 100_001, bytes.len()] {
-            assert_eq!(camera_frame(&bytes, head), Some(want.clone()), "head {head}");
+        for head in [
+            BLOCK,
+            BLOCK + 1,
+            2 * BLOCK - 1,
+            2 * BLOCK + 3,
+            100_001,
+            bytes.len(),
+        ] {
+            assert_eq!(
+                camera_frame(&bytes, head),
+                Some(want.clone()),
+                "head {head}"
+            );
         }
         // A header not wholly in hand, or data cut short: left to decode_fits.
         assert_eq!(camera_frame(&bytes, 100), None);
@@ -586,7 +597,12 @@ fn camera_frames_read_straight_equal_decode_fits() {
     for bytes in [
         image(16, &[2, 2], &[], &small),
         image(16, &[2, 2], &[card("BZERO", 1000)], &small),
-        image(16, &[2, 2], &[card("BZERO", 32768), card("BLANK", 5)], &small),
+        image(
+            16,
+            &[2, 2],
+            &[card("BZERO", 32768), card("BLANK", 5)],
+            &small,
+        ),
         image(8, &[2, 2], &[], &[1, 2, 3, 4]),
         image(16, &[2, 1, 2], &camera, &small),
     ] {
