@@ -248,7 +248,7 @@ pub fn read_camera_frame(
     let mut converted = 0;
     loop {
         let whole = filled / 2;
-        convert(&mut bytemuck::cast_slice_mut(&mut pixels)[converted..whole]);
+        convert(&mut pixels[converted..whole]);
         converted = whole;
         if filled == need {
             break;
