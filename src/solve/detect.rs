@@ -58,6 +58,14 @@ impl Default for DetectSettings {
 }
 
 impl DetectSettings {
+    /// The same with the matched filter on: the detection retry's.
+    pub fn filtered(self) -> DetectSettings {
+        DetectSettings {
+            matched_filter: true,
+            ..self
+        }
+    }
+
     /// Detection of the sequence stage (`--sequence`): the brightest `max_stars`, deblended.
     pub fn for_sequence(self, max_stars: usize) -> DetectSettings {
         DetectSettings {
@@ -206,33 +214,33 @@ pub fn detect(frame: &Frame, s: &DetectSettings) -> Vec<Detection> {
 /// sparse frame had computed twice.
 pub struct Detector<'f> {
     frame: &'f Frame<'f>,
+    settings: DetectSettings,
     tiles: Vec<TileStats>,
-    /// The tile side and threshold the tiles were computed with.
-    tile: u32,
-    k_mad: f32,
 }
 
 impl<'f> Detector<'f> {
-    /// The frame's tile statistics under `s` (its tile side and threshold).
-    pub fn new(frame: &'f Frame<'f>, s: &DetectSettings) -> Self {
-        let p = params(frame, s);
+    /// The frame's tile statistics under `settings`.
+    pub fn new(frame: &'f Frame<'f>, settings: &DetectSettings) -> Self {
+        let tiles = cpu::threshold::tile_stats(&frame.pixels, &params(frame, settings));
         Detector {
             frame,
-            tiles: cpu::threshold::tile_stats(&frame.pixels, &p),
-            tile: p.tile,
-            k_mad: p.k_mad,
+            settings: *settings,
+            tiles,
         }
     }
 
-    /// [`detect`] under `s`, which keeps the tile side and threshold of the settings the
-    /// detector was made with (the matched filter may differ).
-    pub fn detect(&self, s: &DetectSettings) -> Vec<Detection> {
+    /// [`detect`] under the settings.
+    pub fn detect(&self) -> Vec<Detection> {
+        self.detect_with(&self.settings)
+    }
+
+    /// [`detect`] under the settings with the matched filter on (the detection retry).
+    pub fn detect_filtered(&self) -> Vec<Detection> {
+        self.detect_with(&self.settings.filtered())
+    }
+
+    fn detect_with(&self, s: &DetectSettings) -> Vec<Detection> {
         let p = params(self.frame, s);
-        debug_assert_eq!(
-            (p.tile, p.k_mad),
-            (self.tile, self.k_mad),
-            "the tiles' settings"
-        );
         stars(self.frame, &blobs_cpu_with(self.frame, &p, &self.tiles), s)
     }
 }

@@ -400,7 +400,7 @@ impl Solver {
         let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
         let t = Instant::now();
         let detector = detect::Detector::new(frame, &self.settings.detect);
-        let dets = detector.detect(&self.settings.detect);
+        let dets = detector.detect();
         let mut detect_ms = ms(t);
         let t = Instant::now();
         let found = id.identify_scale_free(&dets, epoch);
@@ -414,7 +414,7 @@ impl Solver {
             return (sol, detect_ms, identify_ms);
         }
         let t = Instant::now();
-        let filtered = detector.detect(&self.filtered_settings());
+        let filtered = detector.detect_filtered();
         detect_ms += ms(t);
         let t = Instant::now();
         let solution = match id.identify_scale_free(&filtered, epoch) {

@@ -755,14 +755,14 @@ impl Solver {
     ) -> (Solution, f64, f64) {
         let t0 = Instant::now();
         let detector = detect::Detector::new(frame, &self.settings.detect);
-        let dets = detector.detect(&self.settings.detect);
+        let dets = detector.detect();
         let t1 = Instant::now();
         let sol = identify(dets);
         let t2 = Instant::now();
         let (mut detect_ms, identify_ms) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
         if matches!(sol.outcome, Outcome::Unsolved(_)) && self.detection_stages() > 1 {
             let t3 = Instant::now();
-            let filtered = detector.detect(&self.filtered_settings());
+            let filtered = detector.detect_filtered();
             detect_ms += t3.elapsed().as_secs_f64();
             if !detect::adds_stars(&sol.detections, &filtered) {
                 return (sol, detect_ms * 1e3, identify_ms * 1e3);
@@ -793,10 +793,7 @@ impl Solver {
 
     /// Detection's settings with the matched filter on (the detection retry).
     pub fn filtered_settings(&self) -> DetectSettings {
-        DetectSettings {
-            matched_filter: true,
-            ..self.settings.detect
-        }
+        self.settings.detect.filtered()
     }
 
     /// The band (of the scale search; never the shallow pass's) a focal-length factor falls in.

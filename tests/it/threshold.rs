@@ -229,12 +229,8 @@ fn matched_filter_finds_a_faint_star_and_drops_a_hot_pixel() {
         ..Default::default()
     };
     let detector = gpustar::solve::detect::Detector::new(&frame, &first);
-    assert_eq!(detector.detect(&first), raw);
-    let retry = gpustar::solve::detect::DetectSettings {
-        matched_filter: true,
-        ..first
-    };
-    assert_eq!(detector.detect(&retry), filtered);
+    assert_eq!(detector.detect(), raw);
+    assert_eq!(detector.detect_filtered(), filtered);
 }
 
 #[test]
