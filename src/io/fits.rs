@@ -26,7 +26,7 @@
 //! headers (TFIELDS, ZNAXIS) without bound. So a small scan checks every header first, and
 //! fitsrs only ever sees copies of the headers of the HDUs used, both already checked.
 
-use crate::error::{Result, error, fail};
+use crate::error::{Result, fail};
 use fitsrs::card::Value;
 use fitsrs::hdu::header::Header;
 use fitsrs::hdu::header::extension::image::Image;
@@ -79,6 +79,69 @@ const CARD: usize = 80;
 /// extension is decoded instead. Errors say what is wrong in words a person can act on; they
 /// do not name the file, which the caller adds.
 pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
+    let Layout {
+        image,
+        headers,
+        width: w,
+        height: h,
+    } = layout(bytes, max_pixels)?;
+    let Some(header) = headers.last() else {
+        fail!(Input, "no FITS header");
+    };
+    let count = w * h;
+    let need = count * image.bytes_per_value;
+    let have = bytes.len().saturating_sub(image.data_start) as u64;
+    if have < need {
+        fail!(
+            Input,
+            "FITS data truncated: expected {need} bytes, file holds {have}"
+        );
+    }
+    // `need` <= `have`, so these fit in usize.
+    let data = &bytes[image.data_start..image.data_start + need as usize];
+
+    let (scaling, blank) = scaling_and_blank(header, image.bitpix)?;
+    let (epoch, mut warnings) = epoch(headers.iter().rev());
+    let with_warning = |(p, s, w): (Vec<u16>, u16, Option<String>), all: &mut Vec<String>| {
+        all.extend(w);
+        (p, s)
+    };
+    let (pixels, saturation) = match image.bitpix {
+        8 => convert_int::<u8>(data, scaling, blank, count)?,
+        16 => convert_int::<i16>(data, scaling, blank, count)?,
+        32 => convert_int::<i32>(data, scaling, blank, count)?,
+        64 => convert_int::<i64>(data, scaling, blank, count)?,
+        -32 => with_warning(convert_float::<f32>(data, scaling, count)?, &mut warnings),
+        -64 => with_warning(convert_float::<f64>(data, scaling, count)?, &mut warnings),
+        b => fail!(Input, "FITS BITPIX = {b} is not supported"),
+    };
+    Ok(FitsFrame {
+        width: w as u32,
+        height: h as u32,
+        pixels,
+        saturation,
+        // The image's own header first; DATE-OBS often sits only in the primary header of
+        // multi-extension files.
+        epoch,
+        warnings,
+        keywords: keywords(&headers),
+    })
+}
+
+/// What the headers say of a FITS file's image, checked before any of its data are read.
+struct Layout {
+    /// The image's HDU (the primary, or the first IMAGE extension when the primary has no data).
+    image: Scan,
+    /// The headers used, the image's own last.
+    headers: Vec<Header<Image>>,
+    width: u64,
+    height: u64,
+}
+
+/// The [`Layout`] of a FITS file of which `bytes` hold at least the headers: what every
+/// reading checks first (a FITS file, headers fitsrs can take, a 2-D image of at most
+/// `max_pixels`).
+fn layout(bytes: &[u8], max_pixels: u64) -> Result<Layout> {
     if bytes.is_empty() {
         fail!(Input, "the file is empty (0 bytes)");
     }
@@ -101,10 +164,7 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
         None
     };
     let headers = parse_headers(bytes, &primary, ext.as_ref())?;
-    let image = ext.as_ref().unwrap_or(&primary);
-    let header = headers
-        .last()
-        .ok_or_else(|| error!(Input, "no FITS header"))?;
+    let image = ext.unwrap_or(primary);
 
     let dims = &image.naxis;
     if dims.len() < 2 || dims[2..].iter().any(|&d| d != 1) {
@@ -136,62 +196,37 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
              ({max_pixels} pixels at most)"
         );
     }
-    let need = count * image.bytes_per_value;
-    let have = bytes.len().saturating_sub(image.data_start) as u64;
-    if have < need {
-        fail!(
-            Input,
-            "FITS data truncated: expected {need} bytes, file holds {have}"
-        );
-    }
-    // `need` <= `have`, so these fit in usize.
-    let data = &bytes[image.data_start..image.data_start + need as usize];
+    Ok(Layout {
+        image,
+        headers,
+        width: w,
+        height: h,
+    })
+}
 
+/// BZERO and BSCALE of the image's header, and BLANK, which marks missing pixels of integer
+/// data only (FITS 4.0, 4.4.2.5) and is compared before scaling.
+fn scaling_and_blank(header: &Header<Image>, bitpix: i64) -> Result<(Scaling, Option<i64>)> {
     let scaling = Scaling::new(
         number(header, "BZERO")?.unwrap_or(0.0),
         number(header, "BSCALE")?.unwrap_or(1.0),
     );
-    // BLANK marks missing pixels of integer data only (FITS 4.0, 4.4.2.5), compared before
-    // scaling.
     let blank = match header.get("BLANK") {
-        Some(Value::Integer { value, .. }) if image.bitpix > 0 => Some(*value),
+        Some(Value::Integer { value, .. }) if bitpix > 0 => Some(*value),
         _ => None,
     };
-    let (epoch, mut warnings) = epoch(headers.iter().rev());
-    let with_warning = |(p, s, w): (Vec<u16>, u16, Option<String>), all: &mut Vec<String>| {
-        all.extend(w);
-        (p, s)
-    };
-    let (pixels, saturation) = match image.bitpix {
-        8 => convert_int::<u8>(data, scaling, blank, count)?,
-        16 => convert_int::<i16>(data, scaling, blank, count)?,
-        32 => convert_int::<i32>(data, scaling, blank, count)?,
-        64 => convert_int::<i64>(data, scaling, blank, count)?,
-        -32 => with_warning(convert_float::<f32>(data, scaling, count)?, &mut warnings),
-        -64 => with_warning(convert_float::<f64>(data, scaling, count)?, &mut warnings),
-        b => fail!(Input, "FITS BITPIX = {b} is not supported"),
-    };
-    Ok(FitsFrame {
-        width: w as u32,
-        height: h as u32,
-        pixels,
-        saturation,
-        // The image's own header first; DATE-OBS often sits only in the primary header of
-        // multi-extension files.
-        epoch,
-        warnings,
-        keywords: keywords(&headers),
-    })
+    Ok((scaling, blank))
 }
 
-/// The usual camera frame, read from the file straight into its pixels: a primary image of
-/// BITPIX 16 with BZERO 32768 and BSCALE 1 and no BLANK (every stored value is its pixel
-/// exactly). `head` is the file's beginning, already read, holding the whole header; `rest`
+/// The usual camera frame, read from the file straight into its pixels: an image (the one
+/// [`decode_fits`] takes) of BITPIX 16 with BZERO 32768 and BSCALE 1 and no BLANK (every stored
+/// value is its pixel exactly). `head` is the file's beginning, already read, holding the
+/// headers up to the image's; `rest`
 /// reads on from its end; `file_len` is the file's length. The data are read a chunk at a
 /// time into the pixels' own memory and converted there while in cache: one pass over memory
 /// where reading the file whole and converting it made three, half the time of a 2 MB frame.
 ///
-/// None for any other file, and at any irregularity (a header not wholly in `head`, a short
+/// None for any other file, and at any irregularity (headers not wholly in `head`, a short
 /// read): the caller then decodes the file whole with [`decode_fits`], which reads every kind
 /// and says what is wrong. Some(frame) is exactly what `decode_fits` returns for the file.
 pub fn read_camera_frame(
@@ -201,31 +236,19 @@ pub fn read_camera_frame(
     max_pixels: u64,
 ) -> Option<FitsFrame> {
     use std::io::Read;
-    if !head.starts_with(b"SIMPLE  =") {
-        return None;
-    }
-    let image = scan_header(head, 0, "FITS primary HDU".to_string()).ok()?;
-    let dims = &image.naxis;
-    if image.bitpix != 16 || dims.len() < 2 || dims[2..].iter().any(|&d| d != 1) {
-        return None;
-    }
-    let headers = parse_headers(head, &image, None).ok()?;
-    let header = headers.last()?;
-    let (w, h) = (dims[0], dims[1]);
+    let Layout {
+        image,
+        headers,
+        width: w,
+        height: h,
+    } = layout(head, max_pixels).ok()?;
     let count = w * h;
-    if w == 0 || h == 0 || count > max_pixels || w > u64::from(u32::MAX) || h > u64::from(u32::MAX)
-    {
-        return None;
-    }
     let need = usize::try_from(count * 2).ok()?;
-    if (image.data_start + need) as u64 > file_len || header.get("BLANK").is_some() {
+    if image.bitpix != 16 || (image.data_start + need) as u64 > file_len {
         return None;
     }
-    let scaling = Scaling::new(
-        number(header, "BZERO").ok()?.unwrap_or(0.0),
-        number(header, "BSCALE").ok()?.unwrap_or(1.0),
-    );
-    if scaling.int != Some((32768, 1)) {
+    let (scaling, blank) = scaling_and_blank(headers.last()?, image.bitpix).ok()?;
+    if blank.is_some() || scaling.int != Some((32768, 1)) {
         return None;
     }
     let mut pixels = new_pixels(count, 0).ok()?;

@@ -586,13 +586,21 @@ fn camera_frames_read_straight_equal_decode_fits() {
                 "head {head}"
             );
         }
+        // The same image in an extension after an empty primary (the date in the primary).
+        let ext = multi(
+            &[extension("IMAGE", 16, &[w, h], &camera, &be16(&stored))],
+            &dated[1..],
+        );
+        for head in [2 * BLOCK, 3 * BLOCK + 5, ext.len()] {
+            assert_eq!(camera_frame(&ext, head), Some(decode(&ext)), "head {head}");
+        }
         // A header not wholly in hand, or data cut short: left to decode_fits.
         assert_eq!(camera_frame(&bytes, 100), None);
         let cut = &bytes[..bytes.len() - BLOCK];
         assert_eq!(camera_frame(cut, BLOCK), None);
         assert!(error(cut).contains("truncated"));
     }
-    // Other kinds: signed 16-bit, another BZERO, BLANK, 8-bit, 3-D, an extension.
+    // Other kinds: signed 16-bit, another BZERO, BLANK, 8-bit, 3-D.
     let small = be16(&[0, 5, 1234, 32767]);
     for bytes in [
         image(16, &[2, 2], &[], &small),
