@@ -28,17 +28,19 @@ pub struct Triangle {
     pub refs: [u32; 3],
 }
 
-/// Catalog pairs of one image pair: the catalog stars on this side (`owners`, rising), each
-/// with its partners, sorted, and their directions; and the side's key range, to test any two
-/// stars by their chord. A side with wide tolerances holds thousands of pairs and is tested
-/// millions of times: with the directions beside the ids, walking the stars in order reads each
-/// side front to back, where a hash probe per pair missed the cache each time. A side with
-/// tight tolerances holds a few hundred: walking its own stars, not the whole catalog, is what
-/// keeps it cheap.
+/// Catalog pairs of one image pair: which catalog stars are on this side (a bit per star, with
+/// the count of set bits before each word, so that a star's place among them is a popcount),
+/// each one's partners, rising, and their directions; and the side's key range, to test any
+/// two stars by their chord. Most stars on a side have one partner there, so a side is built
+/// by counting (no sort of its pairs) and two sides are joined word by word: where sorted
+/// lists were walked star by star, most of a triangle's time went to stars on only one side.
+/// With the directions beside the ids, the partners are read front to back.
 struct Side {
-    /// The stars with partners on this side, rising.
-    owners: Vec<u32>,
-    /// `owners[t]`'s partners are `partners[start[t]..start[t + 1]]`.
+    /// Bit `s % 64` of word `s / 64` is set when star `s` has partners on this side.
+    words: Vec<u64>,
+    /// The stars with partners in words before word w: `rank[w]`.
+    rank: Vec<u32>,
+    /// The star of rank t's partners are `partners[start[t]..start[t + 1]]`.
     start: Vec<u32>,
     partners: Vec<u32>,
     /// The direction of each of `partners`.
@@ -53,7 +55,8 @@ struct Side {
 }
 
 impl Side {
-    /// The side of image pair `r`, whose catalog pairs are the table's `rows`.
+    /// The side of image pair `r`, whose catalog pairs are the table's `rows`, among catalog
+    /// stars `0..stars`.
     fn new(
         table: &PairTable,
         r: &PairRange,
@@ -61,57 +64,57 @@ impl Side {
         stars: usize,
         dir: impl Fn(u32) -> Vector3<f64>,
     ) -> Side {
-        // Each pair both ways round as `star << 32 | partner`, sorted: by a comparison sort
-        // when the side is small against the catalog, else by counting its stars' partners.
-        let mut pairs: Vec<u64> = Vec::with_capacity(2 * rows.len());
-        if 8 * rows.len() < stars {
-            for row in rows {
-                let (a, b) = table.pair(row);
-                pairs.push(u64::from(a) << 32 | u64::from(b));
-                pairs.push(u64::from(b) << 32 | u64::from(a));
-            }
-            pairs.sort_unstable();
-        } else {
-            let mut at = vec![0u32; stars + 1];
-            for row in rows.clone() {
-                let (a, b) = table.pair(row);
-                at[a as usize + 1] += 1;
-                at[b as usize + 1] += 1;
-            }
-            for s in 1..at.len() {
-                at[s] += at[s - 1];
-            }
-            pairs.resize(2 * rows.len(), 0);
-            for row in rows {
-                let (a, b) = table.pair(row);
-                pairs[at[a as usize] as usize] = u64::from(a) << 32 | u64::from(b);
-                at[a as usize] += 1;
-                pairs[at[b as usize] as usize] = u64::from(b) << 32 | u64::from(a);
-                at[b as usize] += 1;
-            }
-            // Each star's partners are together, in table order: sort within each.
-            for list in pairs.chunk_by_mut(|x, y| x >> 32 == y >> 32) {
+        let mut words = vec![0u64; stars.div_ceil(64)];
+        for row in rows.clone() {
+            let (a, b) = table.pair(row);
+            words[a as usize / 64] |= 1 << (a % 64);
+            words[b as usize / 64] |= 1 << (b % 64);
+        }
+        let mut rank = Vec::with_capacity(words.len());
+        let mut owners = 0u32;
+        for w in &words {
+            rank.push(owners);
+            owners += w.count_ones();
+        }
+        // Counting sort by rank: the places of each pair's two ends, then the partners there.
+        let slot = |s: u32| {
+            let w = s as usize / 64;
+            (rank[w] + (words[w] & ((1u64 << (s % 64)) - 1)).count_ones()) as usize
+        };
+        let mut start = vec![0u32; owners as usize + 1];
+        let mut ends: Vec<(u32, u32)> = Vec::with_capacity(2 * rows.len());
+        for row in rows {
+            let (a, b) = table.pair(row);
+            let (sa, sb) = (slot(a), slot(b));
+            start[sa + 1] += 1;
+            start[sb + 1] += 1;
+            ends.push((sa as u32, b));
+            ends.push((sb as u32, a));
+        }
+        for t in 1..start.len() {
+            start[t] += start[t - 1];
+        }
+        let mut fill = start.clone();
+        let mut partners = vec![0u32; ends.len()];
+        for (t, b) in ends {
+            partners[fill[t as usize] as usize] = b;
+            fill[t as usize] += 1;
+        }
+        // Rows come in key order: each star's few partners are put in rising order here.
+        for t in 0..owners as usize {
+            let list = &mut partners[start[t] as usize..start[t + 1] as usize];
+            if list.len() > 1 {
                 list.sort_unstable();
             }
         }
-        let mut owners = Vec::new();
-        let mut start = Vec::new();
-        for (k, &pair) in pairs.iter().enumerate() {
-            let star = (pair >> 32) as u32;
-            if owners.last() != Some(&star) {
-                owners.push(star);
-                start.push(k as u32);
-            }
-        }
-        start.push(pairs.len() as u32);
-        let partners: Vec<u32> = pairs.iter().map(|&p| p as u32).collect();
         let dirs = partners.iter().map(|&b| dir(b)).collect();
         // key = floor(chord · KEY_SCALE), KEY_SCALE a power of two: key >= lo_key exactly when
         // chord >= lo_key / KEY_SCALE, and key <= hi_key when chord < (hi_key + 1) / KEY_SCALE.
         let lo = f64::from(r.lo) / KEY_SCALE;
         let hi = ((f64::from(r.hi) + 1.0) / KEY_SCALE).min(chord_of_angle(table.max_sep_rad));
         Side {
-            owners,
+            words,
+            rank,
             start,
             partners,
             dirs,
@@ -122,32 +125,37 @@ impl Side {
         }
     }
 
-    /// The partners of `owners[t]`, rising, and their directions.
+    /// The partners of the star of rank `t`, rising, and their directions.
     #[inline]
     fn at(&self, t: usize) -> (&[u32], &[Vector3<f64>]) {
         let at = self.start[t] as usize..self.start[t + 1] as usize;
         (&self.partners[at.clone()], &self.dirs[at])
     }
 
+    /// The rank of the star at bit `bit` of word `w`, which is set.
+    #[inline]
+    fn rank_at(&self, w: usize, bit: u32) -> usize {
+        (self.rank[w] + (self.words[w] & ((1u64 << bit) - 1)).count_ones()) as usize
+    }
+
     /// The partners of catalog star `a` on this side, rising, and their directions (none when
     /// it has none).
+    #[inline]
     fn of(&self, a: u32) -> (&[u32], &[Vector3<f64>]) {
-        match self.owners.binary_search(&a) {
-            Ok(t) => self.at(t),
-            Err(_) => (&[], &[]),
+        let (w, bit) = (a as usize / 64, a % 64);
+        match self.words.get(w) {
+            Some(word) if word >> bit & 1 == 1 => self.at(self.rank_at(w, bit)),
+            _ => (&[], &[]),
         }
     }
 
-    /// [`Side::of`] for `a` rising from call to call: `cursor` (from 0) walks `owners` once.
-    #[inline]
-    fn of_rising(&self, a: u32, cursor: &mut usize) -> (&[u32], &[Vector3<f64>]) {
-        while self.owners.get(*cursor).is_some_and(|&x| x < a) {
-            *cursor += 1;
-        }
-        match self.owners.get(*cursor) {
-            Some(&x) if x == a => self.at(*cursor),
-            _ => (&[], &[]),
-        }
+    /// The stars with partners on this side, rising.
+    #[cfg(test)]
+    fn owners(&self) -> Vec<u32> {
+        (0..self.words.len() * 64)
+            .filter(|&s| self.words[s / 64] >> (s % 64) & 1 == 1)
+            .map(|s| s as u32)
+            .collect()
     }
 
     /// Whether two catalog stars in directions `a` and `b` are a pair of this side: the
@@ -231,36 +239,42 @@ pub fn triangles(
             .filter(|l| ![i, j, k].contains(l))
             .filter_map(|l| Some([side(i, l)?, side(j, l)?, side(k, l)?]))
             .collect();
-        // Each pair both ways round, in rising order of both stars: deterministic.
-        let mut cursor = 0;
-        for (t, &p) in ik.owners.iter().enumerate() {
-            let (rs, r_dirs) = ik.at(t);
-            let (qs, q_dirs) = ij.of_rising(p, &mut cursor);
-            for (&q, vq) in qs.iter().zip(q_dirs) {
-                for (&r, vr) in rs.iter().zip(r_dirs) {
-                    if r == q || !jk.holds(vq, vr) {
-                        continue;
-                    }
-                    let vp = &dir(p);
-                    if (vp.cross(vq).dot(vr) > 0.0) != handed {
-                        continue;
-                    }
-                    matched += 1;
-                    let confirmed = fourth.iter().any(|[il, jl, kl]| {
-                        let (ss, s_dirs) = il.of(p);
-                        ss.iter().zip(s_dirs).any(|(&s, vs)| {
-                            s != q && s != r && jl.holds(vq, vs) && kl.holds(vr, vs)
-                        })
-                    });
-                    if !confirmed {
-                        continue;
-                    }
-                    out.push(Triangle {
-                        stars: [i, j, k],
-                        refs: [p, q, r],
-                    });
-                    if out.len() == MAX_HYPOTHESES {
-                        return (out, matched);
+        // Each pair both ways round, in rising order of both stars: deterministic. The
+        // catalog stars on both sides ij and ik, word by word.
+        for (w, (&on_ik, &on_ij)) in ik.words.iter().zip(&ij.words).enumerate() {
+            let mut both = on_ik & on_ij;
+            while both != 0 {
+                let bit = both.trailing_zeros();
+                both &= both - 1;
+                let p = w as u32 * 64 + bit;
+                let (rs, r_dirs) = ik.at(ik.rank_at(w, bit));
+                let (qs, q_dirs) = ij.at(ij.rank_at(w, bit));
+                let vp = &dir(p);
+                for (&q, vq) in qs.iter().zip(q_dirs) {
+                    for (&r, vr) in rs.iter().zip(r_dirs) {
+                        if r == q || !jk.holds(vq, vr) {
+                            continue;
+                        }
+                        if (vp.cross(vq).dot(vr) > 0.0) != handed {
+                            continue;
+                        }
+                        matched += 1;
+                        let confirmed = fourth.iter().any(|[il, jl, kl]| {
+                            let (ss, s_dirs) = il.of(p);
+                            ss.iter().zip(s_dirs).any(|(&s, vs)| {
+                                s != q && s != r && jl.holds(vq, vs) && kl.holds(vr, vs)
+                            })
+                        });
+                        if !confirmed {
+                            continue;
+                        }
+                        out.push(Triangle {
+                            stars: [i, j, k],
+                            refs: [p, q, r],
+                        });
+                        if out.len() == MAX_HYPOTHESES {
+                            return (out, matched);
+                        }
                     }
                 }
             }
@@ -298,7 +312,7 @@ mod tests {
         };
         let rows = table.range(all.lo, all.hi);
         let side = Side::new(&table, &all, rows, 65_542, |_| Vector3::zeros());
-        assert_eq!(side.owners, vec![1, 2, 5, 65_541]);
+        assert_eq!(side.owners(), vec![1, 2, 5, 65_541]);
         assert_eq!(side.of(1).0, &[65_541]);
         assert_eq!(side.of(65_541).0, &[1]);
         assert_eq!(side.of(2).0, &[5]);
