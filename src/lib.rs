@@ -10,7 +10,7 @@
 //! [`streaks`] finds and reduces satellite streaks, with times, stations and Az/El from [`sky`];
 //! [`sequence`] tracks sequences of frames and rejects moving particles; [`calibrate`] fits the
 //! camera; [`products`] writes WCS headers and annotated images; [`simulate`] makes and scores
-//! synthetic sets.
+//! synthetic sets. [`simd`] runs the CPU's hot loops compiled again for AVX2 where it has it.
 
 pub mod batch;
 pub mod calibrate;
@@ -24,6 +24,7 @@ pub mod pipeline;
 pub mod products;
 pub mod record;
 pub mod sequence;
+pub mod simd;
 pub mod simulate;
 pub mod sky;
 pub mod solve;

@@ -76,6 +76,12 @@ pub fn window(pixels: &[u16], width: u32, height: u32, x0: f64, y0: f64) -> Opti
 /// start, its width leaves [`MIN_WIDTH`]–4 px, or the information is singular): the centre of gravity
 /// then stands.
 pub fn psf_fit(win: &Window) -> Option<PsfFit> {
+    crate::simd::fast!(psf_fit_in(win: &Window) -> Option<PsfFit>)
+}
+
+/// [`psf_fit`], compiled where it is inlined (see [`crate::simd`]).
+#[inline(always)]
+fn psf_fit_in(win: &Window) -> Option<PsfFit> {
     let d: Vec<f64> = win.pixels.iter().map(|&v| v as f64).collect();
     // Background and its noise from the window's border (32 pixels: the upper median).
     let mut border: Vec<f64> = (0..WINDOW)
@@ -131,6 +137,7 @@ pub fn psf_fit(win: &Window) -> Option<PsfFit> {
 /// dP_k/dσ, from the 10 pixel edges e_j = j − 4.5 − centre: at each the tail beyond |e_j|,
 /// q_j = ½·erfc(|e_j|/(σ√2)) (from the side it is on: no cancellation in the tails, which
 /// f32 needs), and the density g_j.
+#[inline(always)]
 fn axis(centre: f64, s: f64) -> [(f64, f64, f64); SIDE] {
     let mut e = [0.0; SIDE + 1];
     let mut q = [0.0; SIDE + 1];
@@ -156,6 +163,7 @@ fn axis(centre: f64, s: f64) -> [(f64, f64, f64); SIDE] {
 /// The score (gradient of the log-likelihood) and the Fisher information at θ (its upper
 /// triangle summed, then mirrored).
 #[allow(clippy::needless_range_loop)]
+#[inline(always)]
 fn score_and_fisher(d: &[f64], t: &[f64; 5], var_b: f64, kappa: f64) -> ([f64; 5], [[f64; 5]; 5]) {
     let (n, b, s) = (t[2], t[3], t[4]);
     let (ax, ay) = (axis(t[0], s), axis(t[1], s));
@@ -192,6 +200,7 @@ fn score_and_fisher(d: &[f64], t: &[f64; 5], var_b: f64, kappa: f64) -> ([f64; 5
 /// Solve F·z = g for a symmetric positive definite F: Cholesky of D^-½·F·D^-½ (D = diag F);
 /// None when F is not positive definite. Index loops, as the kernel's.
 #[allow(clippy::needless_range_loop)]
+#[inline(always)]
 fn solve(f: &[[f64; 5]; 5], g: &[f64; 5]) -> Option<[f64; 5]> {
     let mut dinv = [0.0; 5];
     for i in 0..5 {

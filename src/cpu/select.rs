@@ -23,6 +23,12 @@ pub fn unpack_candidate(packed: u64) -> Option<(u32, u32)> {
 /// (m = min(k, candidates with votes)), by counting votes; keep every candidate above T and the
 /// lowest ids among those at T; sort the m keys.
 pub fn select(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64> {
+    crate::simd::fast!(select_in(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64>)
+}
+
+/// [`select`], compiled where it is inlined (see [`crate::simd`]).
+#[inline(always)]
+fn select_in(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64> {
     let mut out = vec![0u64; n_stars * k];
     let mut counts: Vec<u32> = Vec::new();
     let mut keys: Vec<u64> = Vec::with_capacity(k);

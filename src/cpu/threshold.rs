@@ -69,6 +69,12 @@ pub struct TileStats {
 /// Per-tile median and MAD (lower medians: element (n−1)/2 of the sorted values) of the
 /// tile's even rows (rows y0, y0 + 2, ...).
 pub fn tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
+    crate::simd::fast!(tile_stats_in(pixels: &[u16], p: &DetectParams) -> Vec<TileStats>)
+}
+
+/// [`tile_stats`], compiled where it is inlined (see [`crate::simd`]).
+#[inline(always)]
+fn tile_stats_in(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
     let mut out = Vec::with_capacity((p.tiles_x * p.tiles_y) as usize);
     let mut vals: Vec<u16> = Vec::with_capacity((p.tile * p.tile) as usize);
     let mut hist: Box<Histograms> = Box::new([[0; HIST_SPAN_MAX]; 4]);
@@ -124,6 +130,7 @@ const _: () = assert!(HIST_SPAN_MAX.is_power_of_two());
 /// Median and MAD of 16-bit values: from a histogram over their span when it is narrow (sky
 /// tiles: selection twice over the values cost a tenth of a frame's time), else by selection.
 /// The same order statistics either way.
+#[inline(always)]
 fn median_mad_16bit(v: &mut [u16], hist: &mut Histograms) -> (u16, u16) {
     let (lo, hi) = v
         .iter()
@@ -172,6 +179,7 @@ fn median_mad(v: &mut [u16]) -> (u16, u16) {
 
 /// Median and MAD of `n` values from their histogram, bin b counting value `lo + b`: the
 /// deviations |v − median| are counted from the same bins, outward from the median.
+#[inline(always)]
 fn median_mad_hist(hist: &[u32], lo: u16, n: usize) -> (u16, u16) {
     let rank = (n - 1) / 2;
     let mut seen = 0usize;
@@ -264,8 +272,14 @@ pub struct Run {
 /// (a convex combination), so pixels at or below that bound are passed over without computing
 /// their level: most of a star field is.
 pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
+    crate::simd::fast!(threshold_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run>)
+}
+
+/// [`threshold`], compiled where it is inlined (see [`crate::simd`]).
+#[inline(always)]
+fn threshold_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
     if p.matched == FILTER_BINOMIAL3 {
-        return threshold_filtered(pixels, tiles, p);
+        return threshold_filtered_in(pixels, tiles, p);
     }
     let s = 2 * p.tile;
     let s2 = s * s;
@@ -286,6 +300,7 @@ pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<R
 /// share a pair of tile columns (levels c0, c1), pixels at or below `floor(c0, c1)` cannot be
 /// set and are passed over 32 or 16 at a time (a branch-free maximum the compiler vectorises);
 /// `set(x, y, pixel, wx, c0, c1)` decides the others.
+#[inline(always)]
 fn scan(
     pixels: &[u16],
     tiles: &[TileStats],
@@ -407,6 +422,12 @@ pub fn binomial3(pixels: &[u16], width: u32, height: u32, x: u32, y: u32) -> u32
 /// it stays one pixel and `min_area` drops it. Integer arithmetic throughout: the GPU's mask is
 /// the same bit for bit.
 pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
+    crate::simd::fast!(threshold_filtered_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run>)
+}
+
+/// [`threshold_filtered`], compiled where it is inlined (see [`crate::simd`]).
+#[inline(always)]
+fn threshold_filtered_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
     let s = 2 * p.tile;
     scan(
         pixels,

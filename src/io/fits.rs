@@ -262,16 +262,10 @@ pub fn read_camera_frame(
     {
         return None;
     }
-    // Stored big-endian i16 v is pixel 32768 + v (as `convert_int` maps it).
-    let convert = |p: &mut [u16]| {
-        for v in p {
-            *v = (32768 + i32::from(u16::from_be(*v) as i16)) as u16;
-        }
-    };
     let mut converted = 0;
     loop {
         let whole = filled / 2;
-        convert(&mut pixels[converted..whole]);
+        big_endian_to_pixels(&mut pixels[converted..whole]);
         converted = whole;
         if filled == need {
             break;
@@ -291,6 +285,19 @@ pub fn read_camera_frame(
         warnings,
         keywords: keywords(&headers),
     })
+}
+
+/// Stored big-endian i16 v becomes pixel 32768 + v (as `convert_int` maps it), in place.
+fn big_endian_to_pixels(p: &mut [u16]) {
+    crate::simd::fast!(big_endian_to_pixels_in(p: &mut [u16]) -> ())
+}
+
+/// [`big_endian_to_pixels`], compiled where it is inlined (see [`crate::simd`]).
+#[inline(always)]
+fn big_endian_to_pixels_in(p: &mut [u16]) {
+    for v in p {
+        *v = (32768 + i32::from(u16::from_be(*v) as i16)) as u16;
+    }
 }
 
 /// Bytes [`read_camera_frame`] reads and converts at a time: well inside the L2 cache.

@@ -152,6 +152,25 @@ pub fn verify(
     camera: &Camera,
     s: &IdentifySettings,
 ) -> Vec<Identification> {
+    crate::simd::fast!(verify_in(
+        voted: &VoteResult,
+        vectors: &[Vector3<f64>],
+        refs: &RefCatalog,
+        camera: &Camera,
+        s: &IdentifySettings
+    ) -> Vec<Identification>)
+}
+
+/// [`verify`], compiled where it is inlined (see [`crate::simd`]): the triangle counts are
+/// population counts.
+#[inline(always)]
+fn verify_in(
+    voted: &VoteResult,
+    vectors: &[Vector3<f64>],
+    refs: &RefCatalog,
+    camera: &Camera,
+    s: &IdentifySettings,
+) -> Vec<Identification> {
     let n = vectors.len();
     let k = voted.k;
     let bounds = chord2_bounds(vectors, camera, s);

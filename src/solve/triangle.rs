@@ -57,6 +57,7 @@ struct Side {
 impl Side {
     /// The side of image pair `r`, whose catalog pairs are the table's `rows`, among catalog
     /// stars `0..stars`.
+    #[inline(always)]
     fn new(
         table: &PairTable,
         r: &PairRange,
@@ -133,14 +134,14 @@ impl Side {
     }
 
     /// The rank of the star at bit `bit` of word `w`, which is set.
-    #[inline]
+    #[inline(always)]
     fn rank_at(&self, w: usize, bit: u32) -> usize {
         (self.rank[w] + (self.words[w] & ((1u64 << bit) - 1)).count_ones()) as usize
     }
 
     /// The partners of catalog star `a` on this side, rising, and their directions (none when
     /// it has none).
-    #[inline]
+    #[inline(always)]
     fn of(&self, a: u32) -> (&[u32], &[Vector3<f64>]) {
         let (w, bit) = (a as usize / 64, a % 64);
         match self.words.get(w) {
@@ -199,6 +200,23 @@ pub fn triangle_order(n: usize) -> Vec<[usize; 3]> {
 /// Returns also how many catalog triangles matched before confirmation: the hypotheses a
 /// chance match could have come from.
 pub fn triangles(
+    table: &PairTable,
+    ranges: &[PairRange],
+    vectors: &[Vector3<f64>],
+    refs: &RefCatalog,
+) -> (Vec<Triangle>, u64) {
+    crate::simd::fast!(triangles_in(
+        table: &PairTable,
+        ranges: &[PairRange],
+        vectors: &[Vector3<f64>],
+        refs: &RefCatalog
+    ) -> (Vec<Triangle>, u64))
+}
+
+/// [`triangles`], compiled where it is inlined (see [`crate::simd`]): its sides' bit sets
+/// count with POPCNT.
+#[inline(always)]
+fn triangles_in(
     table: &PairTable,
     ranges: &[PairRange],
     vectors: &[Vector3<f64>],

@@ -34,6 +34,7 @@ mod refine;
 mod resume;
 mod select;
 mod sequence;
+mod simd;
 mod simulate_narrow;
 mod spread;
 mod streaks;

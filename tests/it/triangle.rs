@@ -194,6 +194,10 @@ fn triangles_are_those_of_the_definition_in_its_order() {
             let fast = triangles(band.table(), &ranges, &vectors, &band.refs);
             let plain = triangles_by_definition(band.table(), &ranges, &vectors, &band.refs);
             assert_eq!(fast, plain, "{pair_tol_px} px, frame {frames}");
+            // Compiled for AVX2 (where the CPU has it: `tests/it/simd.rs`) and as built alike.
+            let built =
+                gpustar::simd::baseline(|| triangles(band.table(), &ranges, &vectors, &band.refs));
+            assert_eq!(fast, built, "{pair_tol_px} px, frame {frames}, baseline");
             hypotheses += fast.0.len();
         }
         // Not a vacuous comparison: the true triangles at least are confirmed.

@@ -586,6 +586,9 @@ fn camera_frames_read_straight_equal_decode_fits() {
                 "head {head}"
             );
         }
+        // The pixels converted as built, not compiled for AVX2 (`crate::simd`): the same.
+        let built = crate::simd::baseline(|| camera_frame(&bytes, bytes.len()));
+        assert_eq!(built, Some(want.clone()));
         // The same image in an extension after an empty primary (the date in the primary).
         let ext = multi(
             &[extension("IMAGE", 16, &[w, h], &camera, &be16(&stored))],
