@@ -238,13 +238,12 @@ fn triangles_in(
         Some(p) => p[id as usize],
         None => refs.stars[id as usize].v,
     };
-    let sides: HashMap<(usize, usize), Side> = pairs
-        .into_iter()
-        .map(|(r, rows)| {
-            let (i, j) = (r.i.min(r.j) as usize, r.i.max(r.j) as usize);
-            ((i, j), Side::new(table, r, rows, refs.len(), dir))
-        })
-        .collect();
+    // A loop, not an iterator's collect: `Side::new` stays inlined here, in the AVX2 copy.
+    let mut sides: HashMap<(usize, usize), Side> = HashMap::with_capacity(pairs.len());
+    for (r, rows) in pairs {
+        let (i, j) = (r.i.min(r.j) as usize, r.i.max(r.j) as usize);
+        sides.insert((i, j), Side::new(table, r, rows, refs.len(), dir));
+    }
     let side = |a: usize, b: usize| sides.get(&(a.min(b), a.max(b)));
     let mut out = Vec::new();
     let mut matched = 0u64;
