@@ -3,7 +3,7 @@
 //! Release builds target baseline x86-64 (SSE2), so that one binary runs on any x86-64 machine.
 //! SSE2 lacks much that the pixel and matching loops want: an unsigned 16-bit minimum or
 //! maximum, a byte shuffle (big-endian FITS pixels), 256-bit registers, a population count
-//! (bit sets). [`fast!`](crate::simd::fast) runs a loop compiled a second time for AVX2 and
+//! (bit sets). `simd::fast!` (crate-internal) runs a loop compiled a second time for AVX2 and
 //! POPCNT where the CPU has them; elsewhere (another architecture, an older CPU) as built.
 //!
 //! Both compilations compute the same results bit for bit: integer arithmetic is exact, and
