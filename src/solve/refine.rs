@@ -89,17 +89,63 @@ pub struct Refined {
 
 /// Reference stars projecting inside the image under `r`: (ref id, pixel).
 pub fn stars_in_view(r: &Matrix3<f64>, refs: &RefCatalog, camera: &Camera) -> Vec<(u32, f64, f64)> {
+    stars_in_view_near(r, refs, camera, &mut None)
+}
+
+/// The half-angle of the cone [`stars_in_view`] scans around the boresight.
+fn view_half_angle(camera: &Camera) -> f64 {
+    (camera.diagonal_rad() * 0.5 + 0.01).min(std::f64::consts::PI)
+}
+
+/// How much wider than the view the stars kept for one refinement's later rounds reach
+/// (radians): its rounds move the attitude by pixels, not by a quarter of a degree.
+const NEARBY_MARGIN_RAD: f64 = 0.25 * std::f64::consts::PI / 180.0;
+
+/// The reference stars within `reach` of `axis`, in id order: those a refinement's later
+/// rounds test, where a scan of the whole selection took each round.
+struct Nearby {
+    axis: Vector3<f64>,
+    reach: f64,
+    ids: Vec<u32>,
+}
+
+/// [`stars_in_view`], testing only the stars of `nearby` when the view's cone lies inside
+/// theirs (with a microradian to spare for rounding), else scanning every star and keeping
+/// those within [`NEARBY_MARGIN_RAD`] of the view in `nearby`: the same tests on a superset of
+/// the stars in view, so the same stars in the same order.
+fn stars_in_view_near(
+    r: &Matrix3<f64>,
+    refs: &RefCatalog,
+    camera: &Camera,
+    nearby: &mut Option<Nearby>,
+) -> Vec<(u32, f64, f64)> {
     let boresight = r.transpose() * camera.centre_vector();
-    let cos_half = (camera.diagonal_rad() * 0.5 + 0.01)
-        .min(std::f64::consts::PI)
-        .cos();
-    refs.stars
+    let half = view_half_angle(camera);
+    let inside = |n: &Nearby| angle(&n.axis, &boresight) + half <= n.reach - 1e-6;
+    let near = match nearby {
+        Some(n) if inside(n) => n,
+        _ => {
+            let reach = (half + NEARBY_MARGIN_RAD).min(std::f64::consts::PI);
+            let cos_reach = reach.cos();
+            let ids = (refs.stars.iter().enumerate())
+                .filter(|(_, s)| s.v.dot(&boresight) >= cos_reach)
+                .map(|(id, _)| id as u32)
+                .collect();
+            nearby.insert(Nearby {
+                axis: boresight,
+                reach,
+                ids,
+            })
+        }
+    };
+    let cos_half = half.cos();
+    near.ids
         .iter()
-        .enumerate()
+        .map(|&id| (id, &refs.stars[id as usize]))
         .filter(|(_, s)| s.v.dot(&boresight) >= cos_half)
         .filter_map(|(id, s)| {
             let (x, y) = camera.vector_to_pixel(&(r * s.v))?;
-            camera.contains(x, y).then_some((id as u32, x, y))
+            camera.contains(x, y).then_some((id, x, y))
         })
         .collect()
 }
@@ -156,8 +202,9 @@ pub fn refine(
     let mut pairs: Vec<(usize, u32)> = Vec::new();
     let mut in_view = 0;
     let mut view: Vec<(u32, f64, f64)> = Vec::new();
+    let mut nearby = None;
     for _ in 0..s.rounds.max(1) {
-        let proj = stars_in_view(&r, refs, &camera);
+        let proj = stars_in_view_near(&r, refs, &camera, &mut nearby);
         in_view = proj.len();
         view.clone_from(&proj);
         let next = mutual_nearest(dets, &proj, s.match_radius_px);
@@ -227,7 +274,7 @@ pub fn refine(
         // The scatter of matches cut off at the match radius understates the true one.
         let wide = POLISH_RADIUS_MAX * s.match_radius_px;
         for _ in 0..s.rounds.max(1) {
-            let proj = stars_in_view(&r, refs, &camera);
+            let proj = stars_in_view_near(&r, refs, &camera, &mut nearby);
             let next = mutual_nearest(dets, &proj, wide);
             if next.len() < pairs.len() {
                 break;
@@ -525,6 +572,47 @@ pub fn binomial_tail(n: usize, k: usize, p: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A refinement's later rounds, which test only the stars kept nearby, see the stars a
+    /// whole scan sees, in the same order: attitudes moved by up to a tenth of a degree (kept
+    /// stars reused), by a degree (scanned again), and a field of view half as wide again
+    /// (scanned again).
+    #[test]
+    fn the_stars_kept_nearby_are_the_stars_in_view() {
+        use crate::catalog::{Catalog, DoubleStars, Selection};
+        use rand::{Rng, SeedableRng};
+        let selection = Selection {
+            epoch: 2025.0,
+            mag_limit: 6.5,
+            double_stars: DoubleStars::Keep,
+            double_sep_rad: 0.0,
+        };
+        let refs = RefCatalog::select(&Catalog::builtin(), selection).unwrap();
+        let narrow = Camera::from_fov(1024, 768, 10.0).unwrap();
+        let wide = Camera::from_fov(1024, 768, 15.0).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let (mut reused, mut seen) = (0, 0);
+        for _ in 0..20 {
+            let r0 = crate::simulate::random_rotation(&mut rng);
+            let mut nearby = None;
+            for step_deg in [0.0f64, 0.02, 0.1, 0.05, 1.0, 0.0] {
+                let axis = Vector3::new(rng.random(), rng.random(), rng.random()).normalize();
+                let turn = nalgebra::Rotation3::from_axis_angle(
+                    &nalgebra::Unit::new_normalize(axis),
+                    step_deg.to_radians(),
+                );
+                let r = turn.matrix() * r0;
+                for camera in [&narrow, &narrow, &wide] {
+                    let before = nearby.as_ref().map(|n: &Nearby| n.axis);
+                    let got = stars_in_view_near(&r, &refs, camera, &mut nearby);
+                    assert_eq!(got, stars_in_view(&r, &refs, camera), "{step_deg}°");
+                    reused += (before == nearby.as_ref().map(|n| n.axis)) as usize;
+                    seen += got.len();
+                }
+            }
+        }
+        assert!(reused > 100 && seen > 1000, "{reused} reuses, {seen} stars");
+    }
 
     #[test]
     fn binomial_tail_matches_direct_sums() {
