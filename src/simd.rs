@@ -46,10 +46,9 @@ pub fn wider() -> bool {
     false
 }
 
-/// The body of `fn name(args) -> R` that calls `inner(args)` compiled for AVX2 and POPCNT
-/// when the CPU has them (detected once per process, then cached; see [`wider`]), else as
-/// built:
-/// `simd::fast!(inner(a: &[u16], b: u32) -> R)`. `inner` and what it calls must be
+/// The body of `fn name(a: &[u16], b: u32) -> R { simd::fast!(inner(a: &[u16], b: u32) -> R) }`:
+/// it calls `inner(a, b)` compiled for AVX2 and POPCNT when the CPU has them (detected once
+/// per process, then cached; see [`wider`]), else as built. `inner` and what it calls must be
 /// `#[inline(always)]`: only code inlined into the AVX2 copy is compiled for AVX2.
 macro_rules! fast {
     ($inner:ident($($arg:ident: $ty:ty),*) -> $ret:ty) => {{
