@@ -89,10 +89,28 @@ pub struct Refined {
 
 /// Reference stars projecting inside the image under `r`: (ref id, pixel).
 pub fn stars_in_view(r: &Matrix3<f64>, refs: &RefCatalog, camera: &Camera) -> Vec<(u32, f64, f64)> {
-    stars_in_view_near(r, refs, camera, &mut None)
+    in_view_of(r, refs, camera, 0..refs.len() as u32)
 }
 
-/// The half-angle of the cone [`stars_in_view`] scans around the boresight.
+/// Those of the reference stars `ids` (rising) that project inside the image under `r`.
+fn in_view_of(
+    r: &Matrix3<f64>,
+    refs: &RefCatalog,
+    camera: &Camera,
+    ids: impl Iterator<Item = u32>,
+) -> Vec<(u32, f64, f64)> {
+    let boresight = r.transpose() * camera.centre_vector();
+    let cos_half = view_half_angle(camera).cos();
+    ids.map(|id| (id, &refs.stars[id as usize]))
+        .filter(|(_, s)| s.v.dot(&boresight) >= cos_half)
+        .filter_map(|(id, s)| {
+            let (x, y) = camera.vector_to_pixel(&(r * s.v))?;
+            camera.contains(x, y).then_some((id, x, y))
+        })
+        .collect()
+}
+
+/// The half-angle of the cone [`stars_in_view`] tests around the boresight.
 fn view_half_angle(camera: &Camera) -> f64 {
     (camera.diagonal_rad() * 0.5 + 0.01).min(std::f64::consts::PI)
 }
@@ -110,9 +128,9 @@ struct Nearby {
 }
 
 /// [`stars_in_view`], testing only the stars of `nearby` when the view's cone lies inside
-/// theirs (with a microradian to spare for rounding), else scanning every star and keeping
-/// those within [`NEARBY_MARGIN_RAD`] of the view in `nearby`: the same tests on a superset of
-/// the stars in view, so the same stars in the same order.
+/// theirs (with a microradian to spare for rounding), else first keeping in `nearby` the stars
+/// within [`NEARBY_MARGIN_RAD`] of the view: the same tests on a superset of the stars in
+/// view, so the same stars in the same order.
 fn stars_in_view_near(
     r: &Matrix3<f64>,
     refs: &RefCatalog,
@@ -138,16 +156,7 @@ fn stars_in_view_near(
             })
         }
     };
-    let cos_half = half.cos();
-    near.ids
-        .iter()
-        .map(|&id| (id, &refs.stars[id as usize]))
-        .filter(|(_, s)| s.v.dot(&boresight) >= cos_half)
-        .filter_map(|(id, s)| {
-            let (x, y) = camera.vector_to_pixel(&(r * s.v))?;
-            camera.contains(x, y).then_some((id, x, y))
-        })
-        .collect()
+    in_view_of(r, refs, camera, near.ids.iter().copied())
 }
 
 /// One-to-one matches: a detection and a projected star that are each other's nearest, within

@@ -54,6 +54,13 @@ struct Side {
     hi2: f64,
 }
 
+/// The place of bit `bit` of word `w` among the set bits of `words`, `rank[w]` counting those
+/// before word `w`.
+#[inline(always)]
+fn place(words: &[u64], rank: &[u32], w: usize, bit: u32) -> usize {
+    (rank[w] + (words[w] & ((1u64 << bit) - 1)).count_ones()) as usize
+}
+
 impl Side {
     /// The side of image pair `r`, whose catalog pairs are the table's `rows`, among catalog
     /// stars `0..stars`.
@@ -78,10 +85,7 @@ impl Side {
             owners += w.count_ones();
         }
         // Counting sort by rank: the places of each pair's two ends, then the partners there.
-        let slot = |s: u32| {
-            let w = s as usize / 64;
-            (rank[w] + (words[w] & ((1u64 << (s % 64)) - 1)).count_ones()) as usize
-        };
+        let slot = |s: u32| place(&words, &rank, s as usize / 64, s % 64);
         let mut start = vec![0u32; owners as usize + 1];
         let mut ends: Vec<(u32, u32)> = Vec::with_capacity(2 * rows.len());
         for row in rows {
@@ -136,7 +140,7 @@ impl Side {
     /// The rank of the star at bit `bit` of word `w`, which is set.
     #[inline(always)]
     fn rank_at(&self, w: usize, bit: u32) -> usize {
-        (self.rank[w] + (self.words[w] & ((1u64 << bit) - 1)).count_ones()) as usize
+        place(&self.words, &self.rank, w, bit)
     }
 
     /// The partners of catalog star `a` on this side, rising, and their directions (none when
