@@ -1,29 +1,29 @@
 //! The loops compiled for AVX2 (`gpustar::simd`) compute what the baseline build computes, bit
 //! for bit: tile statistics, masks with and without the matched filter, and whole frames solved
-//! (detection, PSF fits, vote selection, verification and the triangle fallback). Each is run
-//! as dispatched and again inside `simd::baseline`.
+//! (detection, PSF fits, vote selection, verification). Each is run as dispatched and again
+//! inside `simd::baseline`; the triangle fallback is compared so in `tests/it/triangle.rs`,
+//! the FITS pixels in `io::fits`'s tests.
 
 use crate::common;
 use gpustar::cpu::threshold::{self, DetectParams};
 use gpustar::simd;
 use gpustar::solve::Outcome;
 
-/// Whether this CPU runs the AVX2 loops; without them both runs are the baseline, which the
-/// test then says (and CI, whose machines have AVX2, refuses).
-fn wider(test: &str) -> bool {
+/// Without AVX2 both runs are the baseline: the test says so (and CI, whose machines have
+/// AVX2, refuses).
+fn note_without_avx2(test: &str) {
     if simd::wider() {
-        return true;
+        return;
     }
     if std::env::var("CI").is_ok_and(|v| v == "true") {
         panic!("{test}: this CPU has no AVX2, and CI must compare the two compilations");
     }
     eprintln!("SKIPPED {test}: this CPU has no AVX2: only the baseline loops ran");
-    false
 }
 
 #[test]
 fn detection_stages_are_the_same_compiled_for_avx2() {
-    wider("detection_stages_are_the_same_compiled_for_avx2");
+    note_without_avx2("detection_stages_are_the_same_compiled_for_avx2");
     for (bits, saturation) in [(16, 65535), (8, 255)] {
         for f in common::sim_frames(2, (640, 480), 12.0, bits, 3) {
             for filter in [false, true] {
@@ -48,7 +48,7 @@ fn detection_stages_are_the_same_compiled_for_avx2() {
 
 #[test]
 fn frames_solve_the_same_compiled_for_avx2() {
-    wider("frames_solve_the_same_compiled_for_avx2");
+    note_without_avx2("frames_solve_the_same_compiled_for_avx2");
     let solver = common::solver(10.0, (1024, 1024));
     let outcome = |o: &Outcome| match o {
         Outcome::Solved(r, _) => format!("{r:?}"),
