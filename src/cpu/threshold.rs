@@ -298,8 +298,16 @@ fn threshold_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Ru
 /// The mask's runs, row by row: `tile_level` of the tiles interpolated between tile rows by
 /// `between_rows(upper, lower, wy)` for each tile column; within each segment of columns that
 /// share a pair of tile columns (levels c0, c1), pixels at or below `floor(c0, c1)` cannot be
-/// set and are passed over 32 or 16 at a time (a branch-free maximum the compiler vectorises);
-/// `set(x, y, pixel, wx, c0, c1)` decides the others.
+/// set; `set(x, y, pixel, wx, c0, c1)` decides the others.
+///
+/// Most of a star field is passed over [`BLOCK`] columns at a time, without computing the
+/// row's levels: between two tile rows a column's level is at least `between_rows(m, m, ·)`,
+/// m the least level of its four tiles (both interpolations are convex combinations), so a
+/// block whose pixels are all at or below the least such floor of the segments it meets holds
+/// no set pixel. That floor is taken once per pair of tile rows. A block above it is tested
+/// again against the row's own floors, and only then pixel by pixel. (So `between_rows` must
+/// not fall as either level rises, and give `m` the same level at every `wy`: both callers'
+/// do; `tests/it/threshold.rs` holds the runs to the per-pixel definition.)
 #[inline(always)]
 fn scan(
     pixels: &[u16],
@@ -310,69 +318,139 @@ fn scan(
     floor: impl Fn(u32, u32) -> u16,
     set: impl Fn(u32, u32, u16, u32, u32, u32) -> bool,
 ) -> Vec<Run> {
-    // Column segments with the same pair of tile columns: (x0, x1, lower, upper tile column).
-    let mut segments: Vec<(usize, usize, usize, usize)> = Vec::new();
-    let mut weights = Vec::with_capacity(p.width as usize);
+    let w = p.width as usize;
+    // Segments of columns with the same pair of tile columns (lower, upper), the segment of
+    // each column, and its weight between the two.
+    let mut segments: Vec<(usize, usize)> = Vec::new();
+    let mut segment_of = Vec::with_capacity(w);
+    let mut weights = Vec::with_capacity(w);
     for x in 0..p.width {
         let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
-        let t1 = (tx + 1).min(p.tiles_x - 1) as usize;
-        weights.push(wx);
-        match segments.last_mut() {
-            Some(seg) if seg.2 == tx as usize && seg.3 == t1 => seg.1 = x as usize + 1,
-            _ => segments.push((x as usize, x as usize + 1, tx as usize, t1)),
+        let pair = (tx as usize, (tx + 1).min(p.tiles_x - 1) as usize);
+        if segments.last() != Some(&pair) {
+            segments.push(pair);
         }
+        segment_of.push(segments.len() as u32 - 1);
+        weights.push(wx);
     }
+    let mut ends = vec![0; segments.len()];
+    for (x, &s) in segment_of.iter().enumerate() {
+        ends[s as usize] = x + 1;
+    }
+    // The segments each block of columns meets (first, last).
+    let blocks: Vec<(usize, usize)> = (0..w.div_ceil(BLOCK))
+        .map(|b| {
+            let (x0, x1) = (b * BLOCK, ((b + 1) * BLOCK).min(w) - 1);
+            (segment_of[x0] as usize, segment_of[x1] as usize)
+        })
+        .collect();
+    let least =
+        |f: &[u16], (s0, s1): (usize, usize)| f[s0..=s1].iter().fold(u16::MAX, |m, &v| m.min(v));
+    let full = w / BLOCK * BLOCK;
+    let level_at = |tx: usize, ty: u32| tile_level(&tiles[(ty * p.tiles_x) as usize + tx]);
+    let mut band = None;
+    let mut band_floors = vec![0u16; segments.len()];
+    let mut band_block_floors = vec![0u16; blocks.len()];
     let mut col_level = vec![0u32; p.tiles_x as usize];
+    let mut levels = vec![(0u32, 0u32); segments.len()];
+    let mut floors = vec![0u16; segments.len()];
     let mut runs = Vec::new();
     for y in 0..p.height {
         let (ty, wy) = axis_weight(y, p.tile, p.tiles_y);
         let ty1 = (ty + 1).min(p.tiles_y - 1);
-        for (tx, c) in col_level.iter_mut().enumerate() {
-            let a = tile_level(&tiles[(ty * p.tiles_x) as usize + tx]);
-            let b = tile_level(&tiles[(ty1 * p.tiles_x) as usize + tx]);
-            *c = between_rows(a, b, wy);
-        }
-        let row = &pixels[(y * p.width) as usize..((y + 1) * p.width) as usize];
-        let mut start: Option<u32> = None;
-        for &(x0, x1, t0, t1) in &segments {
-            let (c0, c1) = (col_level[t0], col_level[t1]);
-            let floor = floor(c0, c1);
-            let mut x = x0;
-            while x < x1 {
-                if start.is_none() {
-                    // 32 at a time (a segment at the default tile side: one horizontal
-                    // maximum where 16 at a time took two), then 16.
-                    while x + 32 <= x1 && row[x..x + 32].iter().fold(0, |m, &v| m.max(v)) <= floor {
-                        x += 32;
-                    }
-                    while x + 16 <= x1 && row[x..x + 16].iter().fold(0, |m, &v| m.max(v)) <= floor {
-                        x += 16;
-                    }
-                    match row[x..x1].iter().position(|&v| v > floor) {
-                        Some(k) => x += k,
-                        None => break,
-                    }
-                }
-                match (set(x as u32, y, row[x], weights[x], c0, c1), start) {
-                    (true, None) => start = Some(x as u32),
-                    (false, Some(r0)) => {
-                        runs.push(Run {
-                            y,
-                            x0: r0,
-                            x1: x as u32,
-                        });
-                        start = None;
-                    }
-                    _ => {}
-                }
-                x += 1;
+        if band != Some(ty) {
+            for (f, &(t0, t1)) in band_floors.iter_mut().zip(&segments) {
+                let m = [(t0, ty), (t1, ty), (t0, ty1), (t1, ty1)]
+                    .map(|(tx, ty)| level_at(tx, ty))
+                    .into_iter()
+                    .fold(u32::MAX, u32::min);
+                let c = between_rows(m, m, 0);
+                *f = floor(c, c);
             }
+            for (f, &b) in band_block_floors.iter_mut().zip(&blocks) {
+                *f = least(&band_floors, b);
+            }
+            band = Some(ty);
+        }
+        let row = &pixels[y as usize * w..(y as usize + 1) * w];
+        let mut row_ready = false;
+        let mut start: Option<u32> = None;
+        let mut x = 0;
+        while x < w {
+            if start.is_none() && x % BLOCK == 0 {
+                let passed = row[x..full]
+                    .chunks_exact(BLOCK)
+                    .zip(&band_block_floors[x / BLOCK..])
+                    .take_while(|&(b, &f)| !above(b.try_into().expect("BLOCK pixels"), f))
+                    .count();
+                x += passed * BLOCK;
+                if x == w {
+                    break;
+                }
+            }
+            if !row_ready {
+                for (tx, c) in col_level.iter_mut().enumerate() {
+                    *c = between_rows(level_at(tx, ty), level_at(tx, ty1), wy);
+                }
+                for (i, &(t0, t1)) in segments.iter().enumerate() {
+                    levels[i] = (col_level[t0], col_level[t1]);
+                    floors[i] = floor(col_level[t0], col_level[t1]);
+                }
+                row_ready = true;
+            }
+            if start.is_none()
+                && x % BLOCK == 0
+                && let Some(b) = row.get(x..x + BLOCK)
+                && !above(
+                    b.try_into().expect("BLOCK pixels"),
+                    least(&floors, blocks[x / BLOCK]),
+                )
+            {
+                x += BLOCK;
+                continue;
+            }
+            let segment = segment_of[x] as usize;
+            if start.is_none() {
+                // To the first pixel above the floor, in this segment and block.
+                let end = ends[segment].min((x / BLOCK + 1) * BLOCK);
+                match row[x..end].iter().position(|&v| v > floors[segment]) {
+                    Some(k) => x += k,
+                    None => {
+                        x = end;
+                        continue;
+                    }
+                }
+            }
+            let (c0, c1) = levels[segment];
+            match (set(x as u32, y, row[x], weights[x], c0, c1), start) {
+                (true, None) => start = Some(x as u32),
+                (false, Some(r0)) => {
+                    runs.push(Run {
+                        y,
+                        x0: r0,
+                        x1: x as u32,
+                    });
+                    start = None;
+                }
+                _ => {}
+            }
+            x += 1;
         }
         if let Some(x0) = start {
             runs.push(Run { y, x0, x1: p.width });
         }
     }
     runs
+}
+
+/// The columns [`scan`] passes over at a time: 32 u16, two AVX2 registers.
+const BLOCK: usize = 32;
+
+/// Whether any of a block's pixels is above `floor`: their saturating excesses OR-ed, without
+/// a branch per pixel.
+#[inline(always)]
+fn above(block: &[u16; BLOCK], floor: u16) -> bool {
+    block.iter().fold(0, |m, &v| m | v.saturating_sub(floor)) != 0
 }
 
 /// A tile's level for the matched filter, in 1/16 ADU: 16 · background + 6 · offset. The 3×3

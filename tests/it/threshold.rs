@@ -97,6 +97,144 @@ fn row_wise_runs_equal_the_per_pixel_definition() {
     }
 }
 
+/// Pixels at or just below their own level, a few just above it, and some bright spots, on
+/// tiles of varied levels: the frame `scan` passes over block by block, with most blocks at or
+/// below the least level of their tiles and many pixels between that and their own. 16-bit
+/// levels (`level(x, y)`, in ADU) from `level_of`; spots every 97 px and on block edges.
+fn pixels_hugging_the_levels(
+    p: &DetectParams,
+    seed: u32,
+    level_of: impl Fn(u32, u32) -> u32,
+) -> Vec<u16> {
+    let mut seed = seed;
+    let (w, h) = (p.width, p.height);
+    (0..w * h)
+        .map(|i| {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            let (x, y) = (i % w, i / w);
+            let level = level_of(x, y) as i64;
+            let r = (seed >> 16) % 100;
+            let v = match r {
+                0 => level + 1 + (seed >> 8) as i64 % 3,
+                1..=39 => level,
+                _ => level - 1 - (seed >> 20) as i64 % 40,
+            };
+            let spot = (x % 97 == 5 || [31, 32, 63, 64].contains(&x) || x + 1 == w) && y % 7 == 3;
+            (if spot { v + 500 } else { v }).clamp(0, 65535) as u16
+        })
+        .collect()
+}
+
+/// Tile statistics for [`runs_passed_over_by_blocks_equal_the_per_pixel_definition`].
+#[derive(Clone, Copy, Debug)]
+enum Tiles {
+    /// Background 2500, offset 20 everywhere.
+    Flat,
+    /// Backgrounds 2000..3000 and offsets 5..60 from tile to tile, a third of them as `Flat`.
+    Varied,
+    /// One level per tile row, falling 150 a row: a floor kept from the rows above would pass
+    /// over set pixels.
+    Falling,
+}
+
+fn tiles_of(p: &DetectParams, seed: u32, kind: Tiles) -> Vec<TileStats> {
+    let mut seed = seed;
+    let flat = TileStats {
+        background: 2500,
+        offset: 20,
+    };
+    (0..p.tiles_x * p.tiles_y)
+        .map(|i| {
+            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+            match kind {
+                Tiles::Flat => flat,
+                Tiles::Varied if i % 3 == 0 => flat,
+                Tiles::Varied => TileStats {
+                    background: 2000 + (seed >> 16) % 1000,
+                    offset: 5 + (seed >> 8) % 56,
+                },
+                Tiles::Falling => TileStats {
+                    background: 3000 - 150 * (i / p.tiles_x).min(15),
+                    offset: 20,
+                },
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn runs_passed_over_by_blocks_equal_the_per_pixel_definition() {
+    // `scan` passes over 32 columns at a time against floors taken per pair of tile rows and
+    // per row; on frames whose pixels hug their levels, over tiles of one level, of varied
+    // ones and of levels falling down the frame, with widths that are and are not multiples of 32 and tiles of 8 to 64, the runs
+    // must still be exactly the definition's, with and without the matched filter.
+    let mut blocks_passed = 0;
+    for (case, &(w, h, tile, kind)) in [
+        (1000u32, 70u32, 32u32, Tiles::Varied),
+        (1000, 70, 32, Tiles::Flat),
+        (333, 97, 16, Tiles::Varied),
+        (333, 97, 16, Tiles::Falling),
+        (64, 40, 8, Tiles::Varied),
+        (31, 33, 8, Tiles::Varied),
+        (160, 130, 64, Tiles::Varied),
+        (200, 50, 16, Tiles::Flat),
+    ]
+    .iter()
+    .enumerate()
+    {
+        let case = case as u32;
+        let p = DetectParams::new(w, h, tile, 5.0, 65535);
+        let tiles = tiles_of(&p, 100 + case, kind);
+        let s2 = 4 * tile * tile;
+        let px =
+            pixels_hugging_the_levels(&p, 200 + case, |x, y| level_scaled(&tiles, &p, x, y) / s2);
+        let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
+        let mut set = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                let want = (px[i] as u32 * s2 > level_scaled(&tiles, &p, x, y)) as u32;
+                assert_eq!(
+                    mask[i], want,
+                    "{kind:?} {w}×{h}, tile {tile}: pixel ({x}, {y})"
+                );
+                set += want;
+            }
+            // Blocks of 32 wholly at or below the least level of the tiles.
+            let least = tiles.iter().map(|t| t.background + t.offset).min().unwrap();
+            blocks_passed += px[(y * w) as usize..((y + 1) * w) as usize]
+                .chunks_exact(32)
+                .filter(|b| b.iter().all(|&v| (v as u32) <= least))
+                .count();
+        }
+        assert!(set > 5 && set < w * h / 10, "{w}×{h}: {set} set");
+
+        let pf = p.with_filter(true);
+        let px = pixels_hugging_the_levels(&pf, 300 + case, |x, y| {
+            filtered_level_at(&tiles, &pf, x, y) / 16
+        });
+        let mask = dense_mask(&threshold(&px, &tiles, &pf), w, h);
+        let mut set = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                let level = filtered_level_at(&tiles, &pf, x, y);
+                let want = (16 * px[i] as u32 > level && binomial3(&px, w, h, x, y) > level) as u32;
+                assert_eq!(
+                    mask[i], want,
+                    "filtered {kind:?} {w}×{h}, tile {tile}: pixel ({x}, {y})"
+                );
+                set += want;
+            }
+        }
+        assert!(set > 0, "filtered {w}×{h}: none set");
+    }
+    assert!(
+        blocks_passed > 500,
+        "{blocks_passed} blocks at or below every level"
+    );
+}
+
 #[test]
 fn eight_bit_histogram_stats_equal_selection_stats() {
     // The same pixels read as an 8-bit frame (histogram path) and as a 16-bit one (selection
