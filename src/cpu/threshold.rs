@@ -378,12 +378,15 @@ fn scan(
         let mut x = 0;
         while x < w {
             if start.is_none() && x % BLOCK == 0 {
-                let passed = row[x..full]
-                    .chunks_exact(BLOCK)
-                    .zip(&band_block_floors[x / BLOCK..])
-                    .take_while(|&(b, &f)| !above(b.try_into().expect("BLOCK pixels"), f))
-                    .count();
-                x += passed * BLOCK;
+                // A loop, not an iterator adapter: it stays inlined in the AVX2 copy.
+                while x < full
+                    && !above(
+                        row[x..x + BLOCK].try_into().expect("BLOCK pixels"),
+                        band_block_floors[x / BLOCK],
+                    )
+                {
+                    x += BLOCK;
+                }
                 if x == w {
                     break;
                 }
