@@ -256,7 +256,10 @@ pub fn read_camera_frame(
     // READ_CHUNK bytes at a time through a buffer that stays in cache, converted into the
     // pixels' unused capacity: nothing is written twice.
     let in_head = head.len().saturating_sub(image.data_start).min(need) / 2 * 2;
-    big_endian_to_pixels(&head[image.data_start..image.data_start + in_head], &mut pixels);
+    big_endian_to_pixels(
+        &head[image.data_start..image.data_start + in_head],
+        &mut pixels,
+    );
     let skip = image.data_start.saturating_sub(head.len()) as u64;
     if skip > 0 && std::io::copy(&mut rest.by_ref().take(skip), &mut std::io::sink()).ok()? != skip
     {

@@ -28,15 +28,16 @@ pub struct Triangle {
     pub refs: [u32; 3],
 }
 
-/// Catalog pairs of one image pair: which catalog stars are on this side (a bit per star, with
-/// the count of set bits before each word, so that a star's place among them is a popcount),
-/// each one's partners, rising, and their directions; and the side's key range, to test any
-/// two stars by their chord. Most stars on a side have one partner there, so a side is built
-/// by counting (no sort of its pairs) and two sides are joined word by word: where sorted
-/// lists were walked star by star, most of a triangle's time went to stars on only one side.
-/// With the directions beside the ids, the partners are read front to back.
+/// Catalog pairs of one image pair: the catalog stars on this side that a triangle can ask for
+/// (a bit per star, with the count of set bits before each word, so that a star's place among
+/// them is a popcount), each one's partners, rising, and their directions; and the side's key
+/// range, to test any two stars by their chord. Most stars on a side have one partner there,
+/// so a side is built by counting (no sort of its pairs) and two sides are joined word by
+/// word: where sorted lists were walked star by star, most of a triangle's time went to stars
+/// on only one side. With the directions beside the ids, the partners are read front to back.
 struct Side {
-    /// Bit `s % 64` of word `s / 64` is set when star `s` has partners on this side.
+    /// Bit `s % 64` of word `s / 64` is set when star `s` has partners on this side and is
+    /// kept (see [`triangles`]: the others are never asked for).
     words: Vec<u64>,
     /// The stars with partners in words before word w: `rank[w]`.
     rank: Vec<u32>,
@@ -61,23 +62,30 @@ fn place(words: &[u64], rank: &[u32], w: usize, bit: u32) -> usize {
     (rank[w] + (words[w] & ((1u64 << bit) - 1)).count_ones()) as usize
 }
 
+/// The catalog stars of a side's pairs (the table's `rows`) among stars `0..stars`: bit
+/// `s % 64` of word `s / 64` for star `s`.
+#[inline(always)]
+fn stars_of(table: &PairTable, rows: RowRange, stars: usize) -> Vec<u64> {
+    let mut words = vec![0u64; stars.div_ceil(64)];
+    for row in rows {
+        let (a, b) = table.pair(row);
+        words[a as usize / 64] |= 1 << (a % 64);
+        words[b as usize / 64] |= 1 << (b % 64);
+    }
+    words
+}
+
 impl Side {
-    /// The side of image pair `r`, whose catalog pairs are the table's `rows`, among catalog
-    /// stars `0..stars`.
+    /// The side of image pair `r`, whose catalog pairs are the table's `rows`, keeping the
+    /// partners of the stars of `words` (stars of those pairs, see [`stars_of`]) only.
     #[inline(always)]
     fn new(
         table: &PairTable,
         r: &PairRange,
         rows: RowRange,
-        stars: usize,
+        words: Vec<u64>,
         dir: impl Fn(u32) -> Vector3<f64>,
     ) -> Side {
-        let mut words = vec![0u64; stars.div_ceil(64)];
-        for row in rows.clone() {
-            let (a, b) = table.pair(row);
-            words[a as usize / 64] |= 1 << (a % 64);
-            words[b as usize / 64] |= 1 << (b % 64);
-        }
         let mut rank = Vec::with_capacity(words.len());
         let mut owners = 0u32;
         for w in &words {
@@ -85,16 +93,19 @@ impl Side {
             owners += w.count_ones();
         }
         // Counting sort by rank: the places of each pair's two ends, then the partners there.
+        let kept = |s: u32| words[s as usize / 64] >> (s % 64) & 1 == 1;
         let slot = |s: u32| place(&words, &rank, s as usize / 64, s % 64);
         let mut start = vec![0u32; owners as usize + 1];
         let mut ends: Vec<(u32, u32)> = Vec::with_capacity(2 * rows.len());
         for row in rows {
             let (a, b) = table.pair(row);
-            let (sa, sb) = (slot(a), slot(b));
-            start[sa + 1] += 1;
-            start[sb + 1] += 1;
-            ends.push((sa as u32, b));
-            ends.push((sb as u32, a));
+            for (s, partner) in [(a, b), (b, a)] {
+                if kept(s) {
+                    let t = slot(s);
+                    start[t + 1] += 1;
+                    ends.push((t as u32, partner));
+                }
+            }
         }
         for t in 1..start.len() {
             start[t] += start[t - 1];
@@ -154,7 +165,7 @@ impl Side {
         }
     }
 
-    /// The stars with partners on this side, rising.
+    /// The stars kept on this side, rising.
     #[cfg(test)]
     fn owners(&self) -> Vec<u32> {
         (0..self.words.len() * 64)
@@ -242,11 +253,37 @@ fn triangles_in(
         Some(p) => p[id as usize],
         None => refs.stars[id as usize].v,
     };
-    // A loop, not an iterator's collect: `Side::new` stays inlined here, in the AVX2 copy.
+    // Each side's catalog stars, and those that can stand for image star i in a triangle
+    // [i, j, k] (i < j < k: the loop below joins sides ij and ik at i): on both of some two
+    // sides (i, j), (i, k). A side (a, b) is only asked for such stars of a or b (as ij or ik
+    // at a, or as the fourth star's side il at i = a or i = b), so it keeps their partners
+    // only: on sparse frames' deep selections fewer than half of its stars. Loops, not an
+    // iterator's collect: `stars_of` and `Side::new` stay inlined here, in the AVX2 copy.
+    let key = |r: &PairRange| (r.i.min(r.j) as usize, r.i.max(r.j) as usize);
+    let mut on_side: HashMap<(usize, usize), Vec<u64>> = HashMap::with_capacity(pairs.len());
+    for (r, rows) in &pairs {
+        on_side.insert(key(r), stars_of(table, rows.clone(), refs.len()));
+    }
+    let mut joinable = vec![vec![0u64; refs.len().div_ceil(64)]; n];
+    for (i, joins) in joinable.iter_mut().enumerate() {
+        for j in i + 1..n {
+            for k in j + 1..n {
+                if let (Some(a), Some(b)) = (on_side.get(&(i, j)), on_side.get(&(i, k))) {
+                    for (w, (a, b)) in joins.iter_mut().zip(a.iter().zip(b)) {
+                        *w |= a & b;
+                    }
+                }
+            }
+        }
+    }
     let mut sides: HashMap<(usize, usize), Side> = HashMap::with_capacity(pairs.len());
     for (r, rows) in pairs {
-        let (i, j) = (r.i.min(r.j) as usize, r.i.max(r.j) as usize);
-        sides.insert((i, j), Side::new(table, r, rows, refs.len(), dir));
+        let (i, j) = key(r);
+        let mut words = on_side[&(i, j)].clone();
+        for (w, (a, b)) in words.iter_mut().zip(joinable[i].iter().zip(&joinable[j])) {
+            *w &= a | b;
+        }
+        sides.insert((i, j), Side::new(table, r, rows, words, dir));
     }
     let side = |a: usize, b: usize| sides.get(&(a.min(b), a.max(b)));
     let mut out = Vec::new();
@@ -332,7 +369,13 @@ mod tests {
             hi: max_key,
         };
         let rows = table.range(all.lo, all.hi);
-        let side = Side::new(&table, &all, rows, 65_542, |_| Vector3::zeros());
+        let side = Side::new(
+            &table,
+            &all,
+            rows.clone(),
+            stars_of(&table, rows, 65_542),
+            |_| Vector3::zeros(),
+        );
         assert_eq!(side.owners(), vec![1, 2, 5, 65_541]);
         assert_eq!(side.of(1).0, &[65_541]);
         assert_eq!(side.of(65_541).0, &[1]);
