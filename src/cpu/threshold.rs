@@ -292,6 +292,7 @@ fn threshold_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Ru
         // Pixels at or below this are below every level between the two columns.
         |c0, c1| (s * c0.min(c1) / s2).min(65535) as u16,
         |_, _, v, wx, c0, c1| v as u32 * s2 > (s - wx) * c0 + wx * c1,
+        |row, x, _, f| !block_above(row, x, f),
     )
 }
 
@@ -307,7 +308,12 @@ fn threshold_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Ru
 /// no set pixel. That floor is taken once per pair of tile rows. A block above it is tested
 /// again against the row's own floors, and only then pixel by pixel. (So `between_rows` must
 /// not fall as either level rises, and give `m` the same level at every `wy`: both callers'
-/// do; `tests/it/threshold.rs` holds the runs to the per-pixel definition.)
+/// do; `tests/it/threshold.rs` holds the runs to the per-pixel definition.) `quiet(row, x, y,
+/// f)` says whether the whole block at column x of row y holds no set pixel when every
+/// pixel's floor is at least f: at the least, when no pixel is above f ([`block_above`]).
+// The frame, then what each mask's rule supplies: five closures read better than a trait
+// with two implementations.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn scan(
     pixels: &[u16],
@@ -317,6 +323,7 @@ fn scan(
     between_rows: impl Fn(u32, u32, u32) -> u32,
     floor: impl Fn(u32, u32) -> u16,
     set: impl Fn(u32, u32, u16, u32, u32, u32) -> bool,
+    quiet: impl Fn(&[u16], usize, u32, u16) -> bool,
 ) -> Vec<Run> {
     let w = p.width as usize;
     // Segments of columns with the same pair of tile columns (lower, upper), the segment of
@@ -379,12 +386,7 @@ fn scan(
         while x < w {
             if start.is_none() && x % BLOCK == 0 {
                 // A loop, not an iterator adapter: it stays inlined in the AVX2 copy.
-                while x < full
-                    && !above(
-                        row[x..x + BLOCK].try_into().expect("BLOCK pixels"),
-                        band_block_floors[x / BLOCK],
-                    )
-                {
+                while x < full && quiet(row, x, y, band_block_floors[x / BLOCK]) {
                     x += BLOCK;
                 }
                 if x == w {
@@ -403,11 +405,8 @@ fn scan(
             }
             if start.is_none()
                 && x % BLOCK == 0
-                && let Some(b) = row.get(x..x + BLOCK)
-                && !above(
-                    b.try_into().expect("BLOCK pixels"),
-                    least(&floors, blocks[x / BLOCK]),
-                )
+                && x < full
+                && quiet(row, x, y, least(&floors, blocks[x / BLOCK]))
             {
                 x += BLOCK;
                 continue;
@@ -449,11 +448,38 @@ fn scan(
 /// The columns [`scan`] passes over at a time: 32 u16, two AVX2 registers.
 const BLOCK: usize = 32;
 
-/// Whether any of a block's pixels is above `floor`: their saturating excesses OR-ed, without
-/// a branch per pixel.
+/// Whether any pixel of the block at column `x` of `row` (the block whole) is above `floor`:
+/// their saturating excesses OR-ed, without a branch per pixel.
 #[inline(always)]
-fn above(block: &[u16; BLOCK], floor: u16) -> bool {
+fn block_above(row: &[u16], x: usize, floor: u16) -> bool {
+    let block: &[u16; BLOCK] = row[x..x + BLOCK].try_into().expect("BLOCK pixels");
     block.iter().fold(0, |m, &v| m | v.saturating_sub(floor)) != 0
+}
+
+/// Whether any 3×3 binomial sum ([`binomial3`]) of the block at column `x` of row `y` is above
+/// `16 · floor`; true (cannot tell) for a block on the frame's edge, where the sums repeat
+/// edge pixels. Sums of columns first, then along the row, in u32 lanes the compiler
+/// vectorises.
+#[inline(always)]
+fn block_binomial_above(pixels: &[u16], p: &DetectParams, x: usize, y: u32, floor: u16) -> bool {
+    let (w, h) = (p.width as usize, p.height as usize);
+    let y = y as usize;
+    if x == 0 || x + BLOCK >= w || y == 0 || y + 1 >= h {
+        return true;
+    }
+    let row = |y: usize| -> &[u16; BLOCK + 2] {
+        let start = y * w + x - 1;
+        pixels[start..start + BLOCK + 2]
+            .try_into()
+            .expect("BLOCK + 2 pixels")
+    };
+    let (up, mid, down) = (row(y - 1), row(y), row(y + 1));
+    let cols: [u32; BLOCK + 2] =
+        std::array::from_fn(|t| up[t] as u32 + 2 * mid[t] as u32 + down[t] as u32);
+    let limit = 16 * floor as u32;
+    (0..BLOCK).fold(0, |m, t| {
+        m | (cols[t] + 2 * cols[t + 1] + cols[t + 2]).saturating_sub(limit)
+    }) != 0
 }
 
 /// A tile's level for the matched filter, in 1/16 ADU: 16 · background + 6 · offset. The 3×3
@@ -522,6 +548,10 @@ fn threshold_filtered_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) 
             let level = ((s - wx) * c0 + wx * c1) / s;
             16 * v as u32 > level && binomial3(pixels, p.width, p.height, x, y) > level
         },
+        // A set pixel is above its level's sixteenth and its binomial sum above the level
+        // (at least 16 · floor): a block whose pixels or whose sums are all below cannot hold
+        // one. Most of the sky passes by its sums (the smoothed noise is 6/16 of the pixels').
+        |row, x, y, f| !block_above(row, x, f) || !block_binomial_above(pixels, p, x, y, f),
     )
 }
 

@@ -97,13 +97,15 @@ fn row_wise_runs_equal_the_per_pixel_definition() {
     }
 }
 
-/// Pixels at or just below their own level, a few just above it, and some bright spots, on
-/// tiles of varied levels: the frame `scan` passes over block by block, with most blocks at or
-/// below the least level of their tiles and many pixels between that and their own. 16-bit
-/// levels (`level(x, y)`, in ADU) from `level_of`; spots every 97 px and on block edges.
+/// Pixels at or just below their own level (by up to `below`), a few just above it, and some
+/// bright spots, on tiles of varied levels: the frame `scan` passes over block by block, with
+/// most blocks at or below the least level of their tiles and many pixels between that and
+/// their own. 16-bit levels (`level(x, y)`, in ADU) from `level_of`; spots every 97 px and on
+/// block edges.
 fn pixels_hugging_the_levels(
     p: &DetectParams,
     seed: u32,
+    below: i64,
     level_of: impl Fn(u32, u32) -> u32,
 ) -> Vec<u16> {
     let mut seed = seed;
@@ -117,7 +119,7 @@ fn pixels_hugging_the_levels(
             let v = match r {
                 0 => level + 1 + (seed >> 8) as i64 % 3,
                 1..=39 => level,
-                _ => level - 1 - (seed >> 20) as i64 % 40,
+                _ => level - 1 - (seed >> 20) as i64 % below,
             };
             let spot = (x % 97 == 5 || [31, 32, 63, 64].contains(&x) || x + 1 == w) && y % 7 == 3;
             (if spot { v + 500 } else { v }).clamp(0, 65535) as u16
@@ -186,8 +188,9 @@ fn runs_passed_over_by_blocks_equal_the_per_pixel_definition() {
         let p = DetectParams::new(w, h, tile, 5.0, 65535);
         let tiles = tiles_of(&p, 100 + case, kind);
         let s2 = 4 * tile * tile;
-        let px =
-            pixels_hugging_the_levels(&p, 200 + case, |x, y| level_scaled(&tiles, &p, x, y) / s2);
+        let px = pixels_hugging_the_levels(&p, 200 + case, 40, |x, y| {
+            level_scaled(&tiles, &p, x, y) / s2
+        });
         let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
         let mut set = 0;
         for y in 0..h {
@@ -210,7 +213,9 @@ fn runs_passed_over_by_blocks_equal_the_per_pixel_definition() {
         assert!(set > 5 && set < w * h / 10, "{w}×{h}: {set} set");
 
         let pf = p.with_filter(true);
-        let px = pixels_hugging_the_levels(&pf, 300 + case, |x, y| {
+        // Closer to the level: many binomial sums just above it or just below (the filter's
+        // blocks are passed over by their sums).
+        let px = pixels_hugging_the_levels(&pf, 300 + case, 2, |x, y| {
             filtered_level_at(&tiles, &pf, x, y) / 16
         });
         let mask = dense_mask(&threshold(&px, &tiles, &pf), w, h);
