@@ -19,51 +19,51 @@ pub fn unpack_candidate(packed: u64) -> Option<(u32, u32)> {
 
 /// The `k` best candidates of each image star, `out[star · k + rank]` (0 = empty slot).
 ///
-/// As the GPU does it: find T, the (saturated) votes of the m-th best candidate
-/// (m = min(k, candidates with votes)), by counting votes; keep every candidate above T and the
-/// lowest ids among those at T; sort the m keys.
+/// The GPU finds T, the (saturated) votes of the m-th best candidate (m = min(k, candidates
+/// with votes)), by counting votes, keeps every candidate above T and the lowest ids among
+/// those at T, and sorts the m keys. Here one pass in id order keeps the best so far: once k
+/// are kept, a later id needs more votes than the least of them to rank above it, so a run of
+/// [`RUN`] counters none of which exceeds that is passed over with one vectorised maximum.
+/// The same m keys, in the same order.
 pub fn select(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64> {
     crate::simd::fast!(select_in(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64>)
 }
+
+/// The counters [`select`] tests at a time.
+const RUN: usize = 32;
 
 /// [`select`], compiled where it is inlined (see [`crate::simd`]).
 #[inline(always)]
 fn select_in(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64> {
     let mut out = vec![0u64; n_stars * k];
-    let mut counts: Vec<u32> = Vec::new();
-    let mut keys: Vec<u64> = Vec::with_capacity(k);
+    // The best keys so far, rising.
+    let mut best: Vec<u64> = Vec::with_capacity(k + 1);
     for s in 0..n_stars {
         let row = &votes[s * n_ref..(s + 1) * n_ref];
-        let top = row.iter().map(|&v| v.min(0xFFFF)).max().unwrap_or(0) as usize;
-        counts.clear();
-        counts.resize(top + 1, 0);
-        for &v in row {
-            counts[v.min(0xFFFF) as usize] += 1;
-        }
-        let nonzero = row.len() - counts[0] as usize;
-        let m = k.min(nonzero);
-        if m == 0 {
-            continue;
-        }
-        // T: walk down from the top until m candidates are covered.
-        let (mut threshold, mut above) = (top, 0usize);
-        while above + (counts[threshold] as usize) < m {
-            above += counts[threshold] as usize;
-            threshold -= 1;
-        }
-        keys.clear();
-        let mut ties = m - above;
-        for (id, &v) in row.iter().enumerate() {
-            let v = v.min(0xFFFF) as usize;
-            if v > threshold || (v == threshold && ties > 0) {
-                if v == threshold {
-                    ties -= 1;
+        best.clear();
+        // The votes a candidate must exceed: none until k are kept.
+        let mut bar = 0u32;
+        for (r, run) in row.chunks(RUN).enumerate() {
+            if k == 0 || run.iter().fold(0, |m, &v| m.max(v)).min(0xFFFF) <= bar {
+                continue;
+            }
+            for (i, &v) in run.iter().enumerate() {
+                if v.min(0xFFFF) <= bar {
+                    continue;
                 }
-                keys.push(pack_candidate(v as u32, id as u32));
+                let key = pack_candidate(v, (r * RUN + i) as u32);
+                best.insert(best.partition_point(|&b| b < key), key);
+                if best.len() > k {
+                    best.remove(0);
+                }
+                if best.len() == k {
+                    bar = (best[0] >> 32) as u32;
+                }
             }
         }
-        keys.sort_unstable_by(|a, b| b.cmp(a));
-        out[s * k..s * k + m].copy_from_slice(&keys);
+        for (o, &key) in out[s * k..(s + 1) * k].iter_mut().zip(best.iter().rev()) {
+            *o = key;
+        }
     }
     out
 }
