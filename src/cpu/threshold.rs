@@ -281,25 +281,62 @@ fn threshold_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Ru
     if p.matched == FILTER_BINOMIAL3 {
         return threshold_filtered_in(pixels, tiles, p);
     }
-    let s = 2 * p.tile;
-    let s2 = s * s;
-    scan(
-        pixels,
-        tiles,
-        p,
-        |t| (t.background + t.offset).min(65536),
-        |a, b, wy| (s - wy) * a + wy * b,
-        // Pixels at or below this are below every level between the two columns.
-        |c0, c1| (s * c0.min(c1) / s2).min(65535) as u16,
-        |_, _, v, wx, c0, c1| v as u32 * s2 > (s - wx) * c0 + wx * c1,
-        |row, x, _, f| !block_above(row, x, f),
-    )
+    scan(pixels, tiles, p, &Plain::new(p))
 }
 
-/// The mask's runs, row by row: `tile_level` of the tiles interpolated between tile rows by
-/// `between_rows(upper, lower, wy)` for each tile column; within each segment of columns that
-/// share a pair of tile columns (levels c0, c1), pixels at or below `floor(c0, c1)` cannot be
-/// set; `set(x, y, pixel, wx, c0, c1)` decides the others.
+/// What [`scan`] compares against: a tile's level, its interpolation between tile rows, a
+/// floor under the pixels' levels between two tile columns, the comparison of one pixel, and
+/// of a whole block. Methods, not closures, so that they are compiled into the AVX2 copy with
+/// the scan (a closure the compiler kept out of line was built for the baseline only).
+trait Rule {
+    fn tile_level(&self, t: &TileStats) -> u32;
+    fn between_rows(&self, a: u32, b: u32, wy: u32) -> u32;
+    fn floor(&self, c0: u32, c1: u32) -> u16;
+    fn set(&self, x: u32, y: u32, v: u16, wx: u32, c0: u32, c1: u32) -> bool;
+    fn quiet(&self, row: &[u16], x: usize, y: u32, floor: u16) -> bool;
+}
+
+/// The plain mask: `pixel · (2·tile)² > level_scaled`.
+struct Plain {
+    s: u32,
+    s2: u32,
+}
+
+impl Plain {
+    fn new(p: &DetectParams) -> Plain {
+        let s = 2 * p.tile;
+        Plain { s, s2: s * s }
+    }
+}
+
+impl Rule for Plain {
+    #[inline(always)]
+    fn tile_level(&self, t: &TileStats) -> u32 {
+        (t.background + t.offset).min(65536)
+    }
+    #[inline(always)]
+    fn between_rows(&self, a: u32, b: u32, wy: u32) -> u32 {
+        (self.s - wy) * a + wy * b
+    }
+    /// Pixels at or below this are below every level between the two columns.
+    #[inline(always)]
+    fn floor(&self, c0: u32, c1: u32) -> u16 {
+        (self.s * c0.min(c1) / self.s2).min(65535) as u16
+    }
+    #[inline(always)]
+    fn set(&self, _: u32, _: u32, v: u16, wx: u32, c0: u32, c1: u32) -> bool {
+        v as u32 * self.s2 > (self.s - wx) * c0 + wx * c1
+    }
+    #[inline(always)]
+    fn quiet(&self, row: &[u16], x: usize, _: u32, floor: u16) -> bool {
+        !block_above(row, x, floor)
+    }
+}
+
+/// The mask's runs, row by row ([`Rule`]): `tile_level` of the tiles interpolated between tile
+/// rows by `between_rows(upper, lower, wy)` for each tile column; within each segment of
+/// columns that share a pair of tile columns (levels c0, c1), pixels at or below
+/// `floor(c0, c1)` cannot be set; `set(x, y, pixel, wx, c0, c1)` decides the others.
 ///
 /// Most of a star field is passed over [`BLOCK`] columns at a time, without computing the
 /// row's levels: between two tile rows a column's level is at least `between_rows(m, m, ·)`,
@@ -311,20 +348,8 @@ fn threshold_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Ru
 /// do; `tests/it/threshold.rs` holds the runs to the per-pixel definition.) `quiet(row, x, y,
 /// f)` says whether the whole block at column x of row y holds no set pixel when every
 /// pixel's floor is at least f: at the least, when no pixel is above f ([`block_above`]).
-// The frame, then what each mask's rule supplies: five closures read better than a trait
-// with two implementations.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn scan(
-    pixels: &[u16],
-    tiles: &[TileStats],
-    p: &DetectParams,
-    tile_level: impl Fn(&TileStats) -> u32,
-    between_rows: impl Fn(u32, u32, u32) -> u32,
-    floor: impl Fn(u32, u32) -> u16,
-    set: impl Fn(u32, u32, u16, u32, u32, u32) -> bool,
-    quiet: impl Fn(&[u16], usize, u32, u16) -> bool,
-) -> Vec<Run> {
+fn scan(pixels: &[u16], tiles: &[TileStats], p: &DetectParams, rule: &impl Rule) -> Vec<Run> {
     let w = p.width as usize;
     // Segments of columns with the same pair of tile columns (lower, upper), the segment of
     // each column, and its weight between the two.
@@ -354,7 +379,7 @@ fn scan(
     let least =
         |f: &[u16], (s0, s1): (usize, usize)| f[s0..=s1].iter().fold(u16::MAX, |m, &v| m.min(v));
     let full = w / BLOCK * BLOCK;
-    let level_at = |tx: usize, ty: u32| tile_level(&tiles[(ty * p.tiles_x) as usize + tx]);
+    let level_at = |tx: usize, ty: u32| rule.tile_level(&tiles[(ty * p.tiles_x) as usize + tx]);
     let mut band = None;
     let mut band_floors = vec![0u16; segments.len()];
     let mut band_block_floors = vec![0u16; blocks.len()];
@@ -371,8 +396,8 @@ fn scan(
                     .map(|(tx, ty)| level_at(tx, ty))
                     .into_iter()
                     .fold(u32::MAX, u32::min);
-                let c = between_rows(m, m, 0);
-                *f = floor(c, c);
+                let c = rule.between_rows(m, m, 0);
+                *f = rule.floor(c, c);
             }
             for (f, &b) in band_block_floors.iter_mut().zip(&blocks) {
                 *f = least(&band_floors, b);
@@ -386,7 +411,7 @@ fn scan(
         while x < w {
             if start.is_none() && x % BLOCK == 0 {
                 // A loop, not an iterator adapter: it stays inlined in the AVX2 copy.
-                while x < full && quiet(row, x, y, band_block_floors[x / BLOCK]) {
+                while x < full && rule.quiet(row, x, y, band_block_floors[x / BLOCK]) {
                     x += BLOCK;
                 }
                 if x == w {
@@ -395,18 +420,18 @@ fn scan(
             }
             if !row_ready {
                 for (tx, c) in col_level.iter_mut().enumerate() {
-                    *c = between_rows(level_at(tx, ty), level_at(tx, ty1), wy);
+                    *c = rule.between_rows(level_at(tx, ty), level_at(tx, ty1), wy);
                 }
                 for (i, &(t0, t1)) in segments.iter().enumerate() {
                     levels[i] = (col_level[t0], col_level[t1]);
-                    floors[i] = floor(col_level[t0], col_level[t1]);
+                    floors[i] = rule.floor(col_level[t0], col_level[t1]);
                 }
                 row_ready = true;
             }
             if start.is_none()
                 && x % BLOCK == 0
                 && x < full
-                && quiet(row, x, y, least(&floors, blocks[x / BLOCK]))
+                && rule.quiet(row, x, y, least(&floors, blocks[x / BLOCK]))
             {
                 x += BLOCK;
                 continue;
@@ -424,7 +449,7 @@ fn scan(
                 }
             }
             let (c0, c1) = levels[segment];
-            match (set(x as u32, y, row[x], weights[x], c0, c1), start) {
+            match (rule.set(x as u32, y, row[x], weights[x], c0, c1), start) {
                 (true, None) => start = Some(x as u32),
                 (false, Some(r0)) => {
                     runs.push(Run {
@@ -535,24 +560,43 @@ pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams)
 /// [`threshold_filtered`], compiled where it is inlined (see [`crate::simd`]).
 #[inline(always)]
 fn threshold_filtered_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
-    let s = 2 * p.tile;
-    scan(
-        pixels,
-        tiles,
-        p,
-        filtered_tile_level,
-        |a, b, wy| ((s - wy) * a + wy * b) / s,
-        // The level is at least min(c0, c1): a pixel at or below a sixteenth of it is below.
-        |c0, c1| (c0.min(c1) / 16).min(65535) as u16,
-        |x, y, v, wx, c0, c1| {
-            let level = ((s - wx) * c0 + wx * c1) / s;
-            16 * v as u32 > level && binomial3(pixels, p.width, p.height, x, y) > level
-        },
-        // A set pixel is above its level's sixteenth and its binomial sum above the level
-        // (at least 16 · floor): a block whose pixels or whose sums are all below cannot hold
-        // one. Most of the sky passes by its sums (the smoothed noise is 6/16 of the pixels').
-        |row, x, y, f| !block_above(row, x, f) || !block_binomial_above(pixels, p, x, y, f),
-    )
+    scan(pixels, tiles, p, &Filtered { pixels, p })
+}
+
+/// The matched filter's mask (see [`threshold_filtered`]), in 1/16 ADU.
+struct Filtered<'a> {
+    pixels: &'a [u16],
+    p: &'a DetectParams,
+}
+
+impl Rule for Filtered<'_> {
+    #[inline(always)]
+    fn tile_level(&self, t: &TileStats) -> u32 {
+        filtered_tile_level(t)
+    }
+    #[inline(always)]
+    fn between_rows(&self, a: u32, b: u32, wy: u32) -> u32 {
+        let s = 2 * self.p.tile;
+        ((s - wy) * a + wy * b) / s
+    }
+    /// The level is at least min(c0, c1): a pixel at or below a sixteenth of it is below.
+    #[inline(always)]
+    fn floor(&self, c0: u32, c1: u32) -> u16 {
+        (c0.min(c1) / 16).min(65535) as u16
+    }
+    #[inline(always)]
+    fn set(&self, x: u32, y: u32, v: u16, wx: u32, c0: u32, c1: u32) -> bool {
+        let s = 2 * self.p.tile;
+        let level = ((s - wx) * c0 + wx * c1) / s;
+        16 * v as u32 > level && binomial3(self.pixels, self.p.width, self.p.height, x, y) > level
+    }
+    /// A set pixel is above its level's sixteenth and its binomial sum above the level (at
+    /// least 16 · floor): a block whose pixels or whose sums are all below cannot hold one.
+    /// Most of the sky passes by its sums (the smoothed noise is 6/16 of the pixels').
+    #[inline(always)]
+    fn quiet(&self, row: &[u16], x: usize, y: u32, floor: u16) -> bool {
+        !block_above(row, x, floor) || !block_binomial_above(self.pixels, self.p, x, y, floor)
+    }
 }
 
 /// The mask as one value per pixel (1 = set), as the GPU stores it.
