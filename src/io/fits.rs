@@ -252,32 +252,28 @@ pub fn read_camera_frame(
         return None;
     }
     let mut pixels = new_pixels(count, 0).ok()?;
-    // The data in `head`, then the rest (past the header's padding, if `head` ends in it),
-    // READ_CHUNK bytes at a time through a buffer that stays in cache, converted into the
-    // pixels' unused capacity: nothing is written twice.
-    let in_head = head.len().saturating_sub(image.data_start).min(need) / 2 * 2;
-    big_endian_to_pixels(
-        &head[image.data_start..image.data_start + in_head],
-        &mut pixels,
-    );
+    pixels.resize(count as usize, 0);
+    let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut pixels);
+    // The data in `head`, then the rest (past the header's padding, if `head` ends in it).
+    let mut filled = head.len().saturating_sub(image.data_start).min(need);
+    bytes[..filled].copy_from_slice(&head[image.data_start..image.data_start + filled]);
     let skip = image.data_start.saturating_sub(head.len()) as u64;
     if skip > 0 && std::io::copy(&mut rest.by_ref().take(skip), &mut std::io::sink()).ok()? != skip
     {
         return None;
     }
-    // An odd byte left in `head` starts the first chunk.
-    let mut chunk = vec![0u8; READ_CHUNK];
-    let mut carried = head.len().saturating_sub(image.data_start).min(need) - in_head;
-    if carried == 1 {
-        chunk[0] = head[image.data_start + in_head];
-    }
-    let mut filled = in_head + carried;
-    while filled < need {
-        let n = (READ_CHUNK - carried).min(need - filled);
-        rest.read_exact(&mut chunk[carried..carried + n]).ok()?;
-        filled += n;
-        big_endian_to_pixels(&chunk[..carried + n], &mut pixels);
-        carried = 0;
+    let mut converted = 0;
+    loop {
+        let whole = filled / 2;
+        big_endian_to_pixels(&mut pixels[converted..whole]);
+        converted = whole;
+        if filled == need {
+            break;
+        }
+        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut pixels);
+        let end = (filled + READ_CHUNK).min(need);
+        rest.read_exact(&mut bytes[filled..end]).ok()?;
+        filled = end;
     }
     let (epoch, warnings) = epoch(headers.iter().rev());
     Some(FitsFrame {
@@ -291,20 +287,17 @@ pub fn read_camera_frame(
     })
 }
 
-/// Stored big-endian i16 v becomes pixel 32768 + v (as `convert_int` maps it), appended to
-/// `pixels` (whose capacity holds them).
-fn big_endian_to_pixels(bytes: &[u8], pixels: &mut Vec<u16>) {
-    crate::simd::fast!(big_endian_to_pixels_in(bytes: &[u8], pixels: &mut Vec<u16>) -> ())
+/// Stored big-endian i16 v becomes pixel 32768 + v (as `convert_int` maps it), in place.
+fn big_endian_to_pixels(p: &mut [u16]) {
+    crate::simd::fast!(big_endian_to_pixels_in(p: &mut [u16]) -> ())
 }
 
 /// [`big_endian_to_pixels`], compiled where it is inlined (see [`crate::simd`]).
 #[inline(always)]
-fn big_endian_to_pixels_in(bytes: &[u8], pixels: &mut Vec<u16>) {
-    pixels.extend(
-        bytes
-            .chunks_exact(2)
-            .map(|b| (32768 + i32::from(i16::from_be_bytes([b[0], b[1]]))) as u16),
-    );
+fn big_endian_to_pixels_in(p: &mut [u16]) {
+    for v in p {
+        *v = (32768 + i32::from(u16::from_be(*v) as i16)) as u16;
+    }
 }
 
 /// Bytes [`read_camera_frame`] reads and converts at a time: well inside the L2 cache.
