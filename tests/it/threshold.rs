@@ -218,21 +218,9 @@ fn runs_passed_over_by_blocks_equal_the_per_pixel_definition() {
         let px = pixels_hugging_the_levels(&pf, 300 + case, 2, |x, y| {
             filtered_level_at(&tiles, &pf, x, y) / 16
         });
-        let mask = dense_mask(&threshold(&px, &tiles, &pf), w, h);
-        let mut set = 0;
-        for y in 0..h {
-            for x in 0..w {
-                let i = (y * w + x) as usize;
-                let level = filtered_level_at(&tiles, &pf, x, y);
-                let want = (16 * px[i] as u32 > level && binomial3(&px, w, h, x, y) > level) as u32;
-                assert_eq!(
-                    mask[i], want,
-                    "filtered {kind:?} {w}×{h}, tile {tile}: pixel ({x}, {y})"
-                );
-                set += want;
-            }
-        }
-        assert!(set > 0, "filtered {w}×{h}: none set");
+        let what = format!("filtered {kind:?} {w}×{h}, tile {tile}");
+        let set = assert_filtered_mask_is_the_definition(&px, &tiles, &pf, &what);
+        assert!(set > 0, "{what}: none set");
     }
     assert!(
         blocks_passed > 500,
@@ -293,25 +281,37 @@ fn gpu_equals_cpu_on_odd_sizes_and_one_pixel_frames() {
     }
 }
 
-#[test]
-fn filtered_runs_equal_the_per_pixel_definition() {
-    // The matched filter's mask marks exactly the pixels with 16·pixel > level and
-    // binomial3 > level (level = filtered_level_at), the definition the GPU kernel evaluates,
-    // edges included.
-    let (w, h) = (77u32, 51u32);
-    let p = DetectParams::new(w, h, 8, 3.0, 255).with_filter(true);
-    let (px, tiles) = random_pixels_and_tiles(&p, 4321);
-    let mask = dense_mask(&threshold(&px, &tiles, &p), w, h);
+/// The matched filter's mask of `px` marks exactly the pixels with 16·pixel > level and
+/// binomial3 > level (level = filtered_level_at), the definition the GPU kernel evaluates.
+/// Returns how many it marks.
+fn assert_filtered_mask_is_the_definition(
+    px: &[u16],
+    tiles: &[TileStats],
+    p: &DetectParams,
+    what: &str,
+) -> u32 {
+    let (w, h) = (p.width, p.height);
+    let mask = dense_mask(&threshold(px, tiles, p), w, h);
     let mut set = 0;
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
-            let level = filtered_level_at(&tiles, &p, x, y);
-            let want = (16 * px[i] as u32 > level && binomial3(&px, w, h, x, y) > level) as u32;
-            assert_eq!(mask[i], want, "pixel ({x}, {y})");
+            let level = filtered_level_at(tiles, p, x, y);
+            let want = (16 * px[i] as u32 > level && binomial3(px, w, h, x, y) > level) as u32;
+            assert_eq!(mask[i], want, "{what}: pixel ({x}, {y})");
             set += want;
         }
     }
+    set
+}
+
+#[test]
+fn filtered_runs_equal_the_per_pixel_definition() {
+    // Pseudo-random pixels and tile statistics, edges included.
+    let (w, h) = (77u32, 51u32);
+    let p = DetectParams::new(w, h, 8, 3.0, 255).with_filter(true);
+    let (px, tiles) = random_pixels_and_tiles(&p, 4321);
+    let set = assert_filtered_mask_is_the_definition(&px, &tiles, &p, "random");
     assert!(
         set > 100 && set < w * h - 100,
         "{set} set: both outcomes tested"
