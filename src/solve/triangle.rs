@@ -39,7 +39,7 @@ struct Side {
     /// Bit `s % 64` of word `s / 64` is set when star `s` has partners on this side and is
     /// kept (see [`triangles`]: the others are never asked for).
     words: Vec<u64>,
-    /// The stars with partners in words before word w: `rank[w]`.
+    /// The stars kept in words before word w: `rank[w]`.
     rank: Vec<u32>,
     /// The star of rank t's partners are `partners[start[t]..start[t + 1]]`.
     start: Vec<u32>,
