@@ -23,7 +23,7 @@ pub fn unpack_candidate(packed: u64) -> Option<(u32, u32)> {
 /// with votes)), by counting votes, keeps every candidate above T and the lowest ids among
 /// those at T, and sorts the m keys. Here one pass in id order keeps the best so far: once k
 /// are kept, a later id needs more votes than the least of them to rank above it, so a run of
-/// [`RUN`] counters none of which exceeds that is passed over with one vectorised maximum.
+/// `RUN` (32) counters none of which exceeds that is passed over with one vectorised maximum.
 /// The same m keys, in the same order.
 pub fn select(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64> {
     crate::simd::fast!(select_in(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64>)
