@@ -36,6 +36,9 @@ const RUN: usize = 32;
 #[inline(always)]
 fn select_in(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64> {
     let mut out = vec![0u64; n_stars * k];
+    if k == 0 {
+        return out;
+    }
     // The best keys so far, rising.
     let mut best: Vec<u64> = Vec::with_capacity(k + 1);
     for s in 0..n_stars {
@@ -44,7 +47,7 @@ fn select_in(votes: &[u32], n_stars: usize, n_ref: usize, k: usize) -> Vec<u64> 
         // The votes a candidate must exceed: none until k are kept.
         let mut bar = 0u32;
         for (r, run) in row.chunks(RUN).enumerate() {
-            if k == 0 || run.iter().fold(0, |m, &v| m.max(v)).min(0xFFFF) <= bar {
+            if run.iter().fold(0, |m, &v| m.max(v)).min(0xFFFF) <= bar {
                 continue;
             }
             for (i, &v) in run.iter().enumerate() {

@@ -305,6 +305,7 @@ trait Rule {
 
 /// The plain mask: `pixel · (2·tile)² > level_scaled`.
 struct Plain {
+    /// Twice the tile side (the interpolation weights' denominator), and its square.
     s: u32,
     s2: u32,
 }
@@ -567,13 +568,16 @@ pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams)
 /// [`threshold_filtered`], compiled where it is inlined (see [`crate::simd`]).
 #[inline(always)]
 fn threshold_filtered_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
-    scan(pixels, tiles, p, &Filtered { pixels, p })
+    let s = 2 * p.tile;
+    scan(pixels, tiles, p, &Filtered { pixels, p, s })
 }
 
 /// The matched filter's mask (see [`threshold_filtered`]), in 1/16 ADU.
 struct Filtered<'a> {
     pixels: &'a [u16],
     p: &'a DetectParams,
+    /// Twice the tile side: the interpolation weights' denominator.
+    s: u32,
 }
 
 impl Rule for Filtered<'_> {
@@ -583,8 +587,7 @@ impl Rule for Filtered<'_> {
     }
     #[inline(always)]
     fn between_rows(&self, a: u32, b: u32, wy: u32) -> u32 {
-        let s = 2 * self.p.tile;
-        ((s - wy) * a + wy * b) / s
+        ((self.s - wy) * a + wy * b) / self.s
     }
     /// The level is at least min(c0, c1): a pixel at or below a sixteenth of it is below.
     #[inline(always)]
@@ -593,8 +596,7 @@ impl Rule for Filtered<'_> {
     }
     #[inline(always)]
     fn set(&self, x: u32, y: u32, v: u16, wx: u32, c0: u32, c1: u32) -> bool {
-        let s = 2 * self.p.tile;
-        let level = ((s - wx) * c0 + wx * c1) / s;
+        let level = ((self.s - wx) * c0 + wx * c1) / self.s;
         16 * v as u32 > level && binomial3(self.pixels, self.p.width, self.p.height, x, y) > level
     }
     /// A set pixel is above its level's sixteenth and its binomial sum above the level (at
