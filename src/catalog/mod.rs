@@ -388,10 +388,18 @@ pub struct RefStar {
 }
 
 /// The stars a run matches against, brightest first; a star's index is its 32-bit id in the
-/// distance table.
+/// distance table. Positions are read at `selection.epoch` ([`RefCatalog::v`],
+/// [`RefCatalog::star`]): a catalog moved to a frame's own date shares the stars and moves
+/// each by its proper motion when read.
 #[derive(Clone, Debug)]
 pub struct RefCatalog {
-    pub stars: Vec<RefStar>,
+    /// The stars at `stars_epoch`.
+    stars: Arc<Vec<RefStar>>,
+    /// The epoch `stars` hold positions for (Julian year).
+    stars_epoch: f64,
+    /// The largest proper motion of any star (radians per year): how far a move of a year
+    /// takes any star at most, for cone tests on the stored positions ([`RefCatalog::within`]).
+    max_motion: f64,
     pub selection: Selection,
     /// Stars the double-star rule merged away or dropped.
     pub doubles_removed: usize,
@@ -449,34 +457,87 @@ impl RefCatalog {
             );
         }
         Ok(RefCatalog {
-            stars,
+            max_motion: stars.iter().map(|s| s.motion.norm()).fold(0.0, f64::max),
+            stars: Arc::new(stars),
+            stars_epoch: selection.epoch,
             selection,
             doubles_removed,
             names: catalog.names.clone(),
         })
     }
 
-    /// The same stars (same ids) moved to another epoch: for a frame that carries its own
-    /// date (FITS DATE-OBS) while the distance table was made for the run's epoch. Pair
-    /// distances change by far less than the vote's tolerance over decades; positions do not.
+    /// The same stars (same ids) at another epoch: for a frame that carries its own date (FITS
+    /// DATE-OBS) while the distance table was made for the run's epoch. Pair distances change
+    /// by far less than the vote's tolerance over decades; positions do not. The stars are
+    /// shared, not copied: a frame reads only the positions it needs, where a moved copy of
+    /// every star for each date was a tenth of a sparse 10° run (docs/speed.md).
     pub fn at_epoch(&self, epoch: f64) -> RefCatalog {
-        let dt = epoch - self.selection.epoch;
         RefCatalog {
-            stars: self
-                .stars
-                .iter()
-                .map(|s| RefStar {
-                    v: (s.v + s.motion * dt).normalize(),
-                    ..*s
-                })
-                .collect(),
             selection: Selection {
                 epoch,
                 ..self.selection
             },
-            doubles_removed: self.doubles_removed,
-            names: self.names.clone(),
+            ..self.clone()
         }
+    }
+
+    /// Years from the stored positions to `selection.epoch`.
+    fn dt(&self) -> f64 {
+        self.selection.epoch - self.stars_epoch
+    }
+
+    /// The ICRS unit vector of star `id` at `selection.epoch`.
+    #[inline]
+    pub fn v(&self, id: usize) -> Vector3<f64> {
+        let s = &self.stars[id];
+        let dt = self.dt();
+        if dt == 0.0 {
+            s.v
+        } else {
+            (s.v + s.motion * dt).normalize()
+        }
+    }
+
+    /// Star `id` with its position at `selection.epoch`.
+    pub fn star(&self, id: usize) -> RefStar {
+        RefStar {
+            v: self.v(id),
+            ..self.stars[id]
+        }
+    }
+
+    /// Every star, in id order, with its position at `selection.epoch`.
+    pub fn stars(&self) -> impl ExactSizeIterator<Item = RefStar> + '_ {
+        (0..self.len()).map(|id| self.star(id))
+    }
+
+    /// The ids, rising, of the stars within `reach` radians of the unit vector `axis` at
+    /// `selection.epoch`: those with `v(id) · axis >= reach.cos()`. The stored positions are
+    /// tested first against the reach widened by how far the stars can have moved, so only
+    /// the few near the axis are moved.
+    pub fn within(&self, axis: &Vector3<f64>, reach: f64) -> Vec<u32> {
+        let cos_reach = reach.cos();
+        let dt = self.dt();
+        if dt == 0.0 {
+            return (self.stars.iter().enumerate())
+                .filter(|(_, s)| s.v.dot(axis) >= cos_reach)
+                .map(|(id, _)| id as u32)
+                .collect();
+        }
+        // A move of |motion · dt| turns a star by at most that angle; a microradian more
+        // covers rounding, so the stars kept are a superset of those within the reach.
+        let widened = reach + self.max_motion * dt.abs() + 1e-6;
+        let cos_widened = if widened >= std::f64::consts::PI {
+            -2.0
+        } else {
+            widened.cos()
+        };
+        (self.stars.iter().enumerate())
+            .filter(|(_, s)| s.v.dot(axis) >= cos_widened)
+            .map(|(id, _)| id)
+            .filter(|&id| self.v(id).dot(axis) >= cos_reach)
+            .map(|id| id as u32)
+            .collect()
     }
 
     /// The catalog id of reference star `ref_id` as records print it (`catalog_id`).
@@ -618,6 +679,45 @@ mod tests {
             (built.source, built.content_hash),
             (parsed.source, parsed.content_hash)
         );
+    }
+
+    /// `within` keeps exactly the stars whose position at the catalog's epoch is within the
+    /// reach, however far the epoch is from the stored positions' (centuries here, so that the
+    /// fastest stars cross the cone's edge), as at the stored epoch.
+    #[test]
+    fn within_is_the_cone_at_the_epoch() {
+        let selection = Selection {
+            epoch: 2000.0,
+            mag_limit: 6.5,
+            double_stars: DoubleStars::Keep,
+            double_sep_rad: 0.0,
+        };
+        let refs = RefCatalog::select(&Catalog::builtin(), selection).unwrap();
+        // Axes on the fastest stars (their moves decide the edge), and elsewhere.
+        let mut fastest: Vec<usize> = (0..refs.len()).collect();
+        fastest.sort_by(|&a, &b| {
+            refs.stars[b]
+                .motion
+                .norm()
+                .total_cmp(&refs.stars[a].motion.norm())
+        });
+        for epoch in [2000.0, 1500.0, 2026.9, 2600.0] {
+            let at = refs.at_epoch(epoch);
+            for (k, &star) in fastest[..6].iter().enumerate() {
+                let axis = if k % 2 == 0 {
+                    refs.stars[star].v
+                } else {
+                    Vector3::new(1.0, k as f64, -2.0).normalize()
+                };
+                for reach in [0.0, 1e-4, 0.01, 0.2, 1.5, 3.1, std::f64::consts::PI] {
+                    let definition: Vec<u32> = (0..at.len())
+                        .filter(|&id| at.v(id).dot(&axis) >= reach.cos())
+                        .map(|id| id as u32)
+                        .collect();
+                    assert_eq!(at.within(&axis, reach), definition, "{epoch} {k} {reach}");
+                }
+            }
+        }
     }
 
     /// The built-in catalog's hash is its file's (cache keys depend on it).

@@ -122,7 +122,7 @@ impl PatternIndex {
     /// The quads of every level's discs among `cat`'s stars (ids are in brightness order,
     /// brightest first).
     pub fn build(cat: &RefCatalog, levels: &[f64]) -> PatternIndex {
-        let stars = &cat.stars;
+        let stars: Vec<_> = cat.stars().collect();
         let mut rows: Vec<(u32, [u32; 4])> = Vec::new();
         for &d in levels {
             let radius = d / 2.0;

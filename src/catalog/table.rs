@@ -52,7 +52,7 @@ pub type RowRange = std::ops::Range<usize>;
 impl PairTable {
     /// Build the table from reference stars: all pairs with angle < `max_sep_rad`.
     pub fn build(cat: &RefCatalog, max_sep_rad: f64) -> PairTable {
-        let stars = &cat.stars;
+        let stars: Vec<_> = cat.stars().collect();
         let max_chord = chord_of_angle(max_sep_rad);
         let max_key = chord_key(max_chord);
         // Cubes of side max_chord over the unit vectors: a pair closer than max_chord lies in
@@ -209,7 +209,7 @@ pub fn cache_key(cat: &RefCatalog, catalog_hash: u64, max_sep_rad: f64) -> u64 {
         FORMAT_VERSION,
         super::selection_key_text(cat, catalog_hash),
         max_sep_rad,
-        cat.stars.len()
+        cat.len()
     );
     crate::catalog::fnv1a(text.as_bytes())
 }
@@ -268,7 +268,7 @@ pub fn load_or_build_in(
     if let Some(f) = &file
         && f.exists()
     {
-        match read_table(f, key, cat.stars.len(), max_sep_rad) {
+        match read_table(f, key, cat.len(), max_sep_rad) {
             Ok(t) => {
                 return (
                     t,

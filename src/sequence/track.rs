@@ -71,10 +71,7 @@ pub fn identify(
     // The catalog stars that can be in view, then each detection's candidates, nearest first.
     let boresight = pred.r.transpose() * camera.centre_vector();
     let reach = (camera.diagonal_rad() / 2.0 + cone + 0.01).min(std::f64::consts::PI);
-    let cos_reach = reach.cos();
-    let near: Vec<u32> = (0..refs.stars.len() as u32)
-        .filter(|&id| refs.stars[id as usize].v.dot(&boresight) >= cos_reach)
-        .collect();
+    let near = refs.within(&boresight, reach);
     let tol = s.pair_tol_px * camera.ifov_rad();
     let candidates: Vec<Vec<u32>> = cam
         .iter()
@@ -82,7 +79,7 @@ pub fn identify(
             let sky = pred.r.transpose() * u;
             let mut c: Vec<(f64, u32)> = near
                 .iter()
-                .map(|&id| (refs.stars[id as usize].v.angle(&sky), id))
+                .map(|&id| (refs.v(id as usize).angle(&sky), id))
                 .filter(|(a, _)| *a <= cone + tol)
                 .collect();
             c.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
@@ -96,7 +93,7 @@ pub fn identify(
             let sep = cam[i].angle(&cam[j]);
             for &a in &candidates[i] {
                 for &b in &candidates[j] {
-                    let d = refs.stars[a as usize].v.angle(&refs.stars[b as usize].v);
+                    let d = refs.v(a as usize).angle(&refs.v(b as usize));
                     if a != b && (d - sep).abs() <= tol + solver.settings.identify.scale_tol * sep {
                         pairs.push((i, j, a, b));
                     }
@@ -115,7 +112,7 @@ pub fn identify(
     // any two stars can be fitted exactly: they count as fixed, as for a pair.
     let accepted = from(pred.r, 2).or_else(|| {
         pairs.iter().take(s.max_tries).find_map(|&(i, j, a, b)| {
-            let icrs = [refs.stars[a as usize].v, refs.stars[b as usize].v];
+            let icrs = [refs.v(a as usize), refs.v(b as usize)];
             let r0 = wahba(&[cam[i], cam[j]], &icrs)?;
             from(r0, 2)
         })

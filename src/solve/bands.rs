@@ -44,8 +44,6 @@ pub struct Band {
     table_from: (u64, f64, bool),
     /// The reference stars' radial features (`--method radial`), from `table`.
     pub radial: Option<crate::solve::radial::RadialTable>,
-    /// `refs` moved to the epochs of frames that carry their own date.
-    epochs: Days,
 }
 
 impl Band {
@@ -101,7 +99,6 @@ impl Band {
             table,
             table_from,
             radial,
-            epochs: Days::default(),
         })
     }
 
@@ -122,34 +119,19 @@ impl Band {
 
     /// The reference stars at a frame's own epoch (`refs` when it has none, or the same).
     pub fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
-        self.epochs.refs_at(&self.refs, epoch)
+        refs_at(&self.refs, epoch)
     }
 }
 
-/// A selection moved to the epochs of frames that carry their own date, by day.
-#[derive(Default)]
-pub(crate) struct Days(Mutex<HashMap<i64, Arc<RefCatalog>>>);
-
-impl Days {
-    /// `refs` at a frame's own epoch: `refs` itself when the frame has none or one within
-    /// [`SAME_EPOCH_YEARS`] of the selection's, else `refs` moved to the frame's day.
-    pub(crate) fn refs_at(&self, refs: &Arc<RefCatalog>, epoch: Option<f64>) -> Arc<RefCatalog> {
-        let Some(e) = epoch.filter(|e| (e - refs.selection.epoch).abs() > SAME_EPOCH_YEARS) else {
-            return refs.clone();
-        };
-        let mut map = self.0.lock().unwrap_or_else(|p| p.into_inner());
-        let day = epoch_day(e);
-        // A deep catalog's stars take tens of MB a day: an archive of frames from hundreds of
-        // nights must not keep them all (2-degree Gaia frames of 200 dates peaked at 7.8 GB).
-        // Made again from the day alone, so dropping them changes no record.
-        if map.len() >= EPOCHS_KEPT && !map.contains_key(&day) {
-            map.clear();
-        }
-        // At the day's own epoch, not the first frame's of that day: the positions (and the
-        // records' epoch) must not depend on which frame of the day a thread reached first.
-        map.entry(day)
-            .or_insert_with(|| Arc::new(refs.at_epoch(day_epoch(day))))
-            .clone()
+/// `refs` at a frame's own epoch: `refs` itself when the frame has none or one within
+/// [`SAME_EPOCH_YEARS`] of the selection's, else `refs` at the frame's day (the stars shared,
+/// see [`RefCatalog::at_epoch`]).
+fn refs_at(refs: &Arc<RefCatalog>, epoch: Option<f64>) -> Arc<RefCatalog> {
+    match epoch.filter(|e| (e - refs.selection.epoch).abs() > SAME_EPOCH_YEARS) {
+        // At the day's own epoch, not the frame's: the positions (and the records' epoch) are
+        // those of every frame of that day, whichever a thread reached first.
+        Some(e) => Arc::new(refs.at_epoch(day_epoch(epoch_day(e)))),
+        None => refs.clone(),
     }
 }
 
@@ -193,7 +175,7 @@ fn check_table_size(refs: &RefCatalog, max_sep_rad: f64) -> Result<()> {
 /// catalog), a fifth of a 12-degree frame's time with the field searched, and kept it.
 pub(crate) struct Deeper {
     catalog: Catalog,
-    selections: Mutex<HashMap<i64, Option<Arc<Dated>>>>,
+    selections: Mutex<HashMap<i64, Option<Arc<RefCatalog>>>>,
 }
 
 impl Deeper {
@@ -231,41 +213,18 @@ impl Deeper {
                 };
                 RefCatalog::select(&self.catalog, selection)
                     .ok()
-                    .map(|refs| Arc::new(Dated::new(refs)))
+                    .map(Arc::new)
             })
             .clone()?;
-        Some(selected.refs_at(epoch))
+        Some(refs_at(&selected, epoch))
     }
 }
-
-/// A selection and the days it was moved to.
-struct Dated {
-    refs: Arc<RefCatalog>,
-    days: Days,
-}
-
-impl Dated {
-    fn new(refs: RefCatalog) -> Dated {
-        Dated {
-            refs: Arc::new(refs),
-            days: Days::default(),
-        }
-    }
-
-    /// The stars at a frame's own epoch (see [`Days::refs_at`]).
-    fn refs_at(&self, epoch: Option<f64>) -> Arc<RefCatalog> {
-        self.days.refs_at(&self.refs, epoch)
-    }
-}
-
-/// How many days' star positions a band keeps at once (see [`Band::refs_at`]).
-const EPOCHS_KEPT: usize = 8;
 
 /// Frames dated within this many years of the run's epoch use the run's star positions
 /// (about a day: proper motions move no star by a milliarcsecond in that time).
 pub(crate) const SAME_EPOCH_YEARS: f64 = 0.003;
 
-/// The day of an epoch (Julian year): what star positions are cached by.
+/// The day of an epoch (Julian year): frames of one day share their stars' positions.
 pub(crate) fn epoch_day(epoch: f64) -> i64 {
     (epoch * 365.25).round() as i64
 }
@@ -475,27 +434,34 @@ mod tests {
         }
     }
 
-    /// One selection serves frames of every date: moved to each frame's day, the same day's
-    /// frames share it, and only a few days are kept.
+    /// One selection serves frames of every date: moved to each frame's day (the same day's
+    /// frames read the same positions), its stars shared rather than copied.
     #[test]
-    fn a_selection_moves_to_frames_days_and_keeps_a_few() {
+    fn a_selection_moves_to_frames_days() {
         let selection = Selection {
             epoch: 2025.0,
             mag_limit: 4.0,
             double_stars: DoubleStars::Keep,
             double_sep_rad: 0.0,
         };
-        let dated = Dated::new(RefCatalog::select(&Catalog::builtin(), selection).unwrap());
-        assert!(Arc::ptr_eq(&dated.refs_at(None), &dated.refs));
-        assert!(Arc::ptr_eq(&dated.refs_at(Some(2025.001)), &dated.refs));
+        let refs = Arc::new(RefCatalog::select(&Catalog::builtin(), selection).unwrap());
+        assert!(Arc::ptr_eq(&refs_at(&refs, None), &refs));
+        assert!(Arc::ptr_eq(&refs_at(&refs, Some(2025.001)), &refs));
         let (morning, evening) = (2016.2568, 2016.2571);
-        let a = dated.refs_at(Some(morning));
-        assert!(Arc::ptr_eq(&a, &dated.refs_at(Some(evening))));
+        let a = refs_at(&refs, Some(morning));
+        let b = refs_at(&refs, Some(evening));
         assert_eq!(a.selection.epoch, day_epoch(epoch_day(morning)));
-        assert_eq!(a.len(), dated.refs.len());
-        for k in 0..3 * EPOCHS_KEPT {
-            dated.refs_at(Some(2000.0 + k as f64));
+        assert_eq!(b.selection.epoch, a.selection.epoch);
+        assert_eq!(a.len(), refs.len());
+        let dt = a.selection.epoch - 2025.0;
+        let mut moved = 0;
+        for id in 0..refs.len() {
+            let s = refs.star(id);
+            // Bit for bit what a moved copy of every star held.
+            assert_eq!(a.v(id), (s.v + s.motion * dt).normalize());
+            assert_eq!(b.v(id), a.v(id));
+            moved += (a.v(id) != s.v) as usize;
         }
-        assert!(dated.days.0.lock().unwrap().len() <= EPOCHS_KEPT);
+        assert!(moved * 2 > refs.len(), "{moved} of {} moved", refs.len());
     }
 }

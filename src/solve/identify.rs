@@ -201,7 +201,7 @@ fn verify_in(
     let (xs, ys, zs): (Vec<f64>, Vec<f64>, Vec<f64>) = nodes
         .iter()
         .map(|node| {
-            let v = refs.stars[node.ref_id as usize].v;
+            let v = refs.v(node.ref_id as usize);
             (v.x, v.y, v.z)
         })
         .collect();

@@ -60,14 +60,13 @@ impl RadialTable {
     ) -> RadialTable {
         let radius_rad = table.max_sep_rad / 2.0;
         let ring_rad = radius_rad / BITS as f64;
-        let n = refs.stars.len();
+        let n = refs.len();
         let mut features = vec![0u32; n * WORDS];
         let top =
             table.lower_bound(chord_key(crate::catalog::table::chord_of_angle(radius_rad)) + 1);
         for row in 0..top {
             let (a, b) = table.pair(row);
-            let theta =
-                angle_of_chord((refs.stars[a as usize].v - refs.stars[b as usize].v).norm());
+            let theta = angle_of_chord((refs.v(a as usize) - refs.v(b as usize)).norm());
             let tol_rad = pair_tol_rad + scale_tol * theta;
             let lo = ((theta - tol_rad) / ring_rad).floor().max(0.0) as usize;
             let hi = (((theta + tol_rad) / ring_rad).floor() as usize).min(BITS - 1);
@@ -121,7 +120,7 @@ impl RadialTable {
             .map(|d| d.join(format!("radial-{key:016x}.bin")));
         if let Some(t) = file
             .as_ref()
-            .and_then(|f| read_features(f, key, refs.stars.len(), table))
+            .and_then(|f| read_features(f, key, refs.len(), table))
         {
             return (t, true);
         }
@@ -231,7 +230,7 @@ pub fn triangles(
             .collect()
     };
     let lists: Vec<Vec<u32>> = (0..n).map(ids).collect();
-    let v = |id: u32| refs.stars[id as usize].v;
+    let v = |id: u32| refs.v(id as usize);
     let fits = |i: usize, j: usize, a: u32, b: u32| -> bool {
         let Some((lo, hi)) = range[i * n + j] else {
             return false;
@@ -329,14 +328,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let f = dir.path().join("radial.bin");
         write_features(&f, 7, &t).unwrap();
-        let back = read_features(&f, 7, refs.stars.len(), &table).unwrap();
+        let back = read_features(&f, 7, refs.len(), &table).unwrap();
         assert_eq!(back.features, t.features);
         assert_eq!(back.counts, t.counts);
         assert_eq!(back.ring_rad, t.ring_rad);
         assert!(t.counts.iter().any(|&c| c > 0));
-        assert!(read_features(&f, 8, refs.stars.len(), &table).is_none());
+        assert!(read_features(&f, 8, refs.len(), &table).is_none());
         let bytes = std::fs::read(&f).unwrap();
         std::fs::write(&f, &bytes[..bytes.len() - 4]).unwrap();
-        assert!(read_features(&f, 7, refs.stars.len(), &table).is_none());
+        assert!(read_features(&f, 7, refs.len(), &table).is_none());
     }
 }

@@ -89,7 +89,9 @@ pub struct Refined {
 
 /// Reference stars projecting inside the image under `r`: (ref id, pixel).
 pub fn stars_in_view(r: &Matrix3<f64>, refs: &RefCatalog, camera: &Camera) -> Vec<(u32, f64, f64)> {
-    in_view_of(r, refs, camera, 0..refs.len() as u32)
+    let boresight = r.transpose() * camera.centre_vector();
+    let cone = refs.within(&boresight, view_half_angle(camera));
+    in_view_of(r, refs, camera, cone.into_iter())
 }
 
 /// Those of the reference stars `ids` (rising) that project inside the image under `r`.
@@ -101,10 +103,10 @@ fn in_view_of(
 ) -> Vec<(u32, f64, f64)> {
     let boresight = r.transpose() * camera.centre_vector();
     let cos_half = view_half_angle(camera).cos();
-    ids.map(|id| (id, &refs.stars[id as usize]))
-        .filter(|(_, s)| s.v.dot(&boresight) >= cos_half)
-        .filter_map(|(id, s)| {
-            let (x, y) = camera.vector_to_pixel(&(r * s.v))?;
+    ids.map(|id| (id, refs.v(id as usize)))
+        .filter(|(_, v)| v.dot(&boresight) >= cos_half)
+        .filter_map(|(id, v)| {
+            let (x, y) = camera.vector_to_pixel(&(r * v))?;
             camera.contains(x, y).then_some((id, x, y))
         })
         .collect()
@@ -144,11 +146,7 @@ fn stars_in_view_near(
         Some(n) if inside(n) => n,
         _ => {
             let reach = (half + NEARBY_MARGIN_RAD).min(std::f64::consts::PI);
-            let cos_reach = reach.cos();
-            let ids = (refs.stars.iter().enumerate())
-                .filter(|(_, s)| s.v.dot(&boresight) >= cos_reach)
-                .map(|(id, _)| id as u32)
-                .collect();
+            let ids = refs.within(&boresight, reach);
             nearby.insert(Nearby {
                 axis: boresight,
                 reach,
@@ -330,10 +328,7 @@ fn fit_attitude(
     weights: Option<&[f64]>,
 ) -> Option<Matrix3<f64>> {
     let cam: Vec<_> = pairs.iter().map(|&(d, _)| det_vectors[d]).collect();
-    let icrs: Vec<_> = pairs
-        .iter()
-        .map(|&(_, id)| refs.stars[id as usize].v)
-        .collect();
+    let icrs: Vec<_> = pairs.iter().map(|&(_, id)| refs.v(id as usize)).collect();
     match weights {
         Some(w) => wahba_weighted(&cam, &icrs, w),
         None => wahba(&cam, &icrs),
@@ -415,7 +410,7 @@ fn residuals(
     let matches: Vec<Match> = pairs
         .iter()
         .map(|&(det, ref_id)| {
-            let v = r * refs.stars[ref_id as usize].v;
+            let v = r * refs.v(ref_id as usize);
             let residual_px = camera.vector_to_pixel(&v).map_or(f64::INFINITY, |(x, y)| {
                 (x - dets[det].x).hypot(y - dets[det].y)
             });
@@ -466,7 +461,7 @@ fn fit_camera(
         let (rot, c) = apply(p);
         let mut out = Vec::with_capacity(2 * pairs.len());
         for (&(d, id), w) in pairs.iter().zip(&root) {
-            let (x, y) = c.vector_to_pixel(&(rot * refs.stars[id as usize].v))?;
+            let (x, y) = c.vector_to_pixel(&(rot * refs.v(id as usize)))?;
             out.push(w * (x - dets[d].x));
             out.push(w * (y - dets[d].y));
         }

@@ -54,7 +54,7 @@ impl Solver {
                     .iter()
                     .map(|m| {
                         let d = &sol.detections[m.det];
-                        let star = &refs.stars[m.ref_id as usize];
+                        let star = refs.star(m.ref_id as usize);
                         let (ra, dec) = vector_to_radec(&star.v);
                         let rec = MatchRecord {
                             x: d.x,
@@ -104,7 +104,7 @@ pub fn attitude_quality(
         .matches
         .iter()
         .map(|m| {
-            let b = r.r * refs.stars[m.ref_id as usize].v;
+            let b = r.r * refs.v(m.ref_id as usize);
             let sigma = m.sigma_px.map_or(rms, |s| s / focal);
             (nalgebra::Matrix3::identity() - b * b.transpose()) / (sigma * sigma)
         })

@@ -661,10 +661,7 @@ impl Solver {
             return Err("no_consistent_match");
         }
         let cam: Vec<_> = ids.iter().map(|m| vectors[m.star]).collect();
-        let icrs: Vec<_> = ids
-            .iter()
-            .map(|m| refs.stars[m.ref_id as usize].v)
-            .collect();
+        let icrs: Vec<_> = ids.iter().map(|m| refs.v(m.ref_id as usize)).collect();
         let r0 = wahba(&cam, &icrs).ok_or("no_consistent_match")?;
         // Every pass this frame can be tried with multiplies the hypotheses a chance match could
         // come from; the vote has half the pass's error budget (see `STAGES`).
@@ -722,7 +719,7 @@ impl Solver {
         let hypotheses = matched.saturating_mul(self.hypothesis_factor(detections.len(), p.method));
         hyps.iter().find_map(|t| {
             let cam = t.stars.map(|i| vectors[i]);
-            let icrs = t.refs.map(|id| refs.stars[id as usize].v);
+            let icrs = t.refs.map(|id| refs.v(id as usize));
             let r0 = wahba(&cam, &icrs)?;
             let refined =
                 refine::refine(r0, detections, refs, &p.camera, hypotheses, 3, &p.refine)?;

@@ -248,10 +248,10 @@ fn triangles_in(
     // packed copy, which stays in cache; tight ones fetch few and take them from the catalog.
     let rows: usize = pairs.iter().map(|(_, rows)| rows.len()).sum();
     let packed: Option<Vec<Vector3<f64>>> =
-        (2 * rows > refs.len()).then(|| refs.stars.iter().map(|s| s.v).collect());
+        (2 * rows > refs.len()).then(|| (0..refs.len()).map(|id| refs.v(id)).collect());
     let dir = |id: u32| match &packed {
         Some(p) => p[id as usize],
-        None => refs.stars[id as usize].v,
+        None => refs.v(id as usize),
     };
     // Each side's catalog stars, and those that can stand for image star i in a triangle
     // [i, j, k] (i < j < k: the loop below joins sides ij and ik at i): on both of some two

@@ -74,7 +74,7 @@ fn select(mode: DoubleStars) -> RefCatalog {
 fn double_stars_are_merged_dropped_or_kept() {
     let merged = select(DoubleStars::Merge);
     assert_eq!(merged.len(), 4);
-    let m = merged.stars[0];
+    let m = merged.star(0);
     assert_eq!((m.hip, m.members), (Some(1), 2));
     // Equal fluxes: the photocentre is halfway, the magnitude 2.5·log10(2) brighter.
     let half = radec_to_vector((1.0f64 + 0.0000242406840).to_degrees(), 0.5f64.to_degrees());

@@ -33,7 +33,7 @@ fn six_stars_among_the_brightest_are_accepted_and_among_the_faintest_not() {
     let mut view = stars_in_view(&r, refs, &solver.camera);
     assert!(view.len() >= 10, "{} stars in view", view.len());
     view.sort_by(|a, b| {
-        let mag = |id: u32| refs.stars[id as usize].mag;
+        let mag = |id: u32| refs.star(id as usize).mag;
         mag(a.0).total_cmp(&mag(b.0))
     });
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);

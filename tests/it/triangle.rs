@@ -51,8 +51,8 @@ fn confirmed_triangles_find_the_true_stars_among_false_ones() {
             for (a, b) in [(0, 1), (0, 2), (1, 2)] {
                 let d_img = angle(&vectors[t.stars[a]], &vectors[t.stars[b]]);
                 let d_cat = angle(
-                    &band.refs.stars[t.refs[a] as usize].v,
-                    &band.refs.stars[t.refs[b] as usize].v,
+                    &band.refs.v(t.refs[a] as usize),
+                    &band.refs.v(t.refs[b] as usize),
                 );
                 let e = s.tolerance(cam, d_img) + 1e-9;
                 assert!((d_img - d_cat).abs() <= e * 1.001, "side {a}{b} off: {t:?}");
@@ -116,7 +116,7 @@ fn triangles_by_definition(
             .and_then(|s| s.get(&p))
             .unwrap_or(&none)
     };
-    let v = |id: u32| refs.stars[id as usize].v;
+    let v = |id: u32| refs.v(id as usize);
     let (mut out, mut matched) = (Vec::new(), 0u64);
     for [i, j, k] in triangle_order(n) {
         let handed = vectors[i].cross(&vectors[j]).dot(&vectors[k]) > 0.0;

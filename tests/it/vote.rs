@@ -80,7 +80,7 @@ fn every_field_star_is_voted_to_its_catalog_star() {
         // else reaches 5, so the argmax is right.
         let (votes, id) = unpack_candidate(voted.candidates[i * 4]).unwrap();
         assert_eq!(
-            (votes, refs.stars[id as usize].hip),
+            (votes, refs.star(id as usize).hip),
             (5, Some(100 + k as u32)),
             "image star {i}"
         );
@@ -89,13 +89,13 @@ fn every_field_star_is_voted_to_its_catalog_star() {
     assert_eq!(ids.len(), 6);
     for m in ids {
         assert_eq!(
-            refs.stars[m.ref_id as usize].hip,
+            refs.star(m.ref_id as usize).hip,
             Some(100 + order[m.star] as u32)
         );
     }
     // The pair table held every field pair and no far one.
     assert_eq!(table.len(), 15);
-    let (ra, _) = vector_to_radec(&refs.stars[0].v);
+    let (ra, _) = vector_to_radec(&refs.v(0));
     assert!((ra - 30.0).abs() < 1e-9);
 }
 

@@ -55,7 +55,7 @@ impl Solver {
         (lo, hi): (f64, f64),
         perms: &[[usize; 4]],
     ) -> Option<Hypothesis> {
-        let cat = ids.map(|id| refs.stars[id as usize].v);
+        let cat = ids.map(|id| refs.v(id as usize));
         let at = |s: f64| {
             let c = scaled(&self.camera, s);
             stars.map(|i| c.pixel_to_vector(detections[i].x, detections[i].y))
