@@ -419,9 +419,7 @@ impl CacheReader {
                 "truncated (the body is shorter than its header says)"
             );
         }
-        let mut v = Vec::with_capacity(n);
-        advise_huge_pages(v.spare_capacity_mut());
-        v.resize(n, T::zeroed());
+        let mut v = vec![T::zeroed(); n];
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut v);
         self.file.read_exact(bytes)?;
         self.crc.update(bytes);
@@ -451,29 +449,6 @@ impl CacheReader {
         Ok(())
     }
 }
-
-/// Ask Linux to back the whole 2 MiB pages of a large buffer not touched yet with huge pages:
-/// tens of page faults instead of thousands. A 10° band's 38 MB table loaded in 12.0 ms
-/// instead of 21.5 (medians of 40 loads; the mean 15.0 instead of 21.5, as a load in ten waits
-/// while the kernel compacts memory for huge pages). A hint: without transparent huge pages
-/// (`madvise` or `always`) nothing changes.
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-fn advise_huge_pages<T>(buf: &mut [std::mem::MaybeUninit<T>]) {
-    const HUGE: usize = 2 << 20;
-    let start = buf.as_mut_ptr() as usize;
-    let (lo, hi) = (
-        start.next_multiple_of(HUGE),
-        (start + size_of_val(buf)) / HUGE * HUGE,
-    );
-    if lo < hi {
-        // SAFETY: [lo, hi) lies inside `buf`, memory this process owns; MADV_HUGEPAGE changes
-        // how the kernel backs it, never what it holds. A failure leaves it as it was.
-        unsafe { libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_HUGEPAGE) };
-    }
-}
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn advise_huge_pages<T>(_: &mut [std::mem::MaybeUninit<T>]) {}
 
 /// The table of a cache file, checked whole: the checksum, then every bound the range
 /// queries and the GPU rely on (a file that passes cannot make a frame fail).
