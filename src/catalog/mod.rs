@@ -516,22 +516,21 @@ impl RefCatalog {
     /// tested first against the reach widened by how far the stars can have moved, so only
     /// the few near the axis are moved.
     pub fn within(&self, axis: &Vector3<f64>, reach: f64) -> Vec<u32> {
-        let cos_reach = reach.cos();
-        let dt = self.dt();
-        if dt == 0.0 {
-            return (self.stars.iter().enumerate())
-                .filter(|(_, s)| s.v.dot(axis) >= cos_reach)
-                .map(|(id, _)| id as u32)
-                .collect();
-        }
         // A move of |motion · dt| turns a star by at most that angle; a microradian more
-        // covers rounding, so the stars kept are a superset of those within the reach.
-        let widened = reach + self.max_motion * dt.abs() + 1e-6;
+        // covers rounding, so the stars kept first are a superset of those within the reach.
+        let dt = self.dt();
+        let margin = if dt == 0.0 {
+            0.0
+        } else {
+            self.max_motion * dt.abs() + 1e-6
+        };
+        let widened = reach + margin;
         let cos_widened = if widened >= std::f64::consts::PI {
             -2.0
         } else {
             widened.cos()
         };
+        let cos_reach = reach.cos();
         (self.stars.iter().enumerate())
             .filter(|(_, s)| s.v.dot(axis) >= cos_widened)
             .map(|(id, _)| id)
