@@ -14,7 +14,7 @@ use crate::io::frame::Frame;
 use crate::record::{Record, Timing};
 use crate::solve::detect::{self, DetectSettings, Detection};
 use crate::solve::radial;
-use crate::solve::{Outcome, Solution, Solver};
+use crate::solve::{Outcome, Prepared, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -447,6 +447,8 @@ impl GpuRunner {
         epochs: &[Option<f64>],
         outcomes: &mut [Outcome],
     ) -> Result<()> {
+        // Each frame's passes whose vote failed, for their triangle fallbacks after the votes.
+        let mut fallbacks: Vec<Vec<Prepared>> = vec![Vec::new(); detections.len()];
         for h in 0..solver.passes.len() {
             let prepared = for_unsolved(detections, outcomes, |d| solver.prepare(d, h));
             if prepared.is_empty() {
@@ -494,8 +496,22 @@ impl GpuRunner {
                 })
                 .collect();
             let voted = self.gpu.vote(solver.bands[key.2].table(), table, &jobs)?;
-            for ((i, p), v) in prepared.iter().zip(voted) {
-                outcomes[*i] = solver.finish(&detections[*i], p, &v, epochs[*i]);
+            for ((i, p), v) in prepared.into_iter().zip(voted) {
+                outcomes[i] = solver.finish(&detections[i], &p, &v, epochs[i]);
+                if !matches!(outcomes[i], Outcome::Solved(..)) && Solver::falls_back(&p) {
+                    fallbacks[i].push(p);
+                }
+            }
+        }
+        for (i, passes) in fallbacks.iter().enumerate() {
+            if matches!(outcomes[i], Outcome::Solved(..)) {
+                continue;
+            }
+            if let Some(o) = passes
+                .iter()
+                .find_map(|p| solver.fallback(&detections[i], p, epochs[i]))
+            {
+                outcomes[i] = o;
             }
         }
         Ok(())

@@ -444,9 +444,11 @@ impl Solver {
     }
 
     /// The passes of identification after the scale-free pass: the vote (or radial features,
-    /// or triangles) at each scale of the walk.
+    /// or triangles) at each scale of the walk, then the triangle fallbacks of the passes whose
+    /// vote failed, in the same order ([`Solver::fallback`]).
     pub fn identify_walk(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
         let mut outcome = self.unsolved_before_walk(&detections);
+        let mut fallbacks = Vec::new();
         for h in 0..self.passes.len() {
             let Some(p) = self.prepare(&detections, h) else {
                 continue;
@@ -466,12 +468,26 @@ impl Solver {
                 _ => {
                     let voted =
                         identify::vote_cpu(band.table(), &p.ranges, p.n_vote, band.refs.len(), p.k);
-                    self.finish(&detections, &p, &voted, epoch)
+                    let o = self.finish(&detections, &p, &voted, epoch);
+                    if !matches!(o, Outcome::Solved(..)) && Self::falls_back(&p) {
+                        fallbacks.push(p);
+                    }
+                    o
                 }
             };
             if matches!(outcome, Outcome::Solved(..)) {
-                break;
+                return Solution {
+                    detections,
+                    outcome,
+                    epoch,
+                };
             }
+        }
+        if let Some(o) = fallbacks
+            .iter()
+            .find_map(|p| self.fallback(&detections, p, epoch))
+        {
+            outcome = o;
         }
         Solution {
             detections,
@@ -490,9 +506,9 @@ impl Solver {
         }
     }
 
-    /// Verification, attitude, refinement and acceptance after the vote, and the triangle
-    /// fallback when the vote's candidates hold no consistent set; refinement uses the star
-    /// positions at the frame's `epoch` when it has one.
+    /// Verification, attitude, refinement and acceptance after the vote; refinement uses the
+    /// star positions at the frame's `epoch` when it has one. The pass's triangle fallback is
+    /// not run here: see [`Solver::fallback`].
     pub fn finish(
         &self,
         detections: &[Detection],
@@ -501,15 +517,35 @@ impl Solver {
         epoch: Option<f64>,
     ) -> Outcome {
         let refs = self.bands[p.band].refs_at(epoch);
-        let accepted = match self.finish_vote(detections, p, voted, &refs) {
-            Ok(accepted) => accepted,
-            Err(reason) if p.triangle_stars < 4 => return Outcome::Unsolved(reason),
-            Err(reason) => match self.finish_triangles(detections, p, &refs) {
-                Some(accepted) => accepted,
-                None => return Outcome::Unsolved(reason),
-            },
-        };
-        self.conclude(detections, p, accepted, epoch)
+        match self.finish_vote(detections, p, voted, &refs) {
+            Ok(accepted) => self.conclude(detections, p, accepted, epoch),
+            Err(reason) => Outcome::Unsolved(reason),
+        }
+    }
+
+    /// Whether a pass whose vote found no solution has a triangle fallback.
+    pub fn falls_back(p: &Prepared) -> bool {
+        p.triangle_stars >= 4
+    }
+
+    /// The triangle fallback of a pass whose vote found no solution (see [`Solver::finish`]),
+    /// run once the votes of every pass have failed: a sparse frame's triangles cost several
+    /// times its votes, and a later pass's vote (most often the shallow selection's) solves
+    /// most frames that an earlier pass's triangles would (docs/speed.md, "Triangles after the
+    /// votes"). Each stage keeps its share of the false-match budget whatever the order. None
+    /// when no triangle is accepted.
+    pub fn fallback(
+        &self,
+        detections: &[Detection],
+        p: &Prepared,
+        epoch: Option<f64>,
+    ) -> Option<Outcome> {
+        if !Self::falls_back(p) {
+            return None;
+        }
+        let refs = self.bands[p.band].refs_at(epoch);
+        let accepted = self.finish_triangles(detections, p, &refs)?;
+        Some(self.conclude(detections, p, accepted, epoch))
     }
 
     /// `--method radial` after stages radial and select: triangles among the candidates

@@ -207,3 +207,98 @@ fn triangles_are_those_of_the_definition_in_its_order() {
         );
     }
 }
+
+/// The triangle fallback runs once the votes of every pass have failed: a sparse frame that
+/// some pass's vote solves is solved by that vote (two fixed stars), not by an earlier pass's
+/// triangles, which cost several times as much. The frames drawn include ones whose first
+/// pass's triangles would have solved them before a later pass's vote did (the order this
+/// holds to), and the frames no vote solves are still solved by triangles where they can be.
+#[test]
+fn triangles_come_after_every_pass_s_vote() {
+    use gpustar::solve::detect::Detection;
+    use gpustar::solve::{Outcome, identify};
+    let settings = gpustar::solve::Settings {
+        table_cache: false,
+        ..gpustar::solve::Settings::default()
+    };
+    let camera = gpustar::camera::Camera::from_fov(1024, 1024, 10.0).unwrap();
+    let solver =
+        gpustar::solve::Solver::new(&gpustar::catalog::Catalog::builtin(), camera, settings)
+            .unwrap();
+    let cam = &solver.camera;
+    let refs = &solver.bands[0].refs;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let (mut reordered, mut by_triangles) = (0, 0);
+    for _ in 0..300 {
+        let r = random_rotation(&mut rng);
+        let mut view = stars_in_view(&r, refs, cam);
+        view.sort_by(|a, b| {
+            let mag = |id: u32| refs.star(id as usize).mag;
+            mag(a.0).total_cmp(&mag(b.0))
+        });
+        // A sparse sensor: its five to seven brightest stars, 0.3 px centroid errors, and
+        // up to two false stars among them.
+        let shown = rng.random_range(5..=7);
+        let mut at: Vec<(f64, f64)> = view
+            .iter()
+            .take(shown)
+            .map(|&(_, x, y)| {
+                (
+                    x + rng.random_range(-0.3..0.3),
+                    y + rng.random_range(-0.3..0.3),
+                )
+            })
+            .collect();
+        for _ in 0..rng.random_range(0..=2) {
+            let false_star = (rng.random_range(0.0..1023.0), rng.random_range(0.0..1023.0));
+            at.insert(rng.random_range(0..=at.len()), false_star);
+        }
+        let dets: Vec<Detection> = at
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y))| Detection {
+                x,
+                y,
+                flux: 1e4 / (k + 1) as f64,
+                area: 5,
+                peak: 1000,
+                saturated: false,
+                sigma_px: None,
+            })
+            .collect();
+        let solved = |o: &Outcome| matches!(o, Outcome::Solved(..));
+        // Each pass's vote alone, and its triangle fallback alone.
+        let mut votes = Vec::new();
+        let mut first_triangles = None;
+        for h in 0..solver.passes.len() {
+            let Some(p) = solver.prepare(&dets, h) else {
+                continue;
+            };
+            let band = &solver.bands[p.band];
+            let voted = identify::vote_cpu(band.table(), &p.ranges, p.n_vote, band.refs.len(), p.k);
+            let vote = solver.finish(&dets, &p, &voted, None);
+            if !solved(&vote) && first_triangles.is_none() && votes.is_empty() {
+                first_triangles =
+                    Some(solver.fallback(&dets, &p, None).is_some_and(|o| solved(&o)));
+            }
+            votes.push(solved(&vote));
+        }
+        let walk = solver.identify_walk(dets, None).outcome;
+        let fixed = match &walk {
+            Outcome::Solved(refined, _) => Some(refined.fixed),
+            Outcome::Unsolved(_) => None,
+        };
+        if votes.iter().any(|&v| v) {
+            assert_eq!(fixed, Some(2), "a vote solves this frame: {votes:?}");
+            if !votes[0] && first_triangles == Some(true) {
+                reordered += 1;
+            }
+        } else if fixed.is_some() {
+            assert_eq!(fixed, Some(3));
+            by_triangles += 1;
+        }
+    }
+    eprintln!("{reordered} frames told the order apart, {by_triangles} needed the triangles");
+    assert!(reordered > 0, "no frame tells the order apart");
+    assert!(by_triangles > 0, "no frame needed the triangles");
+}
