@@ -208,13 +208,15 @@ fn triangles_are_those_of_the_definition_in_its_order() {
     }
 }
 
-/// The triangle fallback runs once the votes of every pass have failed: a sparse frame that
-/// some pass's vote solves is solved by that vote (two fixed stars), not by an earlier pass's
-/// triangles, which cost several times as much. The frames drawn include ones whose first
-/// pass's triangles would have solved them before a later pass's vote did (the order this
-/// holds to), and the frames no vote solves are still solved by triangles where they can be.
+/// The passes vote in order, the shallow selection's first (known scale, no magnitude limit),
+/// and the first vote that solves a frame gives its solution; the triangle fallback runs once
+/// the votes of every pass have failed, so a frame some pass's vote solves is solved by that
+/// vote (two fixed stars), not by an earlier pass's triangles, which cost several times as
+/// much. The frames drawn include ones whose earlier pass's triangles would have solved them
+/// before a later pass's vote did (the order this holds to), and frames no vote solves that
+/// triangles still solve.
 #[test]
-fn triangles_come_after_every_pass_s_vote() {
+fn passes_vote_in_order_and_triangles_come_last() {
     use gpustar::solve::detect::Detection;
     use gpustar::solve::{Outcome, identify};
     let settings = gpustar::solve::Settings {
@@ -225,22 +227,31 @@ fn triangles_come_after_every_pass_s_vote() {
     let solver =
         gpustar::solve::Solver::new(&gpustar::catalog::Catalog::builtin(), camera, settings)
             .unwrap();
+    assert_eq!(solver.passes[0].kind, gpustar::solve::PassKind::Shallow);
     let cam = &solver.camera;
     let refs = &solver.bands[0].refs;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let (mut reordered, mut by_triangles) = (0, 0);
-    for _ in 0..300 {
+    for _ in 0..600 {
         let r = random_rotation(&mut rng);
         let mut view = stars_in_view(&r, refs, cam);
         view.sort_by(|a, b| {
             let mag = |id: u32| refs.star(id as usize).mag;
             mag(a.0).total_cmp(&mag(b.0))
         });
-        // A sparse sensor: its five to seven brightest stars, 0.3 px centroid errors, and
-        // up to two false stars among them.
-        let shown = rng.random_range(5..=7);
+        // 0.3 px centroid errors; up to two of the brightest stars missed (saturated).
+        // Half the frames sparse (five to eight stars, up to two false), half crowded with
+        // false stars (ten to twenty stars and as many as ten false ones).
+        let crowded = rng.random_bool(0.5);
+        let shown = if crowded {
+            rng.random_range(10..=20)
+        } else {
+            rng.random_range(5..=8)
+        };
+        let skipped = rng.random_range(0..=2);
         let mut at: Vec<(f64, f64)> = view
             .iter()
+            .skip(skipped)
             .take(shown)
             .map(|&(_, x, y)| {
                 (
@@ -249,7 +260,7 @@ fn triangles_come_after_every_pass_s_vote() {
                 )
             })
             .collect();
-        for _ in 0..rng.random_range(0..=2) {
+        for _ in 0..rng.random_range(0..=if crowded { 10 } else { 2 }) {
             let false_star = (rng.random_range(0.0..1023.0), rng.random_range(0.0..1023.0));
             at.insert(rng.random_range(0..=at.len()), false_star);
         }
@@ -267,9 +278,15 @@ fn triangles_come_after_every_pass_s_vote() {
             })
             .collect();
         let solved = |o: &Outcome| matches!(o, Outcome::Solved(..));
-        // Each pass's vote alone, and its triangle fallback alone.
+        let vote_attitude = |o: &Outcome| match o {
+            Outcome::Solved(refined, _) => Some(refined.r),
+            Outcome::Unsolved(_) => None,
+        };
+        // Each pass's vote alone, and the triangle fallbacks of the passes before the first
+        // vote that solves (those the old order ran first).
         let mut votes = Vec::new();
-        let mut first_triangles = None;
+        let mut first_vote = None;
+        let mut triangles_before = false;
         for h in 0..solver.passes.len() {
             let Some(p) = solver.prepare(&dets, h) else {
                 continue;
@@ -277,9 +294,11 @@ fn triangles_come_after_every_pass_s_vote() {
             let band = &solver.bands[p.band];
             let voted = identify::vote_cpu(band.table(), &p.ranges, p.n_vote, band.refs.len(), p.k);
             let vote = solver.finish(&dets, &p, &voted, None);
-            if !solved(&vote) && first_triangles.is_none() && votes.is_empty() {
-                first_triangles =
-                    Some(solver.fallback(&dets, &p, None).is_some_and(|o| solved(&o)));
+            if !solved(&vote) && !votes.iter().any(|&v| v) {
+                triangles_before |= solver.fallback(&dets, &p, None).is_some_and(|o| solved(&o));
+            }
+            if solved(&vote) && first_vote.is_none() {
+                first_vote = Some(vote_attitude(&vote));
             }
             votes.push(solved(&vote));
         }
@@ -290,7 +309,8 @@ fn triangles_come_after_every_pass_s_vote() {
         };
         if votes.iter().any(|&v| v) {
             assert_eq!(fixed, Some(2), "a vote solves this frame: {votes:?}");
-            if !votes[0] && first_triangles == Some(true) {
+            assert_eq!(vote_attitude(&walk), first_vote.unwrap(), "{votes:?}");
+            if triangles_before {
                 reordered += 1;
             }
         } else if fixed.is_some() {
