@@ -300,8 +300,10 @@ fn big_endian_to_pixels_in(p: &mut [u16]) {
     }
 }
 
-/// Bytes [`read_camera_frame`] reads and converts at a time: well inside the L2 cache.
-const READ_CHUNK: usize = 64 << 10;
+/// Bytes [`read_camera_frame`] reads and converts at a time: inside the L2 cache of current
+/// x86 cores (512 KiB and more), and 8 reads for a 2 MB frame where 64 KiB took 32 (each read
+/// looks the file's pages up again: 1-2 % of a sparse 10° run, docs/speed.md).
+const READ_CHUNK: usize = 256 << 10;
 
 /// The keywords of the headers used, later headers over earlier ones.
 fn keywords(headers: &[Header<Image>]) -> BTreeMap<String, String> {
