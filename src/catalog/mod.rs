@@ -437,7 +437,12 @@ impl RefCatalog {
         let doubles_removed = before - stars.len();
         // Brightest first, ties by id (HIP for Hipparcos): an order that does not depend on
         // the file.
-        stars.sort_by(|a, b| a.mag.total_cmp(&b.mag).then(a.id.cmp(&b.id)));
+        // The order is found on (mag, id, place) keys, not by moving the 88-byte stars.
+        let mut order: Vec<(f64, StarId, usize)> = (stars.iter().enumerate())
+            .map(|(k, s)| (s.mag, s.id, k))
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let stars: Vec<RefStar> = order.iter().map(|o| stars[o.2]).collect();
         if stars.len() > MAX_REF_STARS {
             fail!(
                 Catalog,
@@ -581,13 +586,15 @@ fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
             }
         }
     }
-    let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    // Each group under its root, the least index of its members (unions keep the lesser
+    // root): groups in the order of their first member, members rising.
+    let mut groups: Vec<Vec<usize>> = vec![Vec::new(); n];
     for i in 0..n {
         let r = find(&mut parent, i);
-        groups.entry(r).or_default().push(i);
+        groups[r].push(i);
     }
     let mut out = Vec::with_capacity(n);
-    for members in groups.values() {
+    for members in groups.iter().filter(|g| !g.is_empty()) {
         if members.len() == 1 {
             out.push(stars[members[0]]);
             continue;
