@@ -562,9 +562,10 @@ impl RefCatalog {
 fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
     let n = stars.len();
     let chord_max = 2.0 * (selection.double_sep_rad / 2.0).sin();
-    // Sort by z so that neighbours are found in a narrow z band: chord ≥ |Δz|.
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| stars[a].v.z.total_cmp(&stars[b].v.z));
+    // Sort by z so that neighbours are found in a narrow z band: chord ≥ |Δz|. The keys sit
+    // beside the indices (stable: ties in index order), not read through them.
+    let mut by_z: Vec<(f64, usize)> = stars.iter().map(|s| s.v.z).zip(0..n).collect();
+    by_z.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut parent: Vec<usize> = (0..n).collect();
     fn find(parent: &mut [usize], mut i: usize) -> usize {
         while parent[i] != i {
@@ -573,9 +574,9 @@ fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
         }
         i
     }
-    for (k, &a) in order.iter().enumerate() {
-        for &b in &order[k + 1..] {
-            if stars[b].v.z - stars[a].v.z > chord_max {
+    for (k, &(za, a)) in by_z.iter().enumerate() {
+        for &(zb, b) in &by_z[k + 1..] {
+            if zb - za > chord_max {
                 break;
             }
             if (stars[a].v - stars[b].v).norm() < chord_max {
