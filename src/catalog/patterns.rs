@@ -14,8 +14,8 @@
 //! [`BINS`] bins, packed 6 bits each: `key = Σ bin_i << (6 i)`. Made in f64 on the CPU.
 
 use crate::catalog::RefCatalog;
-use crate::catalog::table::{read_cache, write_cache};
-use crate::error::{Result, fail};
+use crate::catalog::table::{CacheReader, write_cache};
+use crate::error::{Error, IntoKind, Result, fail};
 use nalgebra::Vector3;
 use std::path::Path;
 use std::time::Instant;
@@ -262,21 +262,24 @@ pub fn load_or_build_in(
 /// The index of a cache file, checked whole: the checksum, then every bound the lookup and
 /// the pass rely on (a file that passes cannot make a frame fail).
 fn read_index(path: &Path, key: u64, stars: usize, levels: &[f64]) -> Result<PatternIndex> {
-    let (head, words) = read_cache(path, MAGIC, key, 1)?;
-    let rows = head[0] as usize;
-    if words.len() != 5 * rows {
+    // Read straight into the index's vectors: reading the body whole and copying it out
+    // doubled the memory a start-up touched.
+    let (head, mut body) = CacheReader::open(path, MAGIC, key, 1)?;
+    let rows = usize::try_from(head[0]).into_kind(Error::Catalog)?;
+    if rows.checked_mul(5) != Some(body.words_left) {
         fail!(
             Catalog,
             "{} words where {rows} patterns need {}",
-            words.len(),
-            5 * rows
+            body.words_left,
+            rows.saturating_mul(5)
         );
     }
     let index = PatternIndex {
-        keys: words[..rows].to_vec(),
-        quads: bytemuck::cast_slice(&words[rows..]).to_vec(),
+        keys: body.read(rows)?,
+        quads: body.read(rows)?,
         levels: levels.to_vec(),
     };
+    body.finish()?;
     if !index.keys.windows(2).all(|w| w[0] <= w[1])
         || index.keys.last().is_some_and(|&k| k > MAX_KEY)
     {

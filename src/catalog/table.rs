@@ -370,15 +370,20 @@ pub(crate) fn read_cache(
 /// straight into the caller's vectors (a table's tens of MB: reading the whole file first and
 /// copying it out cost twice the memory and more than the read itself), its checksum taken on
 /// the way and checked by [`CacheReader::finish`] before anything read is used.
-struct CacheReader {
+pub(crate) struct CacheReader {
     file: std::fs::File,
     crc: crc32fast::Hasher,
     /// Body words not read yet.
-    words_left: usize,
+    pub(crate) words_left: usize,
 }
 
 impl CacheReader {
-    fn open(path: &Path, magic: &[u8; 8], key: u64, heads: usize) -> Result<(Vec<u64>, Self)> {
+    pub(crate) fn open(
+        path: &Path,
+        magic: &[u8; 8],
+        key: u64,
+        heads: usize,
+    ) -> Result<(Vec<u64>, Self)> {
         use std::io::Read;
         let mut file = std::fs::File::open(path)?;
         let len = file.metadata()?.len();
@@ -410,7 +415,7 @@ impl CacheReader {
     }
 
     /// The next `n` values of the body (each a whole number of little-endian words).
-    fn read<T: bytemuck::Pod>(&mut self, n: usize) -> Result<Vec<T>> {
+    pub(crate) fn read<T: bytemuck::Pod>(&mut self, n: usize) -> Result<Vec<T>> {
         use std::io::Read;
         let words = n.saturating_mul(std::mem::size_of::<T>() / 4);
         if words > self.words_left {
@@ -433,7 +438,7 @@ impl CacheReader {
     }
 
     /// The whole body read, and the checksum the file ends with is that of what was read.
-    fn finish(mut self) -> Result<()> {
+    pub(crate) fn finish(mut self) -> Result<()> {
         use std::io::Read;
         if self.words_left != 0 {
             fail!(Catalog, "{} words left over", self.words_left);

@@ -171,3 +171,58 @@ fn damaged_cache_files_are_rebuilt() {
         }
     }
 }
+
+/// The pattern index's cache file (read straight into the index since this session): read back
+/// it is the index built; scribbled on (a key out of order, a star beyond the catalog, the row
+/// count; with its checksum recomputed too, so that the bounds checks alone must find it) or
+/// cut short, it is never used: the index is built again and the file rewritten.
+#[test]
+fn damaged_pattern_files_are_rebuilt() {
+    use gpustar::catalog::patterns::{levels_for, load_or_build_in};
+    let dir = tempfile::tempdir().unwrap();
+    let cat = refs(4.5);
+    let levels = levels_for(0.15, 0.3);
+    let index_at = |dir: &std::path::Path| load_or_build_in(Some(dir), &cat, 7, &levels);
+    let (built, was_built, _) = index_at(dir.path());
+    assert!(was_built);
+    let (again, was_built, _) = index_at(dir.path());
+    assert!(!was_built, "the cache file was not used");
+    assert_eq!(again, built);
+    let file = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().contains("patterns-"))
+        .unwrap();
+    let good = std::fs::read(&file).unwrap();
+    let rows = built.keys.len();
+    assert!(rows > 10, "{rows} patterns");
+    // Header 24 bytes; a key per row, then four star ids per row.
+    let (keys, quads) = (24, 24 + 4 * rows);
+    let put = |b: &mut Vec<u8>, at: usize, v: u32| b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    type Scribble = Box<dyn Fn(&mut Vec<u8>)>;
+    let cases: Vec<(&str, Scribble)> = vec![
+        ("key order", Box::new(move |b| put(b, keys, u32::MAX >> 2))),
+        ("star id", Box::new(move |b| put(b, quads + 12, u32::MAX))),
+        ("row count", Box::new(|b| b[16] ^= 1)),
+        ("cut short", Box::new(|b| b.truncate(b.len() - 8))),
+    ];
+    for (what, scribble) in cases {
+        for recompute_crc in [false, true] {
+            let mut bad = good.clone();
+            scribble(&mut bad);
+            if recompute_crc {
+                let n = bad.len() - 4;
+                let crc = crc32fast::hash(&bad[..n]);
+                bad[n..].copy_from_slice(&crc.to_le_bytes());
+            }
+            std::fs::write(&file, &bad).unwrap();
+            let (index, was_built, _) = index_at(dir.path());
+            assert!(
+                was_built,
+                "{what} (crc recomputed: {recompute_crc}): cache used"
+            );
+            assert_eq!(index, built, "{what}: the index differs");
+            assert_eq!(std::fs::read(&file).unwrap(), good, "{what}: not rewritten");
+        }
+    }
+}
