@@ -213,7 +213,9 @@ impl Catalog {
     pub fn sorted_mags(&self) -> &[f64] {
         self.mags.get_or_init(|| {
             let mut mags: Vec<f64> = self.stars.iter().map(|s| s.mag).collect();
-            mags.sort_by(f64::total_cmp);
+            // Unstable: under a total order equal values are the same bits, so the result is
+            // the stable sort's, in about half the time.
+            mags.sort_unstable_by(f64::total_cmp);
             mags
         })
     }
