@@ -443,7 +443,8 @@ impl RefCatalog {
         let mut order: Vec<(f64, StarId, usize)> = (stars.iter().enumerate())
             .map(|(k, s)| (s.mag, s.id, k))
             .collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        // The place breaks ties: a total order, so the unstable sort gives the stable one's.
+        order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
         let stars: Vec<RefStar> = order.iter().map(|o| stars[o.2]).collect();
         if stars.len() > MAX_REF_STARS {
             fail!(
@@ -565,9 +566,9 @@ fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
     let n = stars.len();
     let chord_max = 2.0 * (selection.double_sep_rad / 2.0).sin();
     // Sort by z so that neighbours are found in a narrow z band: chord ≥ |Δz|. The keys sit
-    // beside the indices (stable: ties in index order), not read through them.
+    // beside the indices (ties in index order), not read through them.
     let mut by_z: Vec<(f64, usize)> = stars.iter().map(|s| s.v.z).zip(0..n).collect();
-    by_z.sort_by(|a, b| a.0.total_cmp(&b.0));
+    by_z.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     let mut parent: Vec<usize> = (0..n).collect();
     fn find(parent: &mut [usize], mut i: usize) -> usize {
         while parent[i] != i {
