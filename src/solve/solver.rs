@@ -262,13 +262,14 @@ impl Solver {
             })
             .collect();
         if bands.len() > main_bands {
-            // First, by what each pass costs and buys (docs/speed.md, "Fail fast" and "The
-            // shallow pass first"): its table is a twelfth of the first pass's and loaded with
-            // the solver, its vote takes a fraction of a millisecond, and once each pass's
-            // triangles wait for every vote it solved all 67 of 300 independent 10° frames that
-            // a vote solves, 25 of which the first pass solved before it (the same stars, the
-            // same attitudes within 1.3"). A frame it does not solve goes on to the others as
-            // before; the false-match test counts the same passes either way.
+            // First, by what each pass costs and buys (docs/speed.md, "Fail fast" and
+            // "Triangles after the votes, the shallow pass first"): its table is a twelfth of
+            // the first pass's and loaded with the solver, its vote takes a fraction of a
+            // millisecond, and once each pass's triangles wait for every vote it solved all 67
+            // of 300 independent 10° frames that a vote solves, 25 of which the first pass
+            // solved before it (the same stars, the same attitudes within 1.3"). A frame it
+            // does not solve goes on to the others as before; the false-match test counts the
+            // same passes either way.
             passes.insert(
                 0,
                 Pass {
@@ -467,7 +468,7 @@ impl Solver {
                         identify::vote_cpu(band.table(), &p.ranges, p.n_vote, band.refs.len(), p.k);
                     let o = self.finish(&detections, &p, &voted, epoch);
                     if !matches!(o, Outcome::Solved(..)) && Self::falls_back(&p) {
-                        fallbacks.push(p);
+                        fallbacks.push((h, p));
                     }
                     o
                 }
@@ -481,14 +482,13 @@ impl Solver {
                 };
             }
         }
-        if let Some((k, o)) = fallbacks
+        if let Some((h, o)) = fallbacks
             .iter()
-            .enumerate()
-            .find_map(|(k, p)| Some((k, self.fallback(&detections, p, epoch)?)))
+            .find_map(|(h, p)| Some((h, self.fallback(&detections, p, epoch)?)))
         {
             tracing::debug!(
-                "solved by the triangles of the {}th pass that fell back",
-                k + 1
+                "solved by the triangles of pass {h} ({:?})",
+                self.passes[*h].kind
             );
             outcome = o;
         }
@@ -535,8 +535,8 @@ impl Solver {
     /// run once the votes of every pass have failed: a sparse frame's triangles cost several
     /// times its votes, and a later pass's vote (most often the shallow selection's) solves
     /// most frames that an earlier pass's triangles would (docs/speed.md, "Triangles after the
-    /// votes"). Each stage keeps its share of the false-match budget whatever the order. None
-    /// when no triangle is accepted.
+    /// votes, the shallow pass first"). Each stage keeps its share of the false-match budget
+    /// whatever the order. None when no triangle is accepted.
     pub fn fallback(
         &self,
         detections: &[Detection],
