@@ -110,6 +110,22 @@ fn cached_table_is_read_back_identically() {
     assert_eq!(again, built);
 }
 
+/// A change to a cache file's bytes, for the tests of damaged files.
+type Scribble = Box<dyn Fn(&mut Vec<u8>)>;
+
+/// `good` scribbled on, its checksum recomputed when asked (so that only the bounds checks
+/// can find the damage).
+fn scribbled(good: &[u8], scribble: &Scribble, recompute_crc: bool) -> Vec<u8> {
+    let mut bad = good.to_vec();
+    scribble(&mut bad);
+    if recompute_crc {
+        let n = bad.len() - 4;
+        let crc = crc32fast::hash(&bad[..n]);
+        bad[n..].copy_from_slice(&crc.to_le_bytes());
+    }
+    bad
+}
+
 /// Issue 22, item 2: a cache file scribbled on (pair ids, the k-vector, the row count; with
 /// its checksum recomputed too, so that the bounds checks alone must find it) is never used:
 /// it is rebuilt, and the table is the one built from the catalog.
@@ -126,7 +142,6 @@ fn damaged_cache_files_are_rebuilt() {
     // Header 48 bytes; a key per row, then a pair of ids per row, then the k-vector.
     let (keys, pairs, kvector) = (48, 48 + 4 * rows, 48 + 12 * rows);
     let put = |b: &mut Vec<u8>, at: usize, v: u32| b[at..at + 4].copy_from_slice(&v.to_le_bytes());
-    type Scribble = Box<dyn Fn(&mut Vec<u8>)>;
     let cases: Vec<(&str, Scribble)> = vec![
         (
             "pair id",
@@ -152,14 +167,7 @@ fn damaged_cache_files_are_rebuilt() {
     ];
     for (what, scribble) in cases {
         for recompute_crc in [false, true] {
-            let mut bad = good.clone();
-            scribble(&mut bad);
-            if recompute_crc {
-                let n = bad.len() - 4;
-                let crc = crc32fast::hash(&bad[..n]);
-                bad[n..].copy_from_slice(&crc.to_le_bytes());
-            }
-            std::fs::write(&file, &bad).unwrap();
+            std::fs::write(&file, scribbled(&good, &scribble, recompute_crc)).unwrap();
             let (table, origin) = table_at(dir.path());
             assert!(
                 origin.built,
@@ -199,7 +207,6 @@ fn damaged_pattern_files_are_rebuilt() {
     // Header 24 bytes; a key per row, then four star ids per row.
     let (keys, quads) = (24, 24 + 4 * rows);
     let put = |b: &mut Vec<u8>, at: usize, v: u32| b[at..at + 4].copy_from_slice(&v.to_le_bytes());
-    type Scribble = Box<dyn Fn(&mut Vec<u8>)>;
     let cases: Vec<(&str, Scribble)> = vec![
         ("key order", Box::new(move |b| put(b, keys, u32::MAX >> 2))),
         ("star id", Box::new(move |b| put(b, quads + 12, u32::MAX))),
@@ -208,14 +215,7 @@ fn damaged_pattern_files_are_rebuilt() {
     ];
     for (what, scribble) in cases {
         for recompute_crc in [false, true] {
-            let mut bad = good.clone();
-            scribble(&mut bad);
-            if recompute_crc {
-                let n = bad.len() - 4;
-                let crc = crc32fast::hash(&bad[..n]);
-                bad[n..].copy_from_slice(&crc.to_le_bytes());
-            }
-            std::fs::write(&file, &bad).unwrap();
+            std::fs::write(&file, scribbled(&good, &scribble, recompute_crc)).unwrap();
             let (index, was_built, _) = index_at(dir.path());
             assert!(
                 was_built,
