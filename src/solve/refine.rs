@@ -384,6 +384,10 @@ pub fn match_sigmas(dets: &[Detection], matches: &mut [Match]) -> Option<f64> {
         let (mut lo, mut hi) = (0.0, r2.iter().sum::<f64>() / dof);
         for _ in 0..100 {
             let mid = 0.5 * (lo + hi);
+            // No double between them: every later step would leave both as they are.
+            if mid <= lo || mid >= hi {
+                break;
+            }
             if chi2(mid) > dof { lo = mid } else { hi = mid }
         }
         floor = hi;
