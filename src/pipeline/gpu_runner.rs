@@ -448,7 +448,7 @@ impl GpuRunner {
         outcomes: &mut [Outcome],
     ) -> Result<()> {
         // Each frame's passes whose vote failed, for their triangle fallbacks after the votes.
-        let mut fallbacks: Vec<Vec<Prepared>> = vec![Vec::new(); detections.len()];
+        let mut fallbacks: Vec<Vec<(usize, Prepared)>> = vec![Vec::new(); detections.len()];
         for h in 0..solver.passes.len() {
             let prepared = for_unsolved(detections, outcomes, |d| solver.prepare(d, h));
             if prepared.is_empty() {
@@ -499,7 +499,7 @@ impl GpuRunner {
             for ((i, p), v) in prepared.into_iter().zip(voted) {
                 outcomes[i] = solver.finish(&detections[i], &p, &v, epochs[i]);
                 if !matches!(outcomes[i], Outcome::Solved(..)) && Solver::falls_back(&p) {
-                    fallbacks[i].push(p);
+                    fallbacks[i].push((h, p));
                 }
             }
         }
@@ -507,10 +507,7 @@ impl GpuRunner {
             if matches!(outcomes[i], Outcome::Solved(..)) {
                 continue;
             }
-            if let Some(o) = passes
-                .iter()
-                .find_map(|p| solver.fallback(&detections[i], p, epochs[i]))
-            {
+            if let Some(o) = solver.fall_back(&detections[i], passes, epochs[i]) {
                 outcomes[i] = o;
             }
         }

@@ -482,14 +482,7 @@ impl Solver {
                 };
             }
         }
-        if let Some((h, o)) = fallbacks
-            .iter()
-            .find_map(|(h, p)| Some((h, self.fallback(&detections, p, epoch)?)))
-        {
-            tracing::debug!(
-                "solved by the triangles of pass {h} ({:?})",
-                self.passes[*h].kind
-            );
+        if let Some(o) = self.fall_back(&detections, &fallbacks, epoch) {
             outcome = o;
         }
         Solution {
@@ -549,6 +542,24 @@ impl Solver {
         let refs = self.bands[p.band].refs_at(epoch);
         let accepted = self.finish_triangles(detections, p, &refs)?;
         Some(self.conclude(detections, p, accepted, epoch))
+    }
+
+    /// The triangle fallbacks of the passes whose vote failed (`fallbacks`: each pass's index
+    /// and input, in pass order), once no vote has solved the frame: the first accepted.
+    pub fn fall_back(
+        &self,
+        detections: &[Detection],
+        fallbacks: &[(usize, Prepared)],
+        epoch: Option<f64>,
+    ) -> Option<Outcome> {
+        fallbacks.iter().find_map(|(h, p)| {
+            let o = self.fallback(detections, p, epoch)?;
+            tracing::debug!(
+                "solved by the triangles of pass {h} ({:?})",
+                self.passes[*h].kind
+            );
+            Some(o)
+        })
     }
 
     /// `--method radial` after stages radial and select: triangles among the candidates
