@@ -14,10 +14,12 @@ mod import;
 pub mod patterns;
 pub mod store;
 pub mod table;
+pub mod words;
 
 pub use cells::{Cells, SkyIndex};
 pub use id::StarId;
 pub use import::import_hip2;
+pub use words::Words;
 
 use crate::error::{Context, Error, IntoKind, Result, error, fail};
 use nalgebra::Vector3;

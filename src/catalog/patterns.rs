@@ -13,8 +13,8 @@
 //! Keys: the six chords sorted, the five smaller divided by the largest, each quantised into
 //! [`BINS`] bins, packed 6 bits each: `key = Σ bin_i << (6 i)`. Made in f64 on the CPU.
 
-use crate::catalog::RefCatalog;
 use crate::catalog::table::{CacheReader, write_cache};
+use crate::catalog::{RefCatalog, Words};
 use crate::error::{Error, IntoKind, Result, fail};
 use nalgebra::Vector3;
 use std::path::Path;
@@ -40,9 +40,9 @@ pub const MAX_KEY: u32 = (1 << 30) - 1;
 #[derive(Clone, Debug, PartialEq)]
 pub struct PatternIndex {
     /// Keys, ascending.
-    pub keys: Vec<u32>,
+    pub keys: Words<u32>,
     /// The four reference-star ids of each key, ascending.
-    pub quads: Vec<[u32; 4]>,
+    pub quads: Words<[u32; 4]>,
     /// Disc diameters (radians), widest first.
     pub levels: Vec<f64>,
 }
@@ -262,8 +262,6 @@ pub fn load_or_build_in(
 /// The index of a cache file, checked whole: the checksum, then every bound the lookup and
 /// the pass rely on (a file that passes cannot make a frame fail).
 fn read_index(path: &Path, key: u64, stars: usize, levels: &[f64]) -> Result<PatternIndex> {
-    // Read straight into the index's vectors: reading the body whole and copying it out
-    // doubled the memory a start-up touched.
     let (head, mut body) = CacheReader::open(path, MAGIC, key, 1)?;
     let rows = usize::try_from(head[0]).into_kind(Error::Catalog)?;
     if rows.checked_mul(5) != Some(body.words_left) {

@@ -7,8 +7,10 @@
 //! compares keys, never angles (see STYLE.md: f32 trig is off by arcseconds).
 
 use crate::catalog::RefCatalog;
+use crate::catalog::words::Words;
 use crate::error::{Context, Error, IntoKind, Result, fail};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Scale of the chord keys: key = floor(chord · KEY_SCALE).
@@ -33,12 +35,12 @@ pub fn angle_of_chord(chord: f64) -> f64 {
 #[derive(Clone, Debug, PartialEq)]
 pub struct PairTable {
     /// Chord keys, ascending.
-    pub keys: Vec<u32>,
+    pub keys: Words<u32>,
     /// The two reference-star ids of each row, `[a, b]` with a < b: 32-bit ids, so a
     /// catalog selection of any size fits (the GPU reads them as `vec2<u32>`).
-    pub pairs: Vec<[u32; 2]>,
+    pub pairs: Words<[u32; 2]>,
     /// `kvector[b]` = first row whose `key >> shift >= b`; one extra entry = number of rows.
-    pub kvector: Vec<u32>,
+    pub kvector: Words<u32>,
     /// Bin width of the k-vector as a shift of the key.
     pub shift: u32,
     /// Largest separation included (radians) and its key.
@@ -102,9 +104,9 @@ impl PairTable {
         let shift = kvector_shift(max_key, keys.len());
         let kvector = build_kvector(&keys, shift, max_key);
         PairTable {
-            keys,
-            pairs,
-            kvector,
+            keys: keys.into(),
+            pairs: pairs.into(),
+            kvector: kvector.into(),
             shift,
             max_sep_rad,
             max_key,
@@ -363,15 +365,17 @@ pub(crate) fn read_cache(
     let (head, mut body) = CacheReader::open(path, magic, key, heads)?;
     let words = body.read(body.words_left)?;
     body.finish()?;
-    Ok((head, words))
+    Ok((head, words.into_vec()))
 }
 
-/// A cache file written by [`write_cache`], its header read and checked, its body read
-/// straight into the caller's vectors (a table's tens of MB: reading the whole file first and
-/// copying it out cost twice the memory and more than the read itself), its checksum taken on
-/// the way and checked by [`CacheReader::finish`] before anything read is used.
+/// A cache file written by [`write_cache`], its header read and checked, its body mapped
+/// read-only and handed out as the caller's columns (see [`Words`]: fresh memory's page faults
+/// were most of a load), its checksum taken on the way and checked by [`CacheReader::finish`]
+/// before anything read is used.
 pub(crate) struct CacheReader {
-    file: std::fs::File,
+    map: Arc<memmap2::Mmap>,
+    /// Byte offset of the next value.
+    at: usize,
     crc: crc32fast::Hasher,
     /// Body words not read yet.
     pub(crate) words_left: usize,
@@ -384,15 +388,20 @@ impl CacheReader {
         key: u64,
         heads: usize,
     ) -> Result<(Vec<u64>, Self)> {
-        use std::io::Read;
-        let mut file = std::fs::File::open(path)?;
+        let file = std::fs::File::open(path)?;
         let len = file.metadata()?.len();
         let fixed = 16 + 8 * heads as u64;
         if len < fixed + 4 || !(len - fixed - 4).is_multiple_of(4) {
             fail!(Catalog, "truncated ({len} bytes)");
         }
-        let mut head = vec![0u8; fixed as usize];
-        file.read_exact(&mut head)?;
+        // SAFETY: the cache directory is gpustar's own, and its files are replaced by rename,
+        // never rewritten in place (write_cache), so the mapped file does not change under us.
+        let map = Arc::new(unsafe { memmap2::Mmap::map(&file) }?);
+        if map.len() as u64 != len {
+            fail!(Catalog, "changed while it was opened");
+        }
+        let fixed = fixed as usize;
+        let head = &map[..fixed];
         if &head[..8] != magic.as_slice() {
             fail!(Catalog, "not a gpustar cache file of this version");
         }
@@ -401,13 +410,14 @@ impl CacheReader {
             fail!(Catalog, "key mismatch");
         }
         let mut crc = crc32fast::Hasher::new();
-        crc.update(&head);
-        let words_left = usize::try_from((len - fixed - 4) / 4).into_kind(Error::Catalog)?;
+        crc.update(head);
+        let words_left = (map.len() - fixed - 4) / 4;
         let values = (0..heads).map(|i| u64_at(16 + 8 * i)).collect();
         Ok((
             values,
             CacheReader {
-                file,
+                map,
+                at: fixed,
                 crc,
                 words_left,
             },
@@ -415,8 +425,7 @@ impl CacheReader {
     }
 
     /// The next `n` values of the body (each a whole number of little-endian words).
-    pub(crate) fn read<T: bytemuck::Pod>(&mut self, n: usize) -> Result<Vec<T>> {
-        use std::io::Read;
+    pub(crate) fn read<T: bytemuck::Pod>(&mut self, n: usize) -> Result<Words<T>> {
         let words = n.saturating_mul(std::mem::size_of::<T>() / 4);
         if words > self.words_left {
             fail!(
@@ -424,28 +433,34 @@ impl CacheReader {
                 "truncated (the body is shorter than its header says)"
             );
         }
-        let mut v = vec![T::zeroed(); n];
-        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut v);
-        self.file.read_exact(bytes)?;
+        let bytes = &self.map[self.at..self.at + 4 * words];
         self.crc.update(bytes);
-        if cfg!(target_endian = "big") {
+        let mapped = if cfg!(target_endian = "little") {
+            Words::mapped(&self.map, self.at, n)
+        } else {
+            None
+        };
+        let values = mapped.unwrap_or_else(|| {
+            // Big-endian (or, never with these files, misaligned): a converted copy.
+            let mut v = vec![T::zeroed(); n];
+            bytemuck::cast_slice_mut::<T, u8>(&mut v).copy_from_slice(bytes);
             for w in bytemuck::cast_slice_mut::<T, u32>(&mut v) {
                 *w = u32::from_le(*w);
             }
-        }
+            v.into()
+        });
+        self.at += 4 * words;
         self.words_left -= words;
-        Ok(v)
+        Ok(values)
     }
 
     /// The whole body read, and the checksum the file ends with is that of what was read.
-    pub(crate) fn finish(mut self) -> Result<()> {
-        use std::io::Read;
+    pub(crate) fn finish(self) -> Result<()> {
         if self.words_left != 0 {
             fail!(Catalog, "{} words left over", self.words_left);
         }
-        let mut crc = [0u8; 4];
-        self.file.read_exact(&mut crc)?;
-        if self.crc.finalize() != u32::from_le_bytes(crc) {
+        let crc = &self.map[self.at..self.at + 4];
+        if self.crc.finalize() != u32::from_le_bytes(crc.try_into().expect("4 bytes")) {
             fail!(
                 Catalog,
                 "checksum mismatch (the file was changed or damaged)"

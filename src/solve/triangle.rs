@@ -355,8 +355,8 @@ mod tests {
             .map(|b| keys.iter().filter(|&&k| k < b).count() as u32)
             .collect();
         let table = PairTable {
-            keys,
-            pairs: vec![[1, 65_541], [2, 5]],
+            keys: keys.into(),
+            pairs: vec![[1, 65_541], [2, 5]].into(),
             kvector,
             shift: 0,
             max_sep_rad: 1.0,
