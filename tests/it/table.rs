@@ -110,6 +110,30 @@ fn cached_table_is_read_back_identically() {
     assert_eq!(again, built);
 }
 
+/// Tables read from the cache are its file mapped (docs/speed.md, "Cached tables mapped"): a
+/// table in use stays as it was read when the file is replaced the way gpustar replaces one (a
+/// new file renamed over it, as another process rebuilding the cache does) and when it is
+/// removed.
+#[test]
+fn a_mapped_table_outlives_its_cache_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let load = |dir: &std::path::Path, cat: &RefCatalog| {
+        gpustar::catalog::table::load_or_build_in(Some(dir), cat, 9, 0.2)
+    };
+    let (built, o) = load(dir.path(), &refs(4.5));
+    assert!(o.built);
+    let (mapped, o) = load(dir.path(), &refs(4.5));
+    assert!(!o.built, "read from the cache");
+    let file = o.cache_file.unwrap();
+    let elsewhere = dir.path().join("elsewhere");
+    let (other, o) = load(&elsewhere, &refs(4.0));
+    assert_ne!(other, built);
+    std::fs::rename(o.cache_file.unwrap(), &file).unwrap();
+    assert_eq!(mapped, built, "after a rename over the file");
+    std::fs::remove_file(&file).unwrap();
+    assert_eq!(mapped, built, "after the file was removed");
+}
+
 /// A change to a cache file's bytes, for the tests of damaged files.
 type Scribble = Box<dyn Fn(&mut Vec<u8>)>;
 
