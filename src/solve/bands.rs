@@ -8,6 +8,7 @@ use crate::camera::Camera;
 use crate::catalog::table::{self, PairTable, TableOrigin};
 use crate::catalog::{Catalog, RefCatalog, Selection};
 use crate::error::Result;
+use nalgebra::Vector3;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -44,6 +45,8 @@ pub struct Band {
     table_from: (u64, f64, bool),
     /// The reference stars' radial features (`--method radial`), from `table`.
     pub radial: Option<crate::solve::radial::RadialTable>,
+    /// `refs`' directions by id, packed: made when the triangles first ask for them.
+    directions: OnceLock<Vec<Vector3<f64>>>,
 }
 
 impl Band {
@@ -99,6 +102,7 @@ impl Band {
             table,
             table_from,
             radial,
+            directions: OnceLock::new(),
         })
     }
 
@@ -115,6 +119,15 @@ impl Band {
     fn loaded(&self) -> &(PairTable, TableOrigin) {
         self.table
             .get_or_init(|| load_table(&self.refs, self.table_from))
+    }
+
+    /// The reference stars' directions by id, at the selection's epoch (the table's), packed:
+    /// the triangle fallback reads tens of thousands of them at random, and packing them for
+    /// each search (2 MB of a 10° camera's deep band, read out of 88-byte stars) was a tenth of
+    /// its time (docs/speed.md, "Cached tables mapped").
+    pub fn directions(&self) -> &[Vector3<f64>] {
+        self.directions
+            .get_or_init(|| (0..self.refs.len()).map(|id| self.refs.v(id)).collect())
     }
 
     /// The reference stars at a frame's own epoch (`refs` when it has none, or the same).

@@ -749,7 +749,7 @@ impl Solver {
             band.table(),
             &p.ranges,
             &p.vectors[..p.triangle_stars],
-            &band.refs,
+            band.directions(),
         );
         self.first_accepted(detections, p, refs, &hyps, matched)
     }

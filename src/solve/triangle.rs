@@ -9,7 +9,6 @@
 //! attitude that refinement then tests against every star in view (the false-match probability
 //! counts every triangle hypothesis tried, on top of the vote's).
 
-use crate::catalog::RefCatalog;
 use crate::catalog::table::{KEY_SCALE, PairTable, RowRange, chord_of_angle};
 use crate::cpu::vote::PairRange;
 use nalgebra::Vector3;
@@ -210,21 +209,22 @@ pub fn triangle_order(n: usize) -> Vec<[usize; 3]> {
 /// `vectors`, then lexicographically), each confirmed by a fourth star whose three distances
 /// to the triangle's catalog stars match too (Mortari's pyramid): chance rarely passes that,
 /// so few hypotheses reach refinement. At most `MAX_HYPOTHESES`. `ranges` are the vote's pair
-/// ranges; `vectors` the stars' camera-frame directions; handedness must agree with the
-/// catalog's (a proper rotation keeps it).
+/// ranges; `vectors` the stars' camera-frame directions; `dirs` the catalog stars' directions
+/// by id, those the table was made from ([`Band::directions`](crate::solve::bands::Band::directions));
+/// handedness must agree with the catalog's (a proper rotation keeps it).
 /// Returns also how many catalog triangles matched before confirmation: the hypotheses a
 /// chance match could have come from.
 pub fn triangles(
     table: &PairTable,
     ranges: &[PairRange],
     vectors: &[Vector3<f64>],
-    refs: &RefCatalog,
+    dirs: &[Vector3<f64>],
 ) -> (Vec<Triangle>, u64) {
     crate::simd::fast!(triangles_in(
         table: &PairTable,
         ranges: &[PairRange],
         vectors: &[Vector3<f64>],
-        refs: &RefCatalog
+        dirs: &[Vector3<f64>]
     ) -> (Vec<Triangle>, u64))
 }
 
@@ -235,7 +235,7 @@ fn triangles_in(
     table: &PairTable,
     ranges: &[PairRange],
     vectors: &[Vector3<f64>],
-    refs: &RefCatalog,
+    dirs: &[Vector3<f64>],
 ) -> (Vec<Triangle>, u64) {
     let n = vectors.len();
     // The image pairs among these stars, with their table rows.
@@ -244,15 +244,8 @@ fn triangles_in(
         .filter(|r| (r.i as usize) < n && (r.j as usize) < n)
         .map(|r| (r, table.range(r.lo, r.hi)))
         .collect();
-    // With wide sides (tens of thousands of partners each) the directions are fetched from a
-    // packed copy, which stays in cache; tight ones fetch few and take them from the catalog.
-    let rows: usize = pairs.iter().map(|(_, rows)| rows.len()).sum();
-    let packed: Option<Vec<Vector3<f64>>> =
-        (2 * rows > refs.len()).then(|| (0..refs.len()).map(|id| refs.v(id)).collect());
-    let dir = |id: u32| match &packed {
-        Some(p) => p[id as usize],
-        None => refs.v(id as usize),
-    };
+    let dir = |id: u32| dirs[id as usize];
+    let stars = dirs.len();
     // Each side's catalog stars, and those that can stand for image star i in a triangle
     // [i, j, k] (i < j < k: the loop below joins sides ij and ik at i): on both of some two
     // sides (i, j), (i, k). A side (a, b) is only asked for such stars of a or b (as ij or ik
@@ -262,9 +255,9 @@ fn triangles_in(
     let key = |r: &PairRange| (r.i.min(r.j) as usize, r.i.max(r.j) as usize);
     let mut on_side: HashMap<(usize, usize), Vec<u64>> = HashMap::with_capacity(pairs.len());
     for (r, rows) in &pairs {
-        on_side.insert(key(r), stars_of(table, rows.clone(), refs.len()));
+        on_side.insert(key(r), stars_of(table, rows.clone(), stars));
     }
-    let mut joinable = vec![vec![0u64; refs.len().div_ceil(64)]; n];
+    let mut joinable = vec![vec![0u64; stars.div_ceil(64)]; n];
     for (i, joins) in joinable.iter_mut().enumerate() {
         for j in i + 1..n {
             for k in j + 1..n {

@@ -45,7 +45,7 @@ fn confirmed_triangles_find_the_true_stars_among_false_ones() {
             ids.push(id);
         }
         let ranges = pair_ranges(&vectors, cam, &s);
-        let (tris, matched) = triangles(band.table(), &ranges, &vectors, &band.refs);
+        let (tris, matched) = triangles(band.table(), &ranges, &vectors, band.directions());
         assert!(matched >= tris.len() as u64);
         for t in &tris {
             for (a, b) in [(0, 1), (0, 2), (1, 2)] {
@@ -69,7 +69,7 @@ fn confirmed_triangles_find_the_true_stars_among_false_ones() {
             .iter()
             .map(|v| Vector3::new(-v.x, v.y, v.z))
             .collect();
-        let (tris_m, _) = triangles(band.table(), &ranges, &mirrored, &band.refs);
+        let (tris_m, _) = triangles(band.table(), &ranges, &mirrored, band.directions());
         assert!(!tris_m.iter().any(truth), "a mirrored triangle matched");
     }
     assert_eq!(
@@ -191,12 +191,13 @@ fn triangles_are_those_of_the_definition_in_its_order() {
                 vectors.insert(at, cam.pixel_to_vector(x, y));
             }
             let ranges = pair_ranges(&vectors, cam, &s);
-            let fast = triangles(band.table(), &ranges, &vectors, &band.refs);
+            let fast = triangles(band.table(), &ranges, &vectors, band.directions());
             let plain = triangles_by_definition(band.table(), &ranges, &vectors, &band.refs);
             assert_eq!(fast, plain, "{pair_tol_px} px, frame {frames}");
             // Compiled for AVX2 (where the CPU has it: `tests/it/simd.rs`) and as built alike.
-            let built =
-                gpustar::simd::baseline(|| triangles(band.table(), &ranges, &vectors, &band.refs));
+            let built = gpustar::simd::baseline(|| {
+                triangles(band.table(), &ranges, &vectors, band.directions())
+            });
             assert_eq!(fast, built, "{pair_tol_px} px, frame {frames}, baseline");
             hypotheses += fast.0.len();
         }
