@@ -81,12 +81,6 @@ impl<T: Pod> FromIterator<T> for Words<T> {
     }
 }
 
-impl<T: Pod> Default for Words<T> {
-    fn default() -> Self {
-        Vec::new().into()
-    }
-}
-
 impl<T: Pod> Clone for Words<T> {
     fn clone(&self) -> Self {
         let repr = match &self.repr {

@@ -3,7 +3,7 @@
 //!
 //! Scale bands and passes are in `bands.rs`, the automatic magnitude limits in `mag_limit.rs`,
 //! the record of a solution in `report.rs`, the scale-free pass (first, at any scale) in
-//! `scale_free.rs`. About 840 lines: the passes of one frame (vote, triangles, radial, the
+//! `scale_free.rs`. About 850 lines: the passes of one frame (vote, triangles, radial, the
 //! deeper check) share the `Prepared` state and the false-match budget, and the `Solver`'s
 //! construction (bands, shallow pass, pattern index) is one piece.
 

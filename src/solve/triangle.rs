@@ -210,8 +210,8 @@ pub fn triangle_order(n: usize) -> Vec<[usize; 3]> {
 /// to the triangle's catalog stars match too (Mortari's pyramid): chance rarely passes that,
 /// so few hypotheses reach refinement. At most `MAX_HYPOTHESES`. `ranges` are the vote's pair
 /// ranges; `vectors` the stars' camera-frame directions; `dirs` the catalog stars' directions
-/// by id, those the table was made from (a band's `directions`);
-/// handedness must agree with the catalog's (a proper rotation keeps it).
+/// by id, those the table was made from (a band's `directions`); handedness must agree with
+/// the catalog's (a proper rotation keeps it).
 /// Returns also how many catalog triangles matched before confirmation: the hypotheses a
 /// chance match could have come from.
 pub fn triangles(
