@@ -1,7 +1,8 @@
 // Stage threshold, kernel 1 of 2 (CPU twin: src/cpu/threshold.rs tile_stats): the median and
 // MAD of each tile's even rows. 8-bit frames: one 256-bin histogram of the values gives both (the MAD by
-// walking outward from the median, as the CPU twin does). Deeper frames: a two-level radix
-// select (high byte, then low byte) for each. Histograms live in workgroup memory.
+// walking outward from the median). Deeper frames: a two-level radix select (high byte, then
+// low byte) for each. Histograms live in workgroup memory. The CPU twin counts instead (one
+// thread: vector compares beat scattered increments); the order statistics are the same.
 // One workgroup of 64 per tile: (tiles_x, tiles_y, images).
 
 @group(0) @binding(0) var<uniform> u: DetectUniform;

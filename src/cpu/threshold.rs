@@ -75,49 +75,35 @@ pub fn tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
 /// [`tile_stats`], compiled where it is inlined (see [`crate::simd`]).
 #[inline(always)]
 fn tile_stats_in(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
-    let mut out = Vec::with_capacity((p.tiles_x * p.tiles_y) as usize);
+    let mut out: Vec<TileStats> = Vec::with_capacity((p.tiles_x * p.tiles_y) as usize);
     let mut vals: Vec<u16> = Vec::with_capacity((p.tile * p.tile) as usize);
-    let mut hist: Box<Histograms> = Box::new([[0; HIST_SPAN_MAX]; 4]);
+    // Where each search starts: the tile before in the row, or the row above's first tile at
+    // a row's start (neighbouring sky tiles differ by a value or two).
+    let (mut guess, mut row_first) = ((0u16, 0u16), (0u16, 0u16));
     for ty in 0..p.tiles_y {
         for tx in 0..p.tiles_x {
             let (x0, y0) = (tx * p.tile, ty * p.tile);
             let (x1, y1) = ((x0 + p.tile).min(p.width), (y0 + p.tile).min(p.height));
+            vals.clear();
             // Every other row of the tile: half the work, and a median and MAD of hundreds of
             // pixels are as good as of a thousand.
-            let rows = (y0..y1).step_by(2).map(|y| {
+            for y in (y0..y1).step_by(2) {
                 let row = (y * p.width) as usize;
-                &pixels[row + x0 as usize..row + x1 as usize]
-            });
-            let (median, mad) = if p.saturation <= 255 {
-                // Four histograms, summed after: neighbouring sky pixels often share a value,
-                // and increments of one counter in a row would wait on each other.
-                let mut h4 = [[0u32; 256]; 4];
-                for row in rows {
-                    let mut quads = row.chunks_exact(4);
-                    for q in &mut quads {
-                        h4[0][(q[0] & 0xFF) as usize] += 1;
-                        h4[1][(q[1] & 0xFF) as usize] += 1;
-                        h4[2][(q[2] & 0xFF) as usize] += 1;
-                        h4[3][(q[3] & 0xFF) as usize] += 1;
-                    }
-                    for &v in quads.remainder() {
-                        h4[0][(v & 0xFF) as usize] += 1;
-                    }
+                let r = &pixels[row + x0 as usize..row + x1 as usize];
+                // A row of the default tile side is copied inline, not by a call.
+                match <&[u16; 32]>::try_from(r) {
+                    Ok(r) => vals.extend_from_slice(r),
+                    Err(_) => vals.extend_from_slice(r),
                 }
-                let hist: [u32; 256] =
-                    std::array::from_fn(|b| h4[0][b] + h4[1][b] + h4[2][b] + h4[3][b]);
-                median_mad_hist(&hist, 0, ((x1 - x0) * (y1 - y0).div_ceil(2)) as usize)
-            } else {
-                vals.clear();
-                for r in rows {
-                    // A row of the default tile side is copied inline, not by a call.
-                    match <&[u16; 32]>::try_from(r) {
-                        Ok(r) => vals.extend_from_slice(r),
-                        Err(_) => vals.extend_from_slice(r),
-                    }
-                }
-                median_mad_16bit(&mut vals, &mut hist)
-            };
+            }
+            if tx == 0 {
+                guess = row_first;
+            }
+            let (median, mad) = median_mad(&mut vals, guess);
+            guess = (median, mad);
+            if tx == 0 {
+                row_first = guess;
+            }
             out.push(TileStats {
                 background: median as u32,
                 offset: (p.k_mad * mad.max(1) as f32).ceil() as u32,
@@ -127,88 +113,69 @@ fn tile_stats_in(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
     out
 }
 
-/// The widest span of values (max − min + 1) a 16-bit tile is counted in a histogram for;
-/// a wider one (a bright star across the tile, a gradient) takes selection instead. A power of
-/// two (see [`median_mad_16bit`]).
-const HIST_SPAN_MAX: usize = 4096;
-const _: () = assert!(HIST_SPAN_MAX.is_power_of_two());
-
-/// Median and MAD of 16-bit values: from a histogram over their span when it is narrow (sky
-/// tiles: selection twice over the values cost a tenth of a frame's time), else by selection.
-/// The same order statistics either way.
+/// Median and MAD (lower medians) of `v`, each searched for by counting from its `guess`;
+/// `v` is left holding the deviations.
 #[inline(always)]
-fn median_mad_16bit(v: &mut [u16], hist: &mut Histograms) -> (u16, u16) {
-    let (lo, hi) = v
-        .iter()
-        .fold((u16::MAX, 0), |(lo, hi), &x| (lo.min(x), hi.max(x)));
-    let span = (hi - lo) as usize + 1;
-    if span > HIST_SPAN_MAX {
-        return median_mad(v);
-    }
-    // Four histograms, summed after (as the 8-bit path): sky pixels share a few values, and
-    // increments of one counter in a row wait on each other (most of the tile's time). They
-    // are zero on entry and left so, each cleared over the span as it is summed or read (a
-    // call to clear each cost more than the clearing); the mask is a no-op (values are within
-    // the span) that lets the compiler drop the bounds checks.
-    let bin = |x: u16| (x - lo) as usize & (HIST_SPAN_MAX - 1);
-    let [h0, h1, h2, h3] = hist;
-    let mut quads = v.chunks_exact(4);
-    for q in &mut quads {
-        h0[bin(q[0])] += 1;
-        h1[bin(q[1])] += 1;
-        h2[bin(q[2])] += 1;
-        h3[bin(q[3])] += 1;
-    }
-    for &x in quads.remainder() {
-        h0[bin(x)] += 1;
-    }
-    for b in 0..span {
-        h0[b] += h1[b] + h2[b] + h3[b];
-        (h1[b], h2[b], h3[b]) = (0, 0, 0);
-    }
-    let stats = median_mad_hist(&h0[..span], lo, v.len());
-    h0[..span].fill(0);
-    stats
-}
-
-/// The four histograms of [`median_mad_16bit`], kept by the caller (made zeroed).
-type Histograms = [[u32; HIST_SPAN_MAX]; 4];
-
-/// Median and MAD by selection (any bit depth).
-fn median_mad(v: &mut [u16]) -> (u16, u16) {
+fn median_mad(v: &mut [u16], guess: (u16, u16)) -> (u16, u16) {
     let rank = (v.len() - 1) / 2;
-    let median = *v.select_nth_unstable(rank).1;
+    let median = value_of_rank(v, rank, guess.0);
     for x in v.iter_mut() {
         *x = x.abs_diff(median);
     }
-    (median, *v.select_nth_unstable(rank).1)
+    (median, value_of_rank(v, rank, guess.1))
 }
 
-/// Median and MAD of `n` values from their histogram, bin b counting value `lo + b`: the
-/// deviations |v − median| are counted from the same bins, outward from the median.
+/// The value of rank `rank` in `v` (0 = the least): the least t with more than `rank` values
+/// at or below it. Counted, not sorted or binned: each count is a pass of vector compares (a
+/// histogram's scattered increments cost more), stepping outward from `guess` in doubling
+/// steps until the value is bracketed, then halving the bracket; two passes when the guess is
+/// right.
 #[inline(always)]
-fn median_mad_hist(hist: &[u32], lo: u16, n: usize) -> (u16, u16) {
-    let rank = (n - 1) / 2;
-    let mut seen = 0usize;
-    let mut median = 0usize;
-    for (b, &n) in hist.iter().enumerate() {
-        seen += n as usize;
-        if seen > rank {
-            median = b;
-            break;
+fn value_of_rank(v: &[u16], rank: usize, guess: u16) -> u16 {
+    let above = |t: i32| count_at_most(v, t as u16) > rank;
+    // The value lies in (lo, hi]: lo = −1 is below every value, and u16::MAX has them all.
+    let g = i32::from(guess);
+    let (mut lo, mut hi) = (-1, i32::from(u16::MAX));
+    let mut step = 1;
+    if above(g) {
+        hi = g;
+        while g - step >= 0 {
+            if !above(g - step) {
+                lo = g - step;
+                break;
+            }
+            hi = g - step;
+            step *= 2;
+        }
+    } else {
+        lo = g;
+        while g + step < hi {
+            if above(g + step) {
+                hi = g + step;
+                break;
+            }
+            lo = g + step;
+            step *= 2;
         }
     }
-    let mut seen = hist[median] as usize;
-    let mut d = 0usize;
-    while seen <= rank {
-        d += 1;
-        seen += median
-            .checked_add(d)
-            .filter(|&b| b < hist.len())
-            .map_or(0, |b| hist[b] as usize);
-        seen += median.checked_sub(d).map_or(0, |b| hist[b] as usize);
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if above(mid) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
     }
-    (lo + median as u16, d as u16)
+    hi as u16
+}
+
+/// How many of `v` are at most `t`: 16-bit counts per chunk, so that the compares stay 16
+/// lanes wide.
+#[inline(always)]
+fn count_at_most(v: &[u16], t: u16) -> usize {
+    v.chunks(u16::MAX as usize)
+        .map(|c| c.iter().fold(0u16, |n, &x| n + u16::from(x <= t)) as usize)
+        .sum()
 }
 
 /// Bilinear position of coordinate `x` among the tile centres of one axis: the lower tile and
@@ -623,26 +590,43 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    /// The histogram path gives the order statistics selection gives, for narrow spans (sky
-    /// tiles, counted) and wide ones (a star in the tile, selected), odd and even counts; the
-    /// histograms are kept from case to case, as a frame's tiles keep them (each case must
-    /// leave them zero).
+    /// Median and MAD by selection: what the counting search must find.
+    fn by_selection(v: &mut [u16]) -> (u16, u16) {
+        let rank = (v.len() - 1) / 2;
+        let median = *v.select_nth_unstable(rank).1;
+        for x in v.iter_mut() {
+            *x = x.abs_diff(median);
+        }
+        (median, *v.select_nth_unstable(rank).1)
+    }
+
+    /// The counting search gives the order statistics selection gives, for narrow spans (sky
+    /// tiles) and wide ones (a star in the tile), odd and even counts, values at both ends of
+    /// the range, and guesses right, near, anywhere and at either end.
     #[test]
-    fn histogram_median_mad_equals_selection() {
+    fn counted_median_mad_equals_selection() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        let mut hist = Box::new([[0; HIST_SPAN_MAX]; 4]);
-        for case in 0..2000 {
+        for case in 0..3000 {
             let n = rng.random_range(1..=600);
-            let base: u16 = rng.random_range(0..60_000);
+            let base: u16 = [0, rng.random_range(0..60_000), u16::MAX - 3][case % 3];
             let spread: u16 = [1, 3, 40, 800, 5000][case % 5];
             let mut v: Vec<u16> = (0..n)
                 .map(|_| base.saturating_add(rng.random_range(0..=spread)))
                 .collect();
             if case % 7 == 0 {
-                v[0] = u16::MAX; // a saturated pixel widens the span past the histogram's
+                v[0] = u16::MAX;
             }
-            let want = median_mad(&mut v.clone());
-            assert_eq!(median_mad_16bit(&mut v, &mut hist), want, "case {case}");
+            if case % 11 == 0 {
+                v[n - 1] = 0;
+            }
+            let want = by_selection(&mut v.clone());
+            let guess = match case % 4 {
+                0 => want,
+                1 => (want.0.saturating_add(2), want.1.saturating_sub(1)),
+                2 => (rng.random(), rng.random()),
+                _ => [(0, u16::MAX), (u16::MAX, 0)][case / 4 % 2],
+            };
+            assert_eq!(median_mad(&mut v, guess), want, "case {case}");
         }
     }
 }
