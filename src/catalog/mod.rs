@@ -425,7 +425,9 @@ struct Zones {
 
 impl Zones {
     fn new(stars: &[RefStar]) -> Zones {
-        let radec = stars.iter().map(|s| (s.v.y.atan2(s.v.x), s.v.z.clamp(-1.0, 1.0).asin()));
+        let radec = stars
+            .iter()
+            .map(|s| (s.v.y.atan2(s.v.x), s.v.z.clamp(-1.0, 1.0).asin()));
         let index = SkyIndex::build(Cells::for_stars(stars.len()), radec);
         let v = index.order.iter().map(|&id| stars[id as usize].v).collect();
         Zones { index, v }

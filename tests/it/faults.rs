@@ -754,15 +754,17 @@ fn a_resumed_run_exports_the_whole_file_s_streaks() {
     }
 }
 
-/// kill -9 at pseudo-random moments of a `--sequence` run (3 sequences of 50), each time resumed: the file ends
+/// kill -9 at pseudo-random moments of a `--sequence` run (3 sequences of 80), each time resumed: the file ends
 /// with every input once and the records of an uninterrupted run (tracking state included).
+/// Records reach the file 64 at a time (or every 250 ms), and a kill waits for the file to
+/// grow: 240 frames leave room for two kills however fast the build.
 #[test]
 fn sigkill_during_sequences_then_resume_gives_the_uninterrupted_records() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sim");
     simulate(
         &dir,
-        &["--sequence", "--sequences", "3", "-n", "50", "--seed", "11"],
+        &["--sequence", "--sequences", "3", "-n", "80", "--seed", "11"],
     );
     let seq = |out: &Path| sequence_batch(&dir, out, &["-q", "--resume", "-j", "1"]);
     let clean = tmp.path().join("clean.jsonl");
@@ -778,7 +780,7 @@ fn sigkill_during_sequences_then_resume_gives_the_uninterrupted_records() {
     );
     println!("sequences: {kills} kills before the run finished");
     assert!(
-        kills >= 3,
+        kills >= 2,
         "the test must really interrupt the run ({kills} kills)"
     );
     assert_eq!(
