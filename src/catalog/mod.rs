@@ -409,14 +409,26 @@ pub struct RefCatalog {
     pub doubles_removed: usize,
     /// The catalog's user ids ([`Catalog::names`]), for [`RefCatalog::catalog_id`].
     pub names: Arc<Vec<String>>,
-    /// The stars by sky cell, for [`RefCatalog::within`]; made on first use and shared,
-    /// as the stars are, by the catalog at other epochs.
-    zones: Arc<OnceLock<Zones>>,
+    /// The stars by sky cell, for [`RefCatalog::within`]; shared, as the stars are, by the
+    /// catalog at other epochs.
+    zones: Arc<ZoneState>,
 }
+
+/// [`Zones`] once [`SCANS_BEFORE_ZONES`] cone searches have scanned every star: a run of a
+/// frame or two never pays for them (a tenth of a one-frame run), a run of many pays once.
+#[derive(Debug, Default)]
+struct ZoneState {
+    scans: std::sync::atomic::AtomicU32,
+    zones: OnceLock<Zones>,
+}
+
+/// Cone searches by scanning before [`Zones`] are made: a scan of a 10° camera's catalog
+/// costs about a thirtieth of making them.
+const SCANS_BEFORE_ZONES: u32 = 32;
 
 /// The stars by sky cell ([`SkyIndex`]), with their stored unit vectors packed in the same
 /// order: a cone touches the few cells about it, where a scan of every star took a
-/// refinement a tenth of a sparse frame's time.
+/// refinement a tenth of a sparse frame's time (and more with deeper catalogs).
 #[derive(Debug)]
 struct Zones {
     index: SkyIndex,
@@ -546,10 +558,11 @@ impl RefCatalog {
     }
 
     /// The ids, rising, of the stars within `reach` radians of the unit vector `axis` at
-    /// `selection.epoch`: those with `v(id) · axis >= reach.cos()`. The stored positions in
-    /// the sky cells about the cone are tested first against the reach widened by how
+    /// `selection.epoch`: those with `v(id) · axis >= reach.cos()`. The stored positions (of
+    /// every star, or of the sky cells about the cone once [`Zones`] are made) are tested first against the reach widened by how
     /// far the stars can have moved, so only the few near the axis are moved.
     pub fn within(&self, axis: &Vector3<f64>, reach: f64) -> Vec<u32> {
+        use std::sync::atomic::Ordering::Relaxed;
         // A move of |motion · dt| turns a star by at most that angle; a microradian more
         // covers rounding, so the stars kept first are a superset of those within the reach.
         let dt = self.dt();
@@ -565,7 +578,21 @@ impl RefCatalog {
             widened.cos()
         };
         let cos_reach = reach.cos();
-        let zones = self.zones.get_or_init(|| Zones::new(&self.stars));
+        let state = &self.zones;
+        let zones = match state.zones.get() {
+            Some(zones) => zones,
+            None if state.scans.fetch_add(1, Relaxed) >= SCANS_BEFORE_ZONES => {
+                state.zones.get_or_init(|| Zones::new(&self.stars))
+            }
+            None => {
+                return (self.stars.iter().enumerate())
+                    .filter(|(_, s)| s.v.dot(axis) >= cos_widened)
+                    .map(|(id, _)| id)
+                    .filter(|&id| self.v(id).dot(axis) >= cos_reach)
+                    .map(|id| id as u32)
+                    .collect();
+            }
+        };
         let index = &zones.index;
         let mut ids = Vec::new();
         for c in index.cells.cone_cells(&axis.normalize(), widened) {
@@ -745,6 +772,9 @@ mod tests {
                 .norm()
                 .total_cmp(&refs.stars[a].motion.norm())
         });
+        // The scans first, then the zones (made after SCANS_BEFORE_ZONES searches; the
+        // catalog at each epoch shares them).
+        let mut zoned = 0;
         for epoch in [2000.0, 1500.0, 2026.9, 2600.0] {
             let at = refs.at_epoch(epoch);
             for (k, &star) in fastest[..6].iter().enumerate() {
@@ -758,10 +788,13 @@ mod tests {
                         .filter(|&id| at.v(id).dot(&axis) >= reach.cos())
                         .map(|id| id as u32)
                         .collect();
+                    zoned += usize::from(at.zones.zones.get().is_some());
                     assert_eq!(at.within(&axis, reach), definition, "{epoch} {k} {reach}");
                 }
             }
         }
+        // 4 epochs × 6 axes × 7 reaches: all but the scans and the search that made them.
+        assert_eq!(zoned, 4 * 6 * 7 - SCANS_BEFORE_ZONES as usize - 1);
     }
 
     /// The built-in catalog's hash is its file's (cache keys depend on it).
