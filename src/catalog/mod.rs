@@ -559,8 +559,9 @@ impl RefCatalog {
 
     /// The ids, rising, of the stars within `reach` radians of the unit vector `axis` at
     /// `selection.epoch`: those with `v(id) · axis >= reach.cos()`. The stored positions (of
-    /// every star, or of the sky cells about the cone once [`Zones`] are made) are tested first against the reach widened by how
-    /// far the stars can have moved, so only the few near the axis are moved.
+    /// every star for the first 32 searches, then of the sky cells about the cone) are tested
+    /// first against the reach widened by how far the stars can have moved, so only the few
+    /// near the axis are moved.
     pub fn within(&self, axis: &Vector3<f64>, reach: f64) -> Vec<u32> {
         use std::sync::atomic::Ordering::Relaxed;
         // A move of |motion · dt| turns a star by at most that angle; a microradian more
