@@ -75,7 +75,7 @@ pub fn tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
 /// [`tile_stats`], compiled where it is inlined (see [`crate::simd`]).
 #[inline(always)]
 fn tile_stats_in(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
-    let mut out: Vec<TileStats> = Vec::with_capacity((p.tiles_x * p.tiles_y) as usize);
+    let mut out = Vec::with_capacity((p.tiles_x * p.tiles_y) as usize);
     let mut vals: Vec<u16> = Vec::with_capacity((p.tile * p.tile) as usize);
     // Where each search starts: the tile before in the row, or the row above's first tile at
     // a row's start (neighbouring sky tiles differ by a value or two).

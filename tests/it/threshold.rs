@@ -229,22 +229,60 @@ fn runs_passed_over_by_blocks_equal_the_per_pixel_definition() {
 }
 
 #[test]
-fn eight_bit_histogram_stats_equal_selection_stats() {
-    // The same pixels read as an 8-bit frame (histogram path) and as a 16-bit one (selection
-    // path) give the same medians and MADs.
-    let (w, h) = (96u32, 64u32);
+fn tile_stats_are_the_median_and_mad_of_each_tile_s_even_rows() {
+    // Tiles of 16 over a 100 × 70 frame (edge tiles cut short, odd counts), with a gradient
+    // (each tile's search starts from its neighbour's values) and bright stars; 8-bit and
+    // 16-bit values, the latter spanning 0..65535.
+    let (w, h) = (100u32, 70u32);
     let mut seed = 99u32;
-    let px: Vec<u16> = (0..w * h)
+    let mut next = || {
+        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+        seed >> 16
+    };
+    let eight: Vec<u16> = (0..w * h)
         .map(|i| {
-            seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
             let star = if i % 97 == 0 { 200 } else { 0 };
-            ((seed >> 24) as u16 % 23 + (i % w) as u16 / 3 + star).min(255)
+            (next() as u16 % 23 + (i % w) as u16 / 3 + star).min(255)
         })
         .collect();
-    let a = tile_stats(&px, &DetectParams::new(w, h, 16, 5.0, 255));
-    let b = tile_stats(&px, &DetectParams::new(w, h, 16, 5.0, 65535));
-    assert_eq!(a, b);
-    assert!(a.iter().any(|t| t.offset > 8), "varied tiles");
+    let sixteen: Vec<u16> = (0..w * h)
+        .map(|i| match i % 211 {
+            0 => u16::MAX,
+            1 => 0,
+            _ => (next() as u16 % 400).saturating_add((i / w) as u16 * 600),
+        })
+        .collect();
+    for (px, saturation) in [(&eight, 255), (&sixteen, 65535)] {
+        let p = DetectParams::new(w, h, 16, 5.0, saturation);
+        let got = tile_stats(px, &p);
+        let mut offsets = std::collections::BTreeSet::new();
+        for ty in 0..p.tiles_y {
+            for tx in 0..p.tiles_x {
+                let (x0, y0) = (tx * 16, ty * 16);
+                let mut v: Vec<u16> = (y0..(y0 + 16).min(h))
+                    .step_by(2)
+                    .flat_map(|y| (x0..(x0 + 16).min(w)).map(move |x| (y * w + x) as usize))
+                    .map(|i| px[i])
+                    .collect();
+                let rank = (v.len() - 1) / 2;
+                v.sort_unstable();
+                let median = v[rank];
+                let mut dev: Vec<u16> = v.iter().map(|x| x.abs_diff(median)).collect();
+                dev.sort_unstable();
+                let want = TileStats {
+                    background: median as u32,
+                    offset: (p.k_mad * dev[rank].max(1) as f32).ceil() as u32,
+                };
+                assert_eq!(
+                    got[(ty * p.tiles_x + tx) as usize],
+                    want,
+                    "{saturation} {tx} {ty}"
+                );
+                offsets.insert(want.offset);
+            }
+        }
+        assert!(offsets.len() > 3, "varied tiles: {offsets:?}");
+    }
 }
 
 #[test]
