@@ -409,41 +409,9 @@ pub struct RefCatalog {
     pub doubles_removed: usize,
     /// The catalog's user ids ([`Catalog::names`]), for [`RefCatalog::catalog_id`].
     pub names: Arc<Vec<String>>,
-    /// The stars by sky cell, for [`RefCatalog::within`]; shared, as the stars are, by the
-    /// catalog at other epochs.
-    zones: Arc<ZoneState>,
-}
-
-/// [`Zones`] once [`SCANS_BEFORE_ZONES`] cone searches have scanned every star: a run of a
-/// frame or two never pays for them (a tenth of a one-frame run), a run of many pays once.
-#[derive(Debug, Default)]
-struct ZoneState {
-    scans: std::sync::atomic::AtomicU32,
-    zones: OnceLock<Zones>,
-}
-
-/// Cone searches by scanning before [`Zones`] are made: a scan of a 10° camera's catalog
-/// costs about a thirtieth of making them.
-const SCANS_BEFORE_ZONES: u32 = 32;
-
-/// The stars by sky cell ([`SkyIndex`]), with their stored unit vectors packed in the same
-/// order: a cone touches the few cells about it, where a scan of every star took a
-/// refinement a tenth of a sparse frame's time (and more with deeper catalogs).
-#[derive(Debug)]
-struct Zones {
-    index: SkyIndex,
-    v: Vec<Vector3<f64>>,
-}
-
-impl Zones {
-    fn new(stars: &[RefStar]) -> Zones {
-        let radec = stars
-            .iter()
-            .map(|s| (s.v.y.atan2(s.v.x), s.v.z.clamp(-1.0, 1.0).asin()));
-        let index = SkyIndex::build(Cells::for_stars(stars.len()), radec);
-        let v = index.order.iter().map(|&id| stars[id as usize].v).collect();
-        Zones { index, v }
-    }
+    /// The stored positions' cone searches, for [`RefCatalog::within`]; shared, as the stars
+    /// are, by the catalog at other epochs.
+    cones: Arc<cells::ConeIndex>,
 }
 
 /// The largest number of stars a reference catalog may hold: ids are 32-bit.
@@ -508,7 +476,7 @@ impl RefCatalog {
             selection,
             doubles_removed,
             names: catalog.names.clone(),
-            zones: Arc::default(),
+            cones: Arc::default(),
         })
     }
 
@@ -558,12 +526,10 @@ impl RefCatalog {
     }
 
     /// The ids, rising, of the stars within `reach` radians of the unit vector `axis` at
-    /// `selection.epoch`: those with `v(id) · axis >= reach.cos()`. The stored positions (of
-    /// every star for the first 32 searches, then of the sky cells about the cone) are tested
-    /// first against the reach widened by how far the stars can have moved, so only the few
-    /// near the axis are moved.
+    /// `selection.epoch`: those with `v(id) · axis >= reach.cos()`. The stored positions are
+    /// searched first ([`cells::ConeIndex`]) with the reach widened by how far the stars can
+    /// have moved, so only the few near the axis are moved.
     pub fn within(&self, axis: &Vector3<f64>, reach: f64) -> Vec<u32> {
-        use std::sync::atomic::Ordering::Relaxed;
         // A move of |motion · dt| turns a star by at most that angle; a microradian more
         // covers rounding, so the stars kept first are a superset of those within the reach.
         let dt = self.dt();
@@ -572,41 +538,16 @@ impl RefCatalog {
         } else {
             self.max_motion * dt.abs() + 1e-6
         };
-        let widened = reach + margin;
-        let cos_widened = if widened >= std::f64::consts::PI {
-            -2.0
-        } else {
-            widened.cos()
-        };
+        let near = self.cones.cone(
+            self.stars.len(),
+            |id| self.stars[id].v,
+            axis,
+            reach + margin,
+        );
         let cos_reach = reach.cos();
-        let state = &self.zones;
-        let zones = match state.zones.get() {
-            Some(zones) => zones,
-            None if state.scans.fetch_add(1, Relaxed) >= SCANS_BEFORE_ZONES => {
-                state.zones.get_or_init(|| Zones::new(&self.stars))
-            }
-            None => {
-                return (self.stars.iter().enumerate())
-                    .filter(|(_, s)| s.v.dot(axis) >= cos_widened)
-                    .map(|(id, _)| id)
-                    .filter(|&id| self.v(id).dot(axis) >= cos_reach)
-                    .map(|id| id as u32)
-                    .collect();
-            }
-        };
-        let index = &zones.index;
-        let mut ids = Vec::new();
-        for c in index.cells.cone_cells(&axis.normalize(), widened) {
-            let cell = index.starts[c as usize] as usize..index.starts[c as usize + 1] as usize;
-            for k in cell.filter(|&k| zones.v[k].dot(axis) >= cos_widened) {
-                let id = index.order[k];
-                if self.v(id as usize).dot(axis) >= cos_reach {
-                    ids.push(id);
-                }
-            }
-        }
-        ids.sort_unstable();
-        ids
+        (near.into_iter())
+            .filter(|&id| self.v(id as usize).dot(axis) >= cos_reach)
+            .collect()
     }
 
     /// The catalog id of reference star `ref_id` as records print it (`catalog_id`).
@@ -773,8 +714,8 @@ mod tests {
                 .norm()
                 .total_cmp(&refs.stars[a].motion.norm())
         });
-        // The scans first, then the zones (made after SCANS_BEFORE_ZONES searches; the
-        // catalog at each epoch shares them).
+        // The scans first, then the cells (indexed after SCANS_BEFORE_INDEX searches; the
+        // catalog at each epoch shares the index).
         let mut zoned = 0;
         for epoch in [2000.0, 1500.0, 2026.9, 2600.0] {
             let at = refs.at_epoch(epoch);
@@ -789,13 +730,13 @@ mod tests {
                         .filter(|&id| at.v(id).dot(&axis) >= reach.cos())
                         .map(|id| id as u32)
                         .collect();
-                    zoned += usize::from(at.zones.zones.get().is_some());
+                    zoned += usize::from(at.cones.indexed());
                     assert_eq!(at.within(&axis, reach), definition, "{epoch} {k} {reach}");
                 }
             }
         }
         // 4 epochs × 6 axes × 7 reaches: all but the scans and the search that made them.
-        assert_eq!(zoned, 4 * 6 * 7 - SCANS_BEFORE_ZONES as usize - 1);
+        assert_eq!(zoned, 4 * 6 * 7 - cells::SCANS_BEFORE_INDEX as usize - 1);
     }
 
     /// The built-in catalog's hash is its file's (cache keys depend on it).
