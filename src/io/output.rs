@@ -499,7 +499,9 @@ pub fn check_replaceable(path: &Path, ours: impl Fn(&str) -> bool, what: &str) -
 }
 
 /// Write a whole file through a new file in the same directory renamed over `path`: a crash
-/// or a full disk leaves the old file or the new one, never a part.
+/// or a full disk leaves the old file or the new one, never a part. The file keeps the old
+/// one's permissions, or gets a new file's (0666 less the umask; the temporary file's own
+/// are 0600).
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
@@ -507,6 +509,15 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     };
     let mut tmp = tempfile::NamedTempFile::new_in(dir)
         .with_context(|| format!("cannot write {}", path.display()))?;
+    let permissions = match std::fs::metadata(path) {
+        Ok(m) => Some(m.permissions()),
+        Err(_) => new_file_permissions(dir),
+    };
+    if let Some(p) = permissions {
+        tmp.as_file()
+            .set_permissions(p)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     tmp.write_all(bytes)
         .and_then(|_| tmp.as_file().sync_all())
         .with_context(|| format!("cannot write {}", path.display()))?;
@@ -514,6 +525,19 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         .map_err(|e| e.error)
         .with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
+}
+
+/// The permissions a new file gets in `dir` (0666 less the umask), found by making one: the
+/// umask cannot be read without changing it, which would race other threads.
+fn new_file_permissions(dir: &Path) -> Option<std::fs::Permissions> {
+    let probe = dir.join(format!(".gpustar-mode-{}", std::process::id()));
+    let made = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+        .and_then(|f| f.metadata());
+    let _ = std::fs::remove_file(&probe);
+    made.ok().map(|m| m.permissions())
 }
 
 /// Read the records of a JSON Lines file (a torn last line is an error: see

