@@ -221,6 +221,11 @@ pub struct Record {
     /// Radial distortion k1 fitted by refinement (`--fit distortion`); absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distortion_k1: Option<f64>,
+    /// Solved records, where the parity was searched (`--fov-deg`, `--parity either`) or the
+    /// camera is mirrored: whether the image is a mirror image of the sky (+Y then points to
+    /// decreasing row; a FITS image stored the conventional way, north up and east left, is).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mirrored: Option<bool>,
     /// Epoch (Julian year) of the catalog positions the solution used: the run's `--epoch`,
     /// or the frame's own date (FITS DATE-OBS); solved records only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -305,6 +310,7 @@ impl Record {
             timing_ms: Timing::default(),
             backend: backend.to_string(),
             distortion_k1: None,
+            mirrored: None,
             epoch: None,
             warnings: Vec::new(),
             streaks: None,

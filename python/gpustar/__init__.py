@@ -210,7 +210,7 @@ class Solver:
     or "cpu", as ``--backend``.
 
     ``**options`` are the command line's, with ``_`` for ``-``: ``fov_tolerance``, ``fov_walk``, ``fit``
-    ("none", "scale", "distortion"), ``mag_limit``, ``epoch``, ``centroid`` ("ml", "cog"),
+    ("none", "scale", "distortion"), ``parity`` ("either", "camera"), ``mag_limit``, ``epoch``, ``centroid`` ("ml", "cog"),
     ``method`` ("vote", "radial", "triangle"), ``detect_filter`` ("none", "binomial"),
     ``sigma``, ``vote_stars``, ``pair_tol_px``, ``scale_tol``, ``match_radius_px``,
     ``max_false_prob``, ``retry`` (False = ``--no-retry``), ``wide_min_stars``, ``double_stars``,

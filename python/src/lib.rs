@@ -13,6 +13,7 @@ use gpustar::pipeline::Counts;
 use gpustar::pipeline::{Backend, BackendChoice, CameraSource, Decoded, Solvers};
 use gpustar::products::Products;
 use gpustar::sequence::{Detected, SequenceOptions, Sequencer};
+use gpustar::solve::Parity;
 use gpustar::solve::detect::Detection;
 use gpustar::streaks::export::{Exports, NO_SITE};
 use gpustar::streaks::{StreakOptions, StreakSettings};
@@ -332,6 +333,16 @@ fn build(
     }
     s.scale_range = scale_range;
     s.walk_wide = o.get::<bool>("fov_walk")?.unwrap_or(false);
+    // As `--parity`: open with fov_deg, the camera file's with camera.
+    s.parity = match (o.get::<String>("parity")?.as_deref(), &camera) {
+        (Some("either"), _) | (None, CameraSource::Fov(_)) => Parity::Either,
+        (Some("camera"), _) | (None, _) => Parity::AsCamera,
+        (Some(p), _) => {
+            return Err(config(format!(
+                "parity: {p:?} is not one of either, camera"
+            )));
+        }
+    };
     let mut solvers = Solvers::new(cat, s, camera);
     if let Some(h) = o.get::<String>("hint")? {
         solvers = solvers.with_hints(gpustar::sky::hint::parse_hint(&h).map_err(py_err)?);

@@ -13,7 +13,7 @@ use gpustar::pipeline::{Backend, BackendNote, CameraSource, Solvers};
 use gpustar::products::Products;
 use gpustar::sequence::SequenceOptions;
 use gpustar::sky::tle::TleCatalog;
-use gpustar::solve::Settings;
+use gpustar::solve::{Parity, Settings};
 use gpustar::streaks::identify::IdentifySettings;
 use gpustar::streaks::reduce::Astrometry;
 use gpustar::streaks::{StreakOptions, StreakSettings, export::Exports};
@@ -55,6 +55,15 @@ pub(crate) fn camera_source(
             "give the camera: --camera FILE or --fov-deg DEG (or, for streaks reduced through \
              each FITS header's WCS alone, --streaks --astrometry header)"
         ),
+    }
+}
+
+/// The parity setting of `--parity`, or its default for the camera's source: open with
+/// `--fov-deg` (which says nothing of it), the camera file's with `--camera`.
+pub(crate) fn parity(c: &CameraOpts, source: &CameraSource) -> Parity {
+    match (c.parity, source) {
+        (Some(ParityArg::Either), _) | (None, CameraSource::Fov(_)) => Parity::Either,
+        _ => Parity::AsCamera,
     }
 }
 
@@ -100,6 +109,7 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
     s.refine.fit = o.camera.fit;
     s.scale_range = scale_range;
     s.walk_wide = o.camera.fov_walk;
+    s.parity = parity(&o.camera, &camera);
     let so = &o.streaks;
     // Read before the run, so that a bad file stops it before any frame is done.
     let tle = match &so.tle {

@@ -35,6 +35,37 @@ pub fn wahba_weighted(
     r.iter().all(|x| x.is_finite()).then_some(r)
 }
 
+/// The attitude of matched directions when the image may be a mirror image of the sky: the
+/// better of Wahba's fits to `cam` as it is and to `cam` mirrored (camera y negated, which is
+/// what [`Camera::mirrored`] does to a pixel's direction), by the sum of squared residuals, and
+/// whether it is the mirrored one. Only with `either`; otherwise `cam` as it is. The vote, its
+/// verification and the pattern keys see distances only, which a mirror keeps: the parity is
+/// first decided here, from the matched stars' arrangement.
+pub fn wahba_parity(
+    cam: &[Vector3<f64>],
+    icrs: &[Vector3<f64>],
+    either: bool,
+) -> Option<(Matrix3<f64>, bool)> {
+    let direct = wahba(cam, icrs);
+    if !either {
+        return direct.map(|r| (r, false));
+    }
+    let flipped: Vec<_> = cam.iter().map(|v| Vector3::new(v.x, -v.y, v.z)).collect();
+    let mirror = wahba(&flipped, icrs);
+    let loss = |r: &Matrix3<f64>, c: &[Vector3<f64>]| -> f64 {
+        c.iter()
+            .zip(icrs)
+            .map(|(c, v)| (c - r * v).norm_squared())
+            .sum()
+    };
+    match (direct, mirror) {
+        (Some(a), Some(b)) if loss(&b, &flipped) < loss(&a, cam) => Some((b, true)),
+        (Some(a), _) => Some((a, false)),
+        (None, Some(b)) => Some((b, true)),
+        (None, None) => None,
+    }
+}
+
 /// Gauss–Newton steps on Wahba's own loss Σ w |cam − R·icrs|² from the SVD's rotation. On a
 /// narrow field B is nearly of rank one (its small singular values are θ² of its large one,
 /// 2·10⁻⁵ at 0.5°), and the SVD resolves the rotation about the boresight only to about 10⁻⁶

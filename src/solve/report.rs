@@ -30,6 +30,9 @@ impl Solver {
                 }));
                 rec.fov_x_deg = Some(r.camera.fov_x_deg());
                 rec.fov_y_deg = Some(r.camera.fov_y_deg());
+                if self.settings.parity == super::Parity::Either || r.camera.mirrored {
+                    rec.mirrored = Some(r.camera.mirrored);
+                }
                 if r.camera.k1 != self.camera.k1 {
                     rec.distortion_k1 = Some(r.camera.k1);
                 }

@@ -559,11 +559,16 @@ impl Solver {
         // Every hypothesis of the round, times its rounds, judged against the pass's share of
         // the budget (of each search and detection stage of the frame, as the vote's are).
         let hypotheses = (hyps.len() as u64).saturating_mul(
-            rounds as u64 * share * self.settings.searches * self.detection_stages(),
+            rounds as u64
+                * share
+                * self.settings.searches
+                * self.detection_stages()
+                * self.parities(),
         );
         for h in hyps.iter().take(MAX_REFINED.min(*refinable)) {
             *refinable -= 1;
-            let p = self.scale_free_prepared(h.scale);
+            let mut p = self.scale_free_prepared(h.scale);
+            p.camera.mirrored ^= h.mirrored;
             let refs = self.bands[p.band].refs_at(epoch);
             let Some(refined) =
                 refine::refine(h.r, detections, &refs, &p.camera, hypotheses, 4, &p.refine)

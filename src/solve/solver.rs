@@ -7,7 +7,7 @@
 //! deeper check) share the `Prepared` state and the false-match budget, and the `Solver`'s
 //! construction (bands, shallow pass, pattern index) is one piece.
 
-use super::attitude::wahba;
+use super::attitude::wahba_parity;
 use super::bands::{
     Band, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SCALE_STEP, SPREAD_TRIANGLE_STARS, STAGES,
     WALK_MAX_RATIO, WIDE_MATCH_RADIUS_PX, WIDE_MIN_STARS, WIDE_PAIR_TOL_PX, band_for, scale_bands,
@@ -71,6 +71,20 @@ pub struct Settings {
     /// Searches of one frame that share the false-match budget, each judged against its share:
     /// 2 when a pointing hint's regional search may be followed by lost-in-space.
     pub searches: u64,
+    /// Whether a frame may be a mirror image of the sky relative to the camera.
+    pub parity: Parity,
+}
+
+/// The parity of the frames relative to the camera model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Parity {
+    /// As the camera says ([`Camera::mirrored`]).
+    AsCamera,
+    /// Either: each hypothesis takes the parity its matched stars fit (a FITS image stored
+    /// the conventional way is a mirror image in row-0-first order, a photograph or a star
+    /// tracker's frame is not; with `--fov-deg` gpustar is not told which). Each hypothesis
+    /// then stands for two attitudes, and the false-match test counts both.
+    Either,
 }
 
 impl Default for Settings {
@@ -93,6 +107,7 @@ impl Default for Settings {
             method: Method::Vote,
             sky_sr: FULL_SKY_SR,
             searches: 1,
+            parity: Parity::AsCamera,
         }
     }
 }
@@ -428,6 +443,52 @@ impl Solver {
         }
     }
 
+    /// The attitudes a vote's or a quad's hypothesis stands for: 2 when the parity is left open
+    /// (a triangle's hypotheses are counted for each hand, see [`Solver::triangles_either`]).
+    pub fn parities(&self) -> u64 {
+        match self.settings.parity {
+            Parity::AsCamera => 1,
+            Parity::Either => 2,
+        }
+    }
+
+    /// A triangle search (`search`: hypotheses with the handedness of the directions given,
+    /// and how many it counts) for the parity the settings allow: with the parity left open,
+    /// for the mirror image too (camera y negated), its hypotheses after the others' and both
+    /// counts summed. [`Solver::first_attitude`] then finds each hypothesis's parity.
+    pub(crate) fn triangles_either(
+        &self,
+        vectors: &[Vector3<f64>],
+        search: impl Fn(&[Vector3<f64>]) -> (Vec<triangle::Triangle>, u64),
+    ) -> (Vec<triangle::Triangle>, u64) {
+        let (mut hyps, mut matched) = search(vectors);
+        if self.settings.parity == Parity::Either {
+            let mirrored: Vec<_> = vectors
+                .iter()
+                .map(|v| Vector3::new(v.x, -v.y, v.z))
+                .collect();
+            let (more, n) = search(&mirrored);
+            hyps.extend(more);
+            matched = matched.saturating_add(n);
+        }
+        (hyps, matched)
+    }
+
+    /// The first attitude of matched directions (`cam` as `camera` sees them) and the camera
+    /// it holds for: `camera`, or its mirror image when the parity is left open and the
+    /// matched stars fit that better (see [`wahba_parity`]).
+    pub(crate) fn first_attitude(
+        &self,
+        cam: &[Vector3<f64>],
+        icrs: &[Vector3<f64>],
+        camera: &Camera,
+    ) -> Option<(nalgebra::Matrix3<f64>, Camera)> {
+        let (r, flipped) = wahba_parity(cam, icrs, self.settings.parity == Parity::Either)?;
+        let mut camera = camera.clone();
+        camera.mirrored ^= flipped;
+        Some((r, camera))
+    }
+
     /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
     /// one solves.
     pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
@@ -575,14 +636,18 @@ impl Solver {
     ) -> Outcome {
         let refs = self.bands[p.band].refs_at(epoch);
         let vectors = &p.vectors[..p.n_vote];
-        let triangles = crate::solve::radial::triangles(
-            &found.candidates,
-            found.k,
-            &p.ranges,
-            vectors,
-            &self.bands[p.band].refs,
-            crate::solve::radial::TRIANGLE_STARS,
-        );
+        let (triangles, _) = self.triangles_either(vectors, |v| {
+            let t = crate::solve::radial::triangles(
+                &found.candidates,
+                found.k,
+                &p.ranges,
+                v,
+                &self.bands[p.band].refs,
+                crate::solve::radial::TRIANGLE_STARS,
+            );
+            let n = t.len() as u64;
+            (t, n)
+        });
         if triangles.is_empty() {
             return Outcome::Unsolved("no_consistent_match");
         }
@@ -712,13 +777,15 @@ impl Solver {
         }
         let cam: Vec<_> = ids.iter().map(|m| vectors[m.star]).collect();
         let icrs: Vec<_> = ids.iter().map(|m| refs.v(m.ref_id as usize)).collect();
-        let r0 = wahba(&cam, &icrs).ok_or("no_consistent_match")?;
+        let (r0, camera) = self
+            .first_attitude(&cam, &icrs, &p.camera)
+            .ok_or("no_consistent_match")?;
         // Every pass this frame can be tried with multiplies the hypotheses a chance match could
         // come from; the vote has half the pass's error budget (see `STAGES`).
         let hypotheses = voted
             .hypotheses
-            .saturating_mul(self.hypothesis_factor(detections.len(), p.method));
-        let refined = refine::refine(r0, detections, refs, &p.camera, hypotheses, 2, &p.refine)
+            .saturating_mul(self.hypothesis_factor(detections.len(), p.method) * self.parities());
+        let refined = refine::refine(r0, detections, refs, &camera, hypotheses, 2, &p.refine)
             .ok_or("no_consistent_match")?;
         if refined.false_match_prob > p.refine.max_false_prob {
             tracing::debug!(
@@ -745,12 +812,9 @@ impl Solver {
         refs: &RefCatalog,
     ) -> Option<(Refined, u64, usize)> {
         let band = &self.bands[p.band];
-        let (hyps, matched) = triangle::triangles(
-            band.table(),
-            &p.ranges,
-            &p.vectors[..p.triangle_stars],
-            band.directions(),
-        );
+        let (hyps, matched) = self.triangles_either(&p.vectors[..p.triangle_stars], |v| {
+            triangle::triangles(band.table(), &p.ranges, v, band.directions())
+        });
         self.first_accepted(detections, p, refs, &hyps, matched)
     }
 
@@ -770,9 +834,8 @@ impl Solver {
         hyps.iter().find_map(|t| {
             let cam = t.stars.map(|i| vectors[i]);
             let icrs = t.refs.map(|id| refs.v(id as usize));
-            let r0 = wahba(&cam, &icrs)?;
-            let refined =
-                refine::refine(r0, detections, refs, &p.camera, hypotheses, 3, &p.refine)?;
+            let (r0, camera) = self.first_attitude(&cam, &icrs, &p.camera)?;
+            let refined = refine::refine(r0, detections, refs, &camera, hypotheses, 3, &p.refine)?;
             (refined.false_match_prob <= p.refine.max_false_prob)
                 .then_some((refined, hypotheses, 3))
         })

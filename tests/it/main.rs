@@ -26,6 +26,7 @@ mod gpu_pipeline;
 mod hint;
 mod layout;
 mod noise;
+mod parity;
 mod pattern;
 mod psf_fit;
 mod radial;

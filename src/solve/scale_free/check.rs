@@ -7,16 +7,19 @@ use super::super::bands::{SCALE_STEP, scaled};
 use super::super::detect::Detection;
 use crate::camera::angle;
 use crate::catalog::patterns;
-use nalgebra::Matrix3;
+use crate::solve::Parity;
+use nalgebra::{Matrix3, Vector3};
 
 /// A quad hypothesis that passed the geometric checks: image stars `stars[i]` are reference
-/// stars `refs[i]` at focal-length factor `scale`, attitude `r`.
+/// stars `refs[i]` at focal-length factor `scale`, attitude `r`, the image a mirror image
+/// relative to the camera when `mirrored` (only where the parity is left open).
 #[derive(Clone, Copy, Debug)]
 pub struct Hypothesis {
     pub stars: [usize; 4],
     pub refs: [u32; 4],
     pub scale: f64,
     pub r: Matrix3<f64>,
+    pub mirrored: bool,
 }
 
 /// The 24 orders of four items.
@@ -43,7 +46,8 @@ impl Solver {
     /// A catalog quad against an image quad: the order of its stars whose chords best match
     /// the image's up to scale, the focal length that matches them (within `lo..hi`), every
     /// chord then within twice the pair tolerance, and the attitude of the four stars
-    /// (Wahba) placing each within that tolerance (which refuses a mirror image).
+    /// (Wahba) placing each within that tolerance (which refuses a mirror image, unless the
+    /// parity is left open: then the parity the four stars fit).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn check_quad(
         &self,
@@ -120,7 +124,18 @@ impl Solver {
                 return None;
             }
         }
-        let r = crate::solve::attitude::wahba(&img, &cat)?;
+        let (r, mirrored) = crate::solve::attitude::wahba_parity(
+            &img,
+            &cat,
+            self.settings.parity == Parity::Either,
+        )?;
+        let img = img.map(|v| {
+            if mirrored {
+                Vector3::new(v.x, -v.y, v.z)
+            } else {
+                v
+            }
+        });
         let tol = 2.0 * s.pair_tol_px * camera.ifov_rad();
         if (0..4).any(|i| angle(&(r * cat[i]), &img[i]) > tol) {
             return None;
@@ -130,6 +145,7 @@ impl Solver {
             refs: refs_in_order,
             scale,
             r,
+            mirrored,
         })
     }
 }
