@@ -1,12 +1,14 @@
 //! Lost-in-space identification of one frame, stage by stage: [`detect`] → [`identify`] (the
 //! vote) or [`radial`] (ring features) with [`triangle`] checks → [`attitude`] (Wahba) →
-//! [`refine`] (match, refit, false-match probability). [`Solver`] holds one camera's catalog
+//! [`refine`] (match, refit, false-match probability; [`explain`]: the brightest detections
+//! explained). [`Solver`] holds one camera's catalog
 //! selection and distance table and runs the stages for a frame; [`hinted`] makes one for the
 //! region a pointing hint names.
 
 pub mod attitude;
 mod bands;
 pub mod detect;
+pub mod explain;
 pub mod hinted;
 pub mod identify;
 mod mag_limit;

@@ -277,6 +277,16 @@ pub fn refine(
     // of their stars outside it: once the solution is accepted, the attitude is fitted again to
     // the mutual nearest stars within POLISH_RADIUS_MAX match radii, which recovers them.
     let accepted = false_match_prob <= s.max_false_prob;
+    // An accepted solution whose matches have brighter unmatched copies (a double exposure's,
+    // ghosts) is no solution: the search goes on.
+    if accepted && !super::explain::explains_brightest(dets, &matches) {
+        tracing::debug!(
+            "refused: {} of {} matches have a brighter unmatched copy in one relation",
+            super::explain::copied_matches(dets, &matches),
+            matches.len()
+        );
+        return None;
+    }
     if accepted && s.fit == CameraFit::None && 3.0 * scatter > s.match_radius_px {
         // The scatter of matches cut off at the match radius understates the true one.
         let wide = POLISH_RADIUS_MAX * s.match_radius_px;

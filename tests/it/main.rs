@@ -18,6 +18,7 @@ mod components;
 mod confidence;
 mod dark;
 mod end_to_end;
+mod explain;
 mod faults;
 mod fits;
 mod formats;
