@@ -106,7 +106,7 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
         all.extend(w);
         (p, s)
     };
-    let (pixels, saturation) = match image.bitpix {
+    let (mut pixels, saturation) = match image.bitpix {
         8 => convert_int::<u8>(data, scaling, blank, count)?,
         16 => convert_int::<i16>(data, scaling, blank, count)?,
         32 => convert_int::<i32>(data, scaling, blank, count)?,
@@ -115,6 +115,11 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
         -64 => with_warning(convert_float::<f64>(data, scaling, count)?, &mut warnings),
         b => fail!(Input, "FITS BITPIX = {b} is not supported"),
     };
+    let keywords = keywords(&headers);
+    // A raw colour mosaic is detected on its luminance (see `bayer`).
+    if super::bayer::mosaic(&keywords).is_some() {
+        super::bayer::luminance(&mut pixels, w as usize, h as usize);
+    }
     Ok(FitsFrame {
         width: w as u32,
         height: h as u32,
@@ -124,7 +129,7 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
         // multi-extension files.
         epoch,
         warnings,
-        keywords: keywords(&headers),
+        keywords,
     })
 }
 
@@ -276,6 +281,10 @@ pub fn read_camera_frame(
         filled = end;
     }
     let (epoch, warnings) = epoch(headers.iter().rev());
+    let keywords = keywords(&headers);
+    if super::bayer::mosaic(&keywords).is_some() {
+        super::bayer::luminance(&mut pixels, w as usize, h as usize);
+    }
     Some(FitsFrame {
         width: w as u32,
         height: h as u32,
@@ -283,7 +292,7 @@ pub fn read_camera_frame(
         saturation: u16::MAX,
         epoch,
         warnings,
-        keywords: keywords(&headers),
+        keywords,
     })
 }
 

@@ -1,8 +1,10 @@
-//! Files in and out: images and FITS ([`frame`], [`fits`], [`dark`]), pixels already in memory
+//! Files in and out: images and FITS ([`frame`], [`fits`], [`dark`]; raw colour mosaics
+//! detected on their luminance, [`bayer`]), pixels already in memory
 //! ([`array`](mod@array)), the inputs of a run ([`inputs`]), world coordinate systems ([`wcs`]), and the
 //! record file ([`output`]).
 
 pub mod array;
+pub mod bayer;
 pub mod dark;
 pub mod fits;
 pub mod frame;
