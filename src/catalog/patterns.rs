@@ -105,17 +105,97 @@ pub fn levels_for(narrowest: f64, widest: f64) -> Vec<f64> {
     out
 }
 
-/// About `n` points spread evenly over the unit sphere (a Fibonacci lattice).
-fn lattice(n: usize) -> Vec<Vector3<f64>> {
+/// Point `i` of `n` spread evenly over the unit sphere (a Fibonacci lattice), from +z down.
+fn lattice_point(i: usize, n: usize) -> Vector3<f64> {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..n)
-        .map(|i| {
-            let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = golden * i as f64;
-            Vector3::new(r * phi.cos(), r * phi.sin(), z)
-        })
-        .collect()
+    let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = golden * i as f64;
+    Vector3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Disc centres of a level of diameter `d` (radians): one per `(d / OVERSAMPLE)²` of sphere.
+pub fn discs_of(d: f64) -> f64 {
+    let spacing = d / OVERSAMPLE;
+    (4.0 * std::f64::consts::PI / (spacing * spacing))
+        .ceil()
+        .max(12.0)
+}
+
+/// The most disc centres an index visits, all levels together: beyond, a frame's field is
+/// too narrow for a pattern index of this sky (a blind 0.01° field over the whole sky would
+/// take 4·10⁹ of them and 89 GB).
+pub const MAX_DISCS: f64 = 64.0e6;
+
+/// The largest index gpustar builds (bytes of keys and quads, before duplicates go).
+pub const MAX_INDEX_BYTES: f64 = 4.0 * (1u64 << 30) as f64;
+
+/// What an index of `levels` over `cat` (whose stars cover `sky_sr` steradians) would take:
+/// the disc centres visited and the bytes of its patterns, at most [`FIELD_STARS`]'s quads
+/// per disc, fewer where the discs hold fewer stars on average.
+pub fn estimate(cat: &RefCatalog, levels: &[f64], sky_sr: f64) -> (f64, f64) {
+    let n = cat.len() as f64;
+    let (mut discs, mut bytes) = (0.0, 0.0);
+    let region = Region::of(cat);
+    for &d in levels {
+        let all = discs_of(d);
+        let visited = all * region.share(d);
+        let per_disc = n * std::f64::consts::PI * (d / 2.0).powi(2) / sky_sr.max(1e-12);
+        let m = per_disc.min(FIELD_STARS as f64).floor();
+        let quads = if m >= 4.0 {
+            m * (m - 1.0) * (m - 2.0) * (m - 3.0) / 24.0
+        } else {
+            0.0
+        };
+        discs += visited;
+        bytes += visited * quads * 20.0;
+    }
+    (discs, bytes)
+}
+
+/// The cap of sky a catalog's stars lie in (its centre and radius), for a region's catalog
+/// (a pointing hint's): the lattice is then turned to put the cap about its first points, and
+/// only those are visited. The whole sky (radius π) for a catalog spread wider than a
+/// hemisphere, or none.
+struct Region {
+    /// Rotation taking the cap's centre to +z.
+    to_pole: nalgebra::Rotation3<f64>,
+    radius: f64,
+}
+
+impl Region {
+    fn of(cat: &RefCatalog) -> Region {
+        let whole = Region {
+            to_pole: nalgebra::Rotation3::identity(),
+            radius: std::f64::consts::PI,
+        };
+        let sum: Vector3<f64> = (0..cat.len()).map(|i| cat.v(i)).sum();
+        if cat.is_empty() || sum.norm() < 1e-9 {
+            return whole;
+        }
+        let centre = sum.normalize();
+        let radius = (0..cat.len())
+            .map(|i| crate::camera::angle(&cat.v(i), &centre))
+            .fold(0.0, f64::max);
+        if radius > std::f64::consts::FRAC_PI_2 {
+            return whole;
+        }
+        let to_pole =
+            nalgebra::Rotation3::rotation_between(&centre, &Vector3::z()).unwrap_or_else(|| {
+                nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+            });
+        Region { to_pole, radius }
+    }
+
+    /// The share of a level's lattice (discs of diameter `d`) that can hold its stars: the
+    /// cap widened by a disc's radius.
+    fn share(&self, d: f64) -> f64 {
+        if self.radius >= std::f64::consts::PI {
+            return 1.0;
+        }
+        let r = (self.radius + d / 2.0).min(std::f64::consts::PI);
+        (1.0 - r.cos()) / 2.0
+    }
 }
 
 impl PatternIndex {
@@ -124,6 +204,8 @@ impl PatternIndex {
     pub fn build(cat: &RefCatalog, levels: &[f64]) -> PatternIndex {
         let stars: Vec<_> = cat.stars().collect();
         let mut rows: Vec<(u32, [u32; 4])> = Vec::new();
+        let region = Region::of(cat);
+        let from_pole = region.to_pole.inverse();
         for &d in levels {
             let radius = d / 2.0;
             let max_chord = crate::catalog::table::chord_of_angle(radius);
@@ -138,10 +220,13 @@ impl PatternIndex {
             for (id, s) in stars.iter().enumerate() {
                 cells.entry(cell_of(&s.v)).or_default().push(id as u32);
             }
-            let spacing = d / OVERSAMPLE;
-            let n = ((4.0 * std::f64::consts::PI / (spacing * spacing)).ceil() as usize).max(12);
+            let n = discs_of(d) as usize;
+            // The lattice from the pole of the catalog's cap down to where its discs can hold
+            // none of its stars (the whole lattice for a catalog of the whole sky).
+            let visited = ((n as f64 * region.share(d)).ceil() as usize).min(n);
             let mut near: Vec<u32> = Vec::new();
-            for c in lattice(n) {
+            for i in 0..visited {
+                let c = from_pole * lattice_point(i, n);
                 near.clear();
                 let (cx, cy, cz) = cell_of(&c);
                 for dx in -1..=1 {

@@ -20,7 +20,7 @@
 //! [`MAX_QUERIES`] per quad: quads of short edges are too vague to look up).
 
 use super::bands::Band;
-use super::bands::{SCALE_STEP, scaled};
+use super::bands::{SCALE_STEP, WALK_MAX_RATIO, scaled};
 use super::detect::{self, Detection};
 use super::refine::{self, CameraFit};
 use super::{Outcome, Prepared, Settings, Solution, Solver};
@@ -28,6 +28,7 @@ use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::catalog::patterns::{self, BINS, PatternIndex};
 use crate::cpu::pattern::{Buckets, Rows};
+use crate::error::Result;
 use crate::io::frame::Frame;
 use nalgebra::Vector3;
 use std::sync::OnceLock;
@@ -156,30 +157,68 @@ pub struct ScaleFree {
 
 impl ScaleFree {
     /// The pattern index of `settings.scale_range` (or the camera's own scale), from the stars
-    /// of `bands[band]` (loaded from the cache or built).
+    /// of `bands[band]` (loaded from the cache or built); None when it would be larger than
+    /// gpustar builds ([`patterns::MAX_INDEX_BYTES`], [`patterns::MAX_DISCS`]) and the frames
+    /// can do without it (a known scale, or one searched within [`WALK_MAX_RATIO`], is
+    /// walked). A range wider than that has no other way in: it is refused, with what would
+    /// serve.
     pub(crate) fn build(
         catalog: &Catalog,
         camera: &Camera,
         settings: &Settings,
         bands: &[Band],
         band: usize,
-    ) -> ScaleFree {
+    ) -> Result<Option<ScaleFree>> {
         let range = settings.scale_range.unwrap_or((1.0, 1.0));
         let levels = patterns::levels_for(short_side(camera, range.1), short_side(camera, range.0));
+        let (discs, bytes) = patterns::estimate(&bands[band].refs, &levels, settings.sky_sr);
+        if discs > patterns::MAX_DISCS || bytes > patterns::MAX_INDEX_BYTES {
+            let what = format!(
+                "a pattern index for fields of {:.3}° ({} stars of {}, magnitude {:.1} and \
+                 brighter) would visit {discs:.1e} sky discs and hold about {:.1} GB",
+                short_side(camera, range.1).to_degrees(),
+                bands[band].refs.len(),
+                if settings.sky_sr < 4.0 * std::f64::consts::PI - 1e-9 {
+                    "a hint's region"
+                } else {
+                    "the whole sky"
+                },
+                bands[band].refs.selection.mag_limit,
+                bytes / 1e9
+            );
+            if range.1 / range.0 > WALK_MAX_RATIO && !settings.walk_wide {
+                // Discs grow as the field narrows whatever the catalog; bytes with its depth.
+                let brighter = if discs > patterns::MAX_DISCS {
+                    ""
+                } else {
+                    ", or a brighter --mag-limit"
+                };
+                crate::error::fail!(
+                    Config,
+                    "{what}, more than gpustar builds ({:.0} GB, {:.0e} discs): give a \
+                     pointing hint (--hint) so that only its region is searched, a narrower \
+                     scale range (within ±5 %, which is walked){brighter}",
+                    patterns::MAX_INDEX_BYTES / 1e9,
+                    patterns::MAX_DISCS
+                );
+            }
+            tracing::warn!("{what}: frames are voted scale by scale without it");
+            return Ok(None);
+        }
         let (index, built, seconds) = patterns::load_or_build(
             &bands[band].refs,
             catalog.content_hash,
             &levels,
             settings.table_cache,
         );
-        ScaleFree {
+        Ok(Some(ScaleFree {
             index,
             band,
             limits: PassLimits::for_settings(settings),
             built,
             seconds,
             buckets: OnceLock::new(),
-        }
+        }))
     }
 }
 

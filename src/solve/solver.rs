@@ -306,13 +306,13 @@ impl Solver {
         let shallow_band = (bands.len() > main_bands).then_some(main_bands);
         let scale_free = if scale_free_on {
             // The quads name the stars of the narrowest field's band, the deepest.
-            Some(super::scale_free::ScaleFree::build(
+            super::scale_free::ScaleFree::build(
                 catalog,
                 &camera,
                 &settings,
                 &bands,
                 main_bands - 1,
-            ))
+            )?
         } else {
             None
         };

@@ -788,3 +788,35 @@ fn sigkill_during_sequences_then_resume_gives_the_uninterrupted_records() {
         without_timing(records(&clean))
     );
 }
+
+/// Fields too narrow for a pattern index of the whole sky (`--fov-deg 0.01`, issue 44/45:
+/// before, `patterns::lattice` allocated 89 GB and the process aborted with every record):
+/// a known scale is voted without the index, a wide range gets one error record per frame
+/// saying what would serve; no abort, every input its record, within seconds.
+#[test]
+fn fields_too_narrow_for_a_pattern_index_cost_no_abort() {
+    let s = set(2);
+    for (fov, status) in [
+        ("0.01", "unsolved"),
+        ("0.01..0.03", "error"),
+        ("0.1..5", "error"),
+    ] {
+        let out = s.root.join(format!("narrow-{fov}.jsonl"));
+        let o = run(cpu_batch(&s.dir, &out, &["--fov-deg", fov, "-q"]), 120);
+        assert!(
+            o.status.code() == Some(0) || o.status.code() == Some(1),
+            "--fov-deg {fov}: {:?} {}",
+            o.status,
+            stderr(&o)
+        );
+        let recs = records(&out);
+        assert_eq!(recs.len(), 2, "--fov-deg {fov}");
+        for r in &recs {
+            assert_eq!(r["status"], status, "--fov-deg {fov}: {r}");
+            if status == "error" {
+                let e = r["error"].as_str().unwrap();
+                assert!(e.contains("pattern index") && e.contains("--hint"), "{e}");
+            }
+        }
+    }
+}
