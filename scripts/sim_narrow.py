@@ -13,6 +13,11 @@ Usage:
     python3 scripts/sim_narrow.py --check DIR          # geometry self-check of a written set
 Options override a preset's parameters (--fov-deg, --size, --psf-sigma, --faint-snr,
 --streak-fraction, --hot-pixels, --exptime, --k1, --lf-ratio ...; see --help).
+--mirror stores each frame bottom row first (a conventional FITS image: a mirror image of the
+sky in row order; the truth's y are rows of the file, "mirrored": true). --double PX adds a
+double exposure: the whole noise-free sky image again, moved PX px in a direction uniform per
+frame and --double-dmag LO,HI (default 1,3) magnitudes fainter, uniform per frame (truth
+"double": {dx, dy, dmag}; the truth attitude stays the bright images').
 
 Writes DIR/frame_NNNN.fits, DIR/truth.jsonl (one JSON object per frame, frame order),
 DIR/camera.toml (width, height, fov_x_deg: the UNDISTORTED pinhole; d3 also writes
@@ -888,6 +893,18 @@ def simulate_frame(i):
                         "line_density_e_px": float(density), "snr_target": snr,
                         "peak_snr": round(peak / noise, 3)})
 
+    # ---- double exposure (--double PX): the whole sky image again, moved PX px in a direction
+    # uniform per frame and dmag uniform in --double-dmag fainter (bilinear shift of the
+    # noise-free signal). The truth stays the bright images'.
+    double = None
+    if prm.get("double_px"):
+        ang = float(rng.uniform(0.0, 2 * math.pi))
+        dmag = float(rng.uniform(*prm["double_dmag"]))
+        dx, dy = prm["double_px"] * math.cos(ang), prm["double_px"] * math.sin(ang)
+        from scipy.ndimage import shift as nd_shift
+        signal = signal + nd_shift(signal, (dy, dx), order=1, mode="constant", cval=0.0) * 10 ** (-0.4 * dmag)
+        double = {"dx": dx, "dy": dy, "dmag": dmag}
+
     # ---- detector
     expected = signal + sky
     hot = [(int(k % W), int(k // W)) for k in hot_idx]
@@ -895,6 +912,19 @@ def simulate_frame(i):
         expected[hy, hx] += e
     electrons = rng.poisson(expected).astype(np.float64) + rng.normal(0.0, READ_NOISE, (H, W))
     img = np.clip(np.round(electrons / GAIN + BIAS), 0, SAT_ADU).astype(np.uint16)
+    if prm.get("mirror"):
+        # Stored bottom row first, as a conventional FITS image (north up, east left) is: the
+        # truth's y are rows of the file, and the frame is a mirror image of the sky.
+        img = img[::-1].copy()
+        for st in stars:
+            st["y"] = H - 1 - st["y"]
+            if "y_u" in st:
+                st["y_u"] = H - 1 - st["y_u"]
+        for e in extra:
+            e[1] = H - 1 - e[1]
+        for sk in streaks:
+            for end in sk["ends"]:
+                end["y"] = H - 1 - end["y"]
 
     # ---- hint
     hra, hdec = offset_point(ra0, dec0, rho, pa)
@@ -923,7 +953,7 @@ def simulate_frame(i):
         "rotation_matrix": [[float(v) for v in r] for r in R], "quaternion": [float(v) for v in matrix_to_quat(R)],
         "epoch": jyear, "date_obs": date_obs, "date_end": t_end, "exptime_s": prm["exptime"],
         "width": W, "height": H, "fov_x_deg": cam.fov_x_deg, "fov_y_deg": cam.fov_y_deg,
-        "fx_px": cam.f, "cx_px": cam.cx, "cy_px": cam.cy, "k1": prm["k1"], "mirrored": False,
+        "fx_px": cam.f, "cx_px": cam.cx, "cy_px": cam.cy, "k1": prm["k1"], "mirrored": bool(prm.get("mirror")), "double": double,
         "hint": hint, "stars": stars, "n_stars": len(stars),
         "n_stars_snr_ge_5": sum(s["peak_snr"] >= 5 for s in stars),
         "uncatalogued_stars": extra, "n_uncatalogued": len(extra),
@@ -1101,6 +1131,11 @@ def main(argv=None):
     ap.add_argument("--lf-ratio", type=float, default=2.3, help="star counts ratio per magnitude beyond G 10")
     ap.add_argument("--regions", type=int, help="n053: sky regions")
     ap.add_argument("--density", type=float, help="n053: catalog stars per deg^2")
+    ap.add_argument("--mirror", action="store_true",
+                    help="store rows bottom first (a conventional FITS image): truth mirrored, y flipped")
+    ap.add_argument("--double", type=float, metavar="PX",
+                    help="double exposure: every source again PX px away, --double-dmag fainter")
+    ap.add_argument("--double-dmag", default="1,3", help="LO,HI magnitudes fainter (uniform per frame)")
     args = ap.parse_args(argv)
     if args.check:
         return check_set(args.check)
@@ -1118,6 +1153,9 @@ def main(argv=None):
     if args.fov_deg is not None:
         prm["scale_arcsec"] = None
     prm["lf_ratio"] = args.lf_ratio
+    prm["mirror"] = args.mirror
+    prm["double_px"] = args.double
+    prm["double_dmag"] = tuple(float(v) for v in args.double_dmag.split(","))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     prm["out"] = str(out)

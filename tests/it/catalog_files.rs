@@ -115,3 +115,57 @@ fn a_table_too_large_to_build_is_refused_with_the_remedy() {
         "{err}"
     );
 }
+
+/// The output of `catalog import` is written beside and renamed: never over an input, never
+/// over a file that is not a catalog gpustar wrote (an image); a catalog gpustar wrote is
+/// replaced; several inputs make one catalog with a star of two of them kept once.
+#[test]
+fn import_never_overwrites_inputs_or_other_files_and_merges_inputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("mine.csv");
+    let mut text = String::from("id,ra_deg,dec_deg,mag\n");
+    for k in 0..12 {
+        text.push_str(&format!(
+            "s{k},{},{},{}\n",
+            30.0 * k as f64,
+            5.0 * k as f64 - 30.0,
+            2.0 + 0.5 * k as f64
+        ));
+    }
+    std::fs::write(&csv, &text).unwrap();
+    // A second file: 4 of the same stars and 3 new ones.
+    let csv2 = dir.path().join("more.csv");
+    let mut more = String::from("id,ra_deg,dec_deg,mag\n");
+    for k in 8..15 {
+        more.push_str(&format!(
+            "t{k},{},{},{}\n",
+            30.0 * k as f64,
+            5.0 * k as f64 - 30.0,
+            2.0 + 0.5 * k as f64
+        ));
+    }
+    std::fs::write(&csv2, &more).unwrap();
+    let png = dir.path().join("frame.png");
+    std::fs::write(&png, b"not really a png").unwrap();
+    let p = |x: &std::path::Path| x.to_str().unwrap().to_string();
+    let e = run_err(&["catalog", "import", &p(&csv), "-o", &p(&csv)]);
+    assert!(e.contains("is an input"), "{e}");
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), text);
+    let e = run_err(&["catalog", "import", &p(&csv), "-o", &p(&png)]);
+    assert!(e.contains("not a catalog gpustar wrote"), "{e}");
+    assert_eq!(std::fs::read(&png).unwrap(), b"not really a png");
+    let bin = dir.path().join("mine.gpustarcat");
+    run_ok(&["catalog", "import", &p(&csv), "-o", &p(&bin)]);
+    // Replacing a catalog gpustar wrote, from two inputs.
+    let out = run_ok(&["catalog", "import", &p(&csv), &p(&csv2), "-o", &p(&bin)]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("15 stars (4 found in an earlier file left out)"),
+        "{said}"
+    );
+    let info = run_ok(&["info", "--catalog", &p(&bin)]);
+    assert!(
+        String::from_utf8_lossy(&info.stdout).contains("15"),
+        "{info:?}"
+    );
+}
