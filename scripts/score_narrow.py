@@ -18,7 +18,8 @@ skipped. Standard library + scripts/benchlib.py only.
 What is scored (per frame of TRUTH_DIR/truth.jsonl):
 * solved: status == "solved". Its boresight is the record's ra_deg/dec_deg (else the third row
   of rotation_matrix, else of the quaternion's matrix); its roll roll_deg (else from the
-  matrix, tetra3's convention as the truth's roll_tetra3_deg).
+  matrix, tetra3's convention as the truth's roll_tetra3_deg; for a mirrored truth always from
+  the matrix, as the truth's is: a mirror image's displayed roll is another angle).
 * wrong: solved with boresight error > --tol-deg (default 0.1 deg) or roll error > --tol-deg;
   both counts are given (a frame can be both).
 * boresight error (the attitude error across the line of sight) median / p95 and roll error
@@ -206,6 +207,11 @@ def score(truth_dir, records_path, tol_deg=0.1, id_radius=2.0, gate=20.0):
         if st == "solved":
             out["solved"] += 1
             ra, dec, roll = record_attitude(r)
+            M = r.get("rotation_matrix")
+            if t.get("mirrored") and M is not None:
+                # A mirror image's displayed roll is not the truth's (made for the sky as seen):
+                # compare the matrices' (the same formula as the truth's roll_tetra3_deg).
+                roll = (math.degrees(math.atan2(M[0][2], M[1][2])) + 180.0) % 360.0
             if ra is None or dec is None:
                 out["solved_without_attitude"] += 1
                 out["wrong"] += 1
