@@ -22,7 +22,8 @@ pub fn mosaic(keywords: &BTreeMap<String, String>) -> Option<String> {
     valid.then_some(p)
 }
 
-/// The luminance of a `width` × `height` mosaic, in place (edges repeat their border pixels).
+/// The luminance of a `width` × `height` mosaic, in place. Edges reflect about their border
+/// pixels (x = -1 reads x = 1), which keeps the mosaic's colours where repeating them would not.
 pub fn luminance(pixels: &mut [u16], width: usize, height: usize) {
     if width < 2 || height < 2 || pixels.len() != width * height {
         return;
@@ -30,8 +31,8 @@ pub fn luminance(pixels: &mut [u16], width: usize, height: usize) {
     // Rows filtered [1 2 1] into u32, then columns, one row at a time.
     let horizontal = |row: &[u16], out: &mut [u32]| {
         for x in 0..width {
-            let l = row[x.saturating_sub(1)] as u32;
-            let r = row[(x + 1).min(width - 1)] as u32;
+            let l = row[if x == 0 { 1 } else { x - 1 }] as u32;
+            let r = row[if x + 1 == width { width - 2 } else { x + 1 }] as u32;
             out[x] = l + 2 * row[x] as u32 + r;
         }
     };
@@ -39,10 +40,14 @@ pub fn luminance(pixels: &mut [u16], width: usize, height: usize) {
     let mut here = vec![0u32; width];
     let mut below = vec![0u32; width];
     horizontal(&pixels[..width], &mut here);
-    above.copy_from_slice(&here);
+    horizontal(&pixels[width..2 * width], &mut above);
     for y in 0..height {
-        let next = (y + 1).min(height - 1);
-        horizontal(&pixels[next * width..(next + 1) * width], &mut below);
+        // The last row reflects onto the row above it, already overwritten: reuse its filter.
+        if y + 1 == height {
+            below.copy_from_slice(&above);
+        } else {
+            horizontal(&pixels[(y + 1) * width..(y + 2) * width], &mut below);
+        }
         let row = &mut pixels[y * width..(y + 1) * width];
         for x in 0..width {
             row[x] = ((above[x] + 2 * here[x] + below[x] + 8) / 16) as u16;
