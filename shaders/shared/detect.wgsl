@@ -1,5 +1,5 @@
-// Shared by the detection kernels (threshold_tiles, threshold, components_merge,
-// components_compress, centroid_count, centroid_scan, centroid).
+// Shared by the detection kernels (threshold_tiles, tile_clip_sky, tile_clip, threshold,
+// components_merge, components_compress, centroid_count, centroid_scan, centroid).
 
 // Keep in sync with src/cpu/threshold.rs (DetectParams).
 struct DetectParams {

@@ -9,4 +9,5 @@ pub mod radial;
 pub mod select;
 pub mod streak_filter;
 pub mod threshold;
+pub mod tile_clip;
 pub mod vote;

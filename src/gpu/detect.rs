@@ -1,4 +1,4 @@
-//! Detection on the GPU: threshold_tiles → threshold → components_merge → components_compress
+//! Detection on the GPU: threshold_tiles → tile_clip_sky → tile_clip → threshold → components_merge → components_compress
 //! → centroid_count → centroid_scan → centroid, for a batch of frames of one size in one
 //! submission, reading back only the blob lists.
 
@@ -62,8 +62,10 @@ fn initial_max_set(pixels: u32) -> u32 {
 }
 
 /// The detection kernels in dispatch order.
-pub const DETECT_KERNELS: [&str; 7] = [
+pub const DETECT_KERNELS: [&str; 9] = [
     "threshold_tiles",
+    "tile_clip_sky",
+    "tile_clip",
     "threshold",
     "components_merge",
     "components_compress",
@@ -75,7 +77,7 @@ pub const DETECT_KERNELS: [&str; 7] = [
 /// Intermediate results of every stage, for the GPU = CPU tests.
 #[derive(Clone, Debug, Default)]
 pub struct DetectInspect {
-    /// Per frame: the tile statistics.
+    /// Per frame: the tile statistics (clipped).
     pub tiles: Vec<Vec<TileStats>>,
     /// Per frame: the mask (1 = set) as threshold wrote it.
     pub mask: Vec<Vec<u32>>,
@@ -223,6 +225,8 @@ impl Gpu {
             }
         }
         let pixels = self.storage_init("pixels", bytemuck::cast_slice(&words));
+        let tiles_raw = self.storage("tiles raw", 8 * (tiles_per_image * n) as u64);
+        let sky = self.storage("tile sky", 8 * (tiles_per_image * n) as u64);
         let tiles = self.storage("tiles", 8 * (tiles_per_image * n) as u64);
         let mask = self.storage("mask", 4 * (mask_words * n) as u64);
         let labels = self.storage("labels", 4 * (pixels_per_image as u64) * n as u64);
@@ -236,7 +240,9 @@ impl Gpu {
         let blobs = self.storage("blobs", blob_bytes);
 
         let pl = &self.kernels;
-        let bg_tiles = self.bind_group(&pl.threshold_tiles, &[&uniform, &pixels, &tiles]);
+        let bg_tiles = self.bind_group(&pl.threshold_tiles, &[&uniform, &pixels, &tiles_raw]);
+        let bg_sky = self.bind_group(&pl.tile_clip_sky, &[&uniform, &tiles_raw, &sky]);
+        let bg_clip = self.bind_group(&pl.tile_clip, &[&uniform, &tiles_raw, &sky, &tiles]);
         let bg_threshold = self.bind_group(
             &pl.threshold,
             &[
@@ -302,6 +308,12 @@ impl Gpu {
                 pass.dispatch_workgroups(p.tiles_x, p.tiles_y, n);
             }
             if run(1) {
+                dispatch_strided(&mut pass, &pl.tile_clip_sky, &bg_sky, tiles_per_image, n);
+            }
+            if run(2) {
+                dispatch_strided(&mut pass, &pl.tile_clip, &bg_clip, tiles_per_image, n);
+            }
+            if run(3) {
                 dispatch_strided(&mut pass, &pl.threshold, &bg_threshold, mask_words, n);
             }
             if let (Some((_, bg_rows, bg_filter)), Some(sp)) = (&streak, streaks) {
@@ -323,10 +335,10 @@ impl Gpu {
         let list_items = room.set.min(LIST_GROUPS * 256);
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            if run(2) {
+            if run(4) {
                 dispatch_strided(&mut pass, &pl.components_merge, &bg_merge, list_items, n);
             }
-            if run(3) {
+            if run(5) {
                 dispatch_strided(
                     &mut pass,
                     &pl.components_compress,
@@ -341,15 +353,15 @@ impl Gpu {
         }
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            if run(4) {
+            if run(6) {
                 dispatch_strided(&mut pass, &pl.centroid_count, &bg_count, list_items, n);
             }
-            if run(5) {
+            if run(7) {
                 pass.set_pipeline(&pl.centroid_scan);
                 pass.set_bind_group(0, &bg_scan, &[]);
                 pass.dispatch_workgroups(n, 1, 1);
             }
-            if run(6) {
+            if run(8) {
                 dispatch_strided(&mut pass, &pl.centroid, &bg_centroid, list_items, n);
             }
         }

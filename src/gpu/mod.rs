@@ -35,6 +35,16 @@ pub const KERNELS: &[(&str, &str, &str)] = &[
         include_str!("../../shaders/threshold_tiles.wgsl"),
     ),
     (
+        "tile_clip_sky",
+        SHARED_DETECT,
+        include_str!("../../shaders/tile_clip_sky.wgsl"),
+    ),
+    (
+        "tile_clip",
+        SHARED_DETECT,
+        include_str!("../../shaders/tile_clip.wgsl"),
+    ),
+    (
         "threshold",
         SHARED_DETECT,
         include_str!("../../shaders/threshold.wgsl"),
@@ -131,6 +141,8 @@ impl AdapterSummary {
 /// The compute pipelines, one per kernel.
 struct Kernels {
     threshold_tiles: wgpu::ComputePipeline,
+    tile_clip_sky: wgpu::ComputePipeline,
+    tile_clip: wgpu::ComputePipeline,
     threshold: wgpu::ComputePipeline,
     components_merge: wgpu::ComputePipeline,
     components_compress: wgpu::ComputePipeline,
@@ -253,6 +265,8 @@ impl Gpu {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let kernels = Kernels {
             threshold_tiles: pipeline(&device, "threshold_tiles"),
+            tile_clip_sky: pipeline(&device, "tile_clip_sky"),
+            tile_clip: pipeline(&device, "tile_clip"),
             threshold: pipeline(&device, "threshold"),
             components_merge: pipeline(&device, "components_merge"),
             components_compress: pipeline(&device, "components_compress"),

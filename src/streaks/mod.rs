@@ -124,7 +124,7 @@ pub fn detect_cpu(
     k_detect: f32,
 ) -> (Vec<Blob>, Vec<StreakFit>) {
     use crate::cpu::{centroid, components, threshold};
-    let tiles = tile_stats(&frame.pixels, p);
+    let tiles = crate::cpu::tile_clip::tile_clip(&tile_stats(&frame.pixels, p), p);
     let runs = threshold::threshold(&frame.pixels, &tiles, p);
     let labels = components::components(&runs, p.width);
     let blobs = centroid::centroid(&frame.pixels, &runs, &labels, &tiles, p);

@@ -43,6 +43,7 @@ mod streaks;
 mod streaks_cli;
 mod table;
 mod threshold;
+mod tile_clip;
 mod tracklets_cli;
 mod triangle;
 mod unseen;

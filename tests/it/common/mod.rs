@@ -93,7 +93,7 @@ pub fn cpu_detect(
     p: &gpustar::cpu::threshold::DetectParams,
 ) -> CpuDetect {
     use gpustar::cpu::*;
-    let tiles = threshold::tile_stats(&f.pixels, p);
+    let tiles = tile_clip::tile_clip(&threshold::tile_stats(&f.pixels, p), p);
     let runs = threshold::threshold(&f.pixels, &tiles, p);
     let labels = components::components(&runs, p.width);
     CpuDetect {
@@ -135,7 +135,10 @@ pub fn assert_detect_stages_equal_with(
     let mut n = 0;
     for (k, f) in frames.iter().enumerate() {
         let c = cpu_detect(f, &p);
-        assert!(c.tiles == ins.tiles[k], "frame {k}: tile_stats differ");
+        assert!(
+            c.tiles == ins.tiles[k],
+            "frame {k}: tile_stats → tile_clip differ"
+        );
         assert!(c.mask == ins.mask[k], "frame {k}: threshold masks differ");
         assert!(
             c.labels == ins.labels[k],

@@ -1,0 +1,160 @@
+//! Stage `tile_clip` (CPU twins of `shaders/tile_clip_sky.wgsl` and `shaders/tile_clip.wgsl`):
+//! a bloated star's tiles take the sky about them. A tile's median is the sky's while stars cover
+//! less than half of it; a photographic plate's bloated stars (20–150 px across with their
+//! halos) fill whole tiles, whose median and MAD are then the star's own level and slope: the
+//! star stays under its own threshold, or only a crescent of its halo passes it, and its fainter
+//! neighbours (a double exposure's fainter copies) become the brightest detections.
+//!
+//! The sky about a tile is the lower medians of the backgrounds and offsets of the 7 × 7 tiles
+//! about it. A tile *stands out* when its level (background + offset) is more than
+//! [`CLIP_OFFSETS`] of its sky's offsets above its sky's level; it is a star's *body* when its
+//! median is more than [`BODY_OFFSETS`] of them above its sky's background. A tile that stands
+//! out takes its sky when it or one of its 8 neighbours is a body: the body and its rim, whose
+//! MAD the star's slope inflates. The edge of a lit tree or roof stands out by its spread, but
+//! is no body, and keeps its statistics. Integers only: the GPU computes the same.
+
+use super::threshold::{DetectParams, TileStats};
+
+/// Tiles on each side of a tile that make its neighbourhood (7 × 7 tiles): a star whose halo
+/// covers up to 4 × 4 tiles (130 px at the default 32) leaves most of the 49 to the sky, its
+/// central tiles included.
+pub const CLIP_REACH: i32 = 3;
+
+/// How many of the neighbourhood's offsets (each about 5σ) a tile's level may stand above the
+/// neighbourhood's before it is clipped: 3, about 15σ, which sky under a gradient (amp glow,
+/// twilight, vignetting) does not climb within two tiles, and which a faint nebula's tiles do
+/// not reach in one exposure.
+pub const CLIP_OFFSETS: u32 = 3;
+
+/// The sky about each tile: the lower medians of the backgrounds and of the offsets of the
+/// tiles within [`CLIP_REACH`] (those inside the frame). Kernel 1 of the stage.
+pub fn tile_clip_sky(tiles: &[TileStats], p: &DetectParams) -> Vec<TileStats> {
+    let (tx, ty) = (p.tiles_x as i32, p.tiles_y as i32);
+    let mut out = Vec::with_capacity(tiles.len());
+    let mut bg = Vec::with_capacity(49);
+    let mut off = Vec::with_capacity(49);
+    for y in 0..ty {
+        for x in 0..tx {
+            bg.clear();
+            off.clear();
+            for ny in (y - CLIP_REACH).max(0)..=(y + CLIP_REACH).min(ty - 1) {
+                for nx in (x - CLIP_REACH).max(0)..=(x + CLIP_REACH).min(tx - 1) {
+                    let t = tiles[(ny * tx + nx) as usize];
+                    bg.push(t.background);
+                    off.push(t.offset);
+                }
+            }
+            bg.sort_unstable();
+            off.sort_unstable();
+            out.push(TileStats {
+                background: bg[(bg.len() - 1) / 2],
+                offset: off[(off.len() - 1) / 2],
+            });
+        }
+    }
+    out
+}
+
+/// Whether a tile's level stands more than [`CLIP_OFFSETS`] of its sky's offsets above its
+/// sky's level. Backgrounds ≤ 65535 and offsets ≤ 7.42 · 65535: no sum here overflows.
+fn stands_out(t: TileStats, sky: TileStats) -> bool {
+    t.background + t.offset > sky.background + (1 + CLIP_OFFSETS) * sky.offset
+}
+
+/// Whether a tile is a bloated star's body: its median, more than half its pixels, stands
+/// [`BODY_OFFSETS`] of its sky's offsets (about 20σ) above its sky. A lit tree's or roof's
+/// edge stands out by its spread more than by its median.
+fn body(t: TileStats, sky: TileStats) -> bool {
+    t.background > sky.background + BODY_OFFSETS * sky.offset
+}
+
+/// How many of its sky's offsets a tile's median must stand above its sky for the tile to be
+/// a star's body.
+pub const BODY_OFFSETS: u32 = 4;
+
+/// The tiles of one frame, clipped (see the module documentation): a tile that stands out
+/// takes its sky when it, or one of the 8 tiles about it, is a star's body (a body's rim,
+/// whose MAD the star's slope inflates). `tiles` in row order, `p.tiles_x` × `p.tiles_y`;
+/// `sky` from [`tile_clip_sky`]. Kernel 2 of the stage.
+pub fn tile_clip_with(tiles: &[TileStats], sky: &[TileStats], p: &DetectParams) -> Vec<TileStats> {
+    let (tx, ty) = (p.tiles_x as i32, p.tiles_y as i32);
+    let at = |x: i32, y: i32| (y * tx + x) as usize;
+    let mut out = tiles.to_vec();
+    for y in 0..ty {
+        for x in 0..tx {
+            let i = at(x, y);
+            if !stands_out(tiles[i], sky[i]) {
+                continue;
+            }
+            let near_body = ((y - 1).max(0)..=(y + 1).min(ty - 1)).any(|ny| {
+                ((x - 1).max(0)..=(x + 1).min(tx - 1))
+                    .any(|nx| body(tiles[at(nx, ny)], sky[at(nx, ny)]))
+            });
+            if near_body {
+                out[i] = sky[i];
+            }
+        }
+    }
+    out
+}
+
+/// The stage: [`tile_clip_sky`], then [`tile_clip_with`].
+pub fn tile_clip(tiles: &[TileStats], p: &DetectParams) -> Vec<TileStats> {
+    tile_clip_with(tiles, &tile_clip_sky(tiles, p), p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params(tx: u32, ty: u32) -> DetectParams {
+        DetectParams::new(tx * 32, ty * 32, 32, 5.0, 65535)
+    }
+
+    #[test]
+    fn a_bloated_star_s_tiles_take_the_sky_and_the_sky_is_left_alone() {
+        let p = params(10, 8);
+        // A gentle gradient, 20 ADU per tile across the frame: never clipped.
+        let sky: Vec<TileStats> = (0..80)
+            .map(|i| TileStats {
+                background: 1000 + 20 * (i % 10) as u32,
+                offset: 30,
+            })
+            .collect();
+        assert_eq!(tile_clip(&sky, &p), sky);
+        // A bloated star: a flat top of 2 × 2 tiles at its own level, a ring whose MAD its
+        // slope inflates, one tile of faint halo.
+        let mut tiles = sky.clone();
+        for y in 2..6 {
+            for x in 3..7 {
+                let inner = (3..5).contains(&y) && (4..6).contains(&x);
+                tiles[y * 10 + x] = if inner {
+                    TileStats {
+                        background: 40000,
+                        offset: 40,
+                    }
+                } else {
+                    TileStats {
+                        background: sky[y * 10 + x].background + 300,
+                        offset: 900,
+                    }
+                };
+            }
+        }
+        tiles[2 * 10 + 3] = TileStats {
+            background: 1090,
+            offset: 60,
+        };
+        let clipped = tile_clip(&tiles, &p);
+        for (i, (c, t)) in clipped.iter().zip(&tiles).enumerate() {
+            if i == 23 || !(2..6).contains(&(i / 10)) || !(3..7).contains(&(i % 10)) {
+                assert_eq!(c, t, "tile {i} kept");
+            } else {
+                assert!(
+                    c.background < 1200 && c.offset == 30,
+                    "tile {i} clipped: {c:?}"
+                );
+            }
+        }
+    }
+}
