@@ -126,7 +126,8 @@ def main():
                          "of each other: the group's median width × (1 ± --scale-rel), as a user gives "
                          "a camera's scale (gpustar's cached pattern index then serves the group)")
     ap.add_argument("--report", nargs="+", type=Path, metavar="JSONL",
-                    help="only print the table of rows saved by earlier runs' --out")
+                    help="only print the table of rows saved by earlier runs' --out; a frame's row in a "
+                         "later file replaces the tools it holds (one run's astrometry beside another's gpustar)")
     ap.add_argument("--tol-frac", type=float, default=0.01, help="right: centre within this fraction of the width")
     ap.add_argument("--timeout", type=int, default=300, help="seconds a frame for each tool")
     ap.add_argument("--core", type=int, default=0, help="the core both tools are pinned to (taskset)")
@@ -138,7 +139,11 @@ def main():
     args = ap.parse_args()
     tools = args.tools.split(",")
     if args.report:
-        report([r for p in args.report for r in read_jsonl(p)], tools)
+        merged = {}
+        for p in args.report:
+            for r in read_jsonl(p):
+                merged.setdefault((r["set"], r["file"]), {}).update(r)
+        report([r for r in merged.values() if all(t in r for t in tools)], tools)
         return
     work = Path(tempfile.mkdtemp(prefix="bench_an_"))
     rows = []
