@@ -204,8 +204,9 @@ class Solver:
     (built on first use, cached on disk) and the GPU context.
 
     ``camera``: a camera file (TOML, as ``--camera``) or its text; or ``fov_deg``: the
-    horizontal field of view in degrees (square pixels, centred, no distortion, size from
-    each image), or a ``(low, high)`` range to search. ``catalog``: a file ``gpustar catalog
+    horizontal field of view in degrees (centred, no distortion, size from each image; square
+    pixels unless the option ``pixel_aspect`` gives a pixel's height over its width), or a
+    ``(low, high)`` range to search. ``catalog``: a file ``gpustar catalog
     import`` made (default: the built-in Hipparcos-2, Hp <= 8). ``backend``: "auto", "gpu"
     or "cpu", as ``--backend``.
 

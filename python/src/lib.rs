@@ -94,6 +94,7 @@ struct Built {
 /// The options' names (with [`STREAK_OPTIONS`]), for the message that refuses any other.
 const OPTIONS: &[&str] = &[
     "fov_tolerance",
+    "pixel_aspect",
     "fov_walk",
     "fit",
     "mag_limit",
@@ -209,7 +210,17 @@ fn camera_source(
     camera: Option<&Bound<'_, PyAny>>,
     fov_deg: Option<&Bound<'_, PyAny>>,
     fov_tolerance: Option<f64>,
+    pixel_aspect: Option<f64>,
 ) -> PyResult<CameraChoice> {
+    if pixel_aspect.is_some() && fov_deg.is_none() {
+        return Err(config(
+            "pixel_aspect goes with fov_deg (a camera file gives fx_px and fy_px)",
+        ));
+    }
+    let with_aspect = |x: f64| CameraSource::Fov {
+        fov_x_deg: x,
+        pixel_aspect: pixel_aspect.unwrap_or(1.0),
+    };
     let tolerance = match fov_tolerance {
         Some(t) if !(t > 0.0 && t < 0.5) => {
             return Err(config("fov_tolerance must be between 0 and 0.5"));
@@ -252,12 +263,12 @@ fn camera_source(
                 let mid = (lo + hi) / 2.0;
                 let k = |x: f64| 1.0 / (x.to_radians() / 2.0).tan();
                 Ok((
-                    CameraSource::Fov(mid),
+                    with_aspect(mid),
                     None,
                     Some((k(hi) / k(mid), k(lo) / k(mid))),
                 ))
             } else {
-                Ok((CameraSource::Fov(fov(f.extract()?)?), None, tolerance))
+                Ok((with_aspect(fov(f.extract()?)?), None, tolerance))
             }
         }
         (None, None) => Err(config("give the camera: camera=FILE or fov_deg=DEG")),
@@ -274,8 +285,12 @@ fn build(
     let o = Opts::new(options)?;
     let backend = <BackendChoice as clap::ValueEnum>::from_str(backend, true)
         .map_err(|_| config(format!("backend: {backend:?} is not one of auto, gpu, cpu")))?;
-    let (camera, camera_mag, scale_range) =
-        camera_source(camera, fov_deg, o.get::<f64>("fov_tolerance")?)?;
+    let (camera, camera_mag, scale_range) = camera_source(
+        camera,
+        fov_deg,
+        o.get::<f64>("fov_tolerance")?,
+        o.within("pixel_aspect", 0.5, 2.0)?,
+    )?;
     let cat = Catalog::load(catalog.as_deref()).map_err(py_err)?;
     let mut s = Settings::default();
     if let Some(e) = o.within("epoch", 1000.0, 3000.0)? {
@@ -335,7 +350,7 @@ fn build(
     s.walk_wide = o.get::<bool>("fov_walk")?.unwrap_or(false);
     // As `--parity`: open with fov_deg, the camera file's with camera.
     s.parity = match (o.get::<String>("parity")?.as_deref(), &camera) {
-        (Some("either"), _) | (None, CameraSource::Fov(_)) => Parity::Either,
+        (Some("either"), _) | (None, CameraSource::Fov { .. }) => Parity::Either,
         (Some("camera"), _) | (None, _) => Parity::AsCamera,
         (Some(p), _) => {
             return Err(config(format!(

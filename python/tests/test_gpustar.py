@@ -223,6 +223,10 @@ def test_options_and_errors_are_the_clis():
         gpustar.Solver(fov_deg=400)
     with pytest.raises(gpustar.ConfigError, match="give the camera"):
         gpustar.Solver()
+    with pytest.raises(gpustar.ConfigError, match="pixel_aspect: 3 is outside 0.5 to 2"):
+        gpustar.Solver(fov_deg=FOV, pixel_aspect=3)
+    with pytest.raises(gpustar.ConfigError, match="pixel_aspect goes with fov_deg"):
+        gpustar.Solver(camera="width = 64\nheight = 64\nfov_x_deg = 10\n", pixel_aspect=0.9)
     with pytest.raises(gpustar.IoError, match="cannot read /nonexistent/cam.toml"):
         gpustar.Solver(camera="/nonexistent/cam.toml")
     with pytest.raises(gpustar.InputError, match="is not a directory"):

@@ -140,10 +140,14 @@ pub struct CameraOpts {
     /// mirrored, mag_limit).
     #[arg(long, conflicts_with = "fov_deg")]
     pub camera: Option<PathBuf>,
-    /// Horizontal field of view in degrees: square pixels, centred, no distortion. A range
-    /// (e.g. 8..20) searches the scale; the records give the fitted FOV.
+    /// Horizontal field of view in degrees: square pixels (or --pixel-aspect), centred, no
+    /// distortion. A range (e.g. 8..20) searches the scale; the records give the fitted FOV.
     #[arg(long, value_parser = parse_fov)]
     pub fov_deg: Option<FovArg>,
+    /// With --fov-deg: a pixel's height over its width, for sensors of non-square pixels (a
+    /// Lodestar's 8.3 µm × 8.6 µm: 8.3/8.6); a number or a ratio A/B. --fov-deg is the width's.
+    #[arg(long, requires = "fov_deg", value_parser = parse_pixel_aspect)]
+    pub pixel_aspect: Option<f64>,
     /// The camera's focal length is only known to within this fraction (e.g. 0.01): search
     /// the scale within it and fit it.
     #[arg(long)]
@@ -189,6 +193,25 @@ pub enum FovArg {
 
 fn parse_hint_arg(s: &str) -> std::result::Result<gpustar::sky::hint::HintSource, String> {
     gpustar::sky::hint::parse_hint(s).map_err(|e| e.to_string())
+}
+
+pub(crate) fn parse_pixel_aspect(s: &str) -> std::result::Result<f64, String> {
+    let num = |v: &str| -> std::result::Result<f64, String> {
+        v.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("bad pixel aspect {s:?}: give a number or a ratio A/B"))
+    };
+    let r = match s.split_once('/') {
+        Some((a, b)) => num(a)? / num(b)?,
+        None => num(s)?,
+    };
+    if (0.5..=2.0).contains(&r) {
+        Ok(r)
+    } else {
+        Err(format!(
+            "pixel aspect (height / width) must be between 0.5 and 2, got {s:?}"
+        ))
+    }
 }
 
 pub(crate) fn parse_fov(s: &str) -> std::result::Result<FovArg, String> {

@@ -68,9 +68,12 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
     let camera = match source {
         CameraSource::Fixed(cam) => cam,
         CameraSource::None => bail!("give the camera: --camera FILE or --fov-deg DEG"),
-        CameraSource::Fov(fov) => {
+        CameraSource::Fov {
+            fov_x_deg,
+            pixel_aspect,
+        } => {
             let (w, h) = size.context("--fov-deg needs --size WIDTHxHEIGHT here")?;
-            Camera::from_fov(w, h, fov)?
+            Camera::from_fov(w, h, fov_x_deg)?.with_pixel_aspect(pixel_aspect)
         }
     };
     let s = Settings {

@@ -34,21 +34,21 @@ pub(crate) fn camera_source(
         Some(t) => Some((1.0 - t, 1.0 + t)),
         None => None,
     };
+    let fov = |fov_x_deg| CameraSource::Fov {
+        fov_x_deg,
+        pixel_aspect: c.pixel_aspect.unwrap_or(1.0),
+    };
     match (&c.camera, c.fov_deg) {
         (Some(path), _) => {
             let (cam, mag) = Camera::from_toml_file(path)?;
             Ok((CameraSource::Fixed(cam), mag, tolerance))
         }
-        (None, Some(FovArg::Exact(fov))) => Ok((CameraSource::Fov(fov), None, tolerance)),
+        (None, Some(FovArg::Exact(deg))) => Ok((fov(deg), None, tolerance)),
         (None, Some(FovArg::Range(lo, hi))) => {
             // The camera of the middle FOV; focal lengths scale as 1 / tan(FOV / 2).
             let mid = (lo + hi) / 2.0;
             let f = |fov: f64| 1.0 / (fov.to_radians() / 2.0).tan();
-            Ok((
-                CameraSource::Fov(mid),
-                None,
-                Some((f(hi) / f(mid), f(lo) / f(mid))),
-            ))
+            Ok((fov(mid), None, Some((f(hi) / f(mid), f(lo) / f(mid)))))
         }
         (None, None) if header_only => Ok((CameraSource::None, None, None)),
         (None, None) => bail!(
@@ -62,7 +62,7 @@ pub(crate) fn camera_source(
 /// `--fov-deg` (which says nothing of it), the camera file's with `--camera`.
 pub(crate) fn parity(c: &CameraOpts, source: &CameraSource) -> Parity {
     match (c.parity, source) {
-        (Some(ParityArg::Either), _) | (None, CameraSource::Fov(_)) => Parity::Either,
+        (Some(ParityArg::Either), _) | (None, CameraSource::Fov { .. }) => Parity::Either,
         _ => Parity::AsCamera,
     }
 }

@@ -30,11 +30,21 @@ use std::time::Instant;
 pub enum CameraSource {
     /// A camera file: frames of another size are errors.
     Fixed(Camera),
-    /// `--fov-deg`: square pixels, centred, no distortion, sized by each frame.
-    Fov(f64),
+    /// `--fov-deg` (and `--pixel-aspect`): centred, no distortion, sized by each frame.
+    Fov { fov_x_deg: f64, pixel_aspect: f64 },
     /// None (`--streaks --astrometry header` alone): stars are not identified (records are
     /// `unsolved`, reason `no_camera`); streaks are reduced through each header's WCS.
     None,
+}
+
+impl CameraSource {
+    /// `--fov-deg` alone: square pixels.
+    pub fn fov(fov_x_deg: f64) -> CameraSource {
+        CameraSource::Fov {
+            fov_x_deg,
+            pixel_aspect: 1.0,
+        }
+    }
 }
 
 /// Which backend runs the kernels, as asked on the command line.
@@ -284,14 +294,19 @@ impl Solvers {
                 c.clone()
             }
             CameraSource::None => return Err("no camera given".into()),
-            CameraSource::Fov(fov) => {
+            CameraSource::Fov {
+                fov_x_deg,
+                pixel_aspect,
+            } => {
                 if width < MIN_SIDE || height < MIN_SIDE {
                     return Err(format!(
                         "image is {width}x{height}: too small to hold a star field (gpustar \
                          needs at least {MIN_SIDE} pixels a side)"
                     ));
                 }
-                Camera::from_fov(width, height, *fov).map_err(|e| format!("{e:#}"))?
+                Camera::from_fov(width, height, *fov_x_deg)
+                    .map_err(|e| format!("{e:#}"))?
+                    .with_pixel_aspect(*pixel_aspect)
             }
         })
     }

@@ -49,7 +49,7 @@ fn pipeline(backend: Backend, fov: f64, epoch: f64) -> Pipeline {
     Pipeline::new(
         Catalog::builtin(),
         settings,
-        CameraSource::Fov(fov),
+        CameraSource::fov(fov),
         backend,
     )
 }

@@ -29,6 +29,7 @@ mod layout;
 mod noise;
 mod parity;
 mod pattern;
+mod pixel_aspect;
 mod psf_fit;
 mod radial;
 mod real;

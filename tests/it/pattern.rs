@@ -220,7 +220,7 @@ fn unknown_fields_give_the_same_records_on_both_backends() {
         Pipeline::new(
             Catalog::builtin(),
             settings(),
-            CameraSource::Fov(15.0),
+            CameraSource::fov(15.0),
             backend,
         )
     };
