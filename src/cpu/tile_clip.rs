@@ -13,7 +13,7 @@
 //! MAD the star's slope inflates. The edge of a lit tree or roof stands out by its spread, but
 //! is no body, and keeps its statistics. Integers only: the GPU computes the same.
 
-use super::threshold::{DetectParams, TileStats};
+use super::threshold::{DetectParams, TileStats, tile_stats};
 
 /// Tiles on each side of a tile that make its neighbourhood (7 × 7 tiles): a star whose halo
 /// covers up to 4 × 4 tiles (130 px at the default 32) leaves most of the 49 to the sky, its
@@ -25,6 +25,10 @@ pub const CLIP_REACH: i32 = 3;
 /// twilight, vignetting) does not climb within two tiles, and which a faint nebula's tiles do
 /// not reach in one exposure.
 pub const CLIP_OFFSETS: u32 = 3;
+
+/// How many of its sky's offsets a tile's median must stand above its sky for the tile to be
+/// a star's body.
+pub const BODY_OFFSETS: u32 = 4;
 
 /// The sky about each tile: the lower medians of the backgrounds and of the offsets of the
 /// tiles within [`CLIP_REACH`] (those inside the frame). Kernel 1 of the stage.
@@ -68,10 +72,6 @@ fn body(t: TileStats, sky: TileStats) -> bool {
     t.background > sky.background + BODY_OFFSETS * sky.offset
 }
 
-/// How many of its sky's offsets a tile's median must stand above its sky for the tile to be
-/// a star's body.
-pub const BODY_OFFSETS: u32 = 4;
-
 /// The tiles of one frame, clipped (see the module documentation): a tile that stands out
 /// takes its sky when it, or one of the 8 tiles about it, is a star's body (a body's rim,
 /// whose MAD the star's slope inflates). `tiles` in row order, `p.tiles_x` × `p.tiles_y`;
@@ -101,6 +101,12 @@ pub fn tile_clip_with(tiles: &[TileStats], sky: &[TileStats], p: &DetectParams) 
 /// The stage: [`tile_clip_sky`], then [`tile_clip_with`].
 pub fn tile_clip(tiles: &[TileStats], p: &DetectParams) -> Vec<TileStats> {
     tile_clip_with(tiles, &tile_clip_sky(tiles, p), p)
+}
+
+/// The tiles detection thresholds against, as the GPU leaves them: [`tile_stats`] of the
+/// pixels, then this stage.
+pub fn clipped_tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
+    tile_clip(&tile_stats(pixels, p), p)
 }
 
 #[cfg(test)]

@@ -1,6 +1,6 @@
-//! Detection on the GPU: threshold_tiles → tile_clip_sky → tile_clip → threshold → components_merge → components_compress
-//! → centroid_count → centroid_scan → centroid, for a batch of frames of one size in one
-//! submission, reading back only the blob lists.
+//! Detection on the GPU: threshold_tiles → tile_clip_sky → tile_clip → threshold →
+//! components_merge → components_compress → centroid_count → centroid_scan → centroid, for a
+//! batch of frames of one size in one submission, reading back only the blob lists.
 
 use super::{Gpu, dispatch_strided};
 use crate::cpu::centroid::Blob;

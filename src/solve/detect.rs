@@ -106,13 +106,11 @@ pub fn params(frame: &Frame, s: &DetectSettings) -> DetectParams {
 
 /// Run the CPU twins of the detection kernels: the blobs in label order.
 pub fn blobs_cpu(frame: &Frame, p: &DetectParams) -> Vec<Blob> {
-    blobs_cpu_with(frame, p, &tiles_cpu(frame, p))
-}
-
-/// The CPU twins of the tile stages: the statistics of each tile ([`cpu::threshold::tile_stats`]),
-/// clipped where a tile stands far above its neighbourhood ([`cpu::tile_clip::tile_clip`]).
-pub fn tiles_cpu(frame: &Frame, p: &DetectParams) -> Vec<TileStats> {
-    cpu::tile_clip::tile_clip(&cpu::threshold::tile_stats(&frame.pixels, p), p)
+    blobs_cpu_with(
+        frame,
+        p,
+        &cpu::tile_clip::clipped_tile_stats(&frame.pixels, p),
+    )
 }
 
 /// [`blobs_cpu`] with the frame's tile statistics already computed (under parameters of the
@@ -227,7 +225,7 @@ pub struct Detector<'f> {
 impl<'f> Detector<'f> {
     /// The frame's tile statistics under `settings`.
     pub fn new(frame: &'f Frame<'f>, settings: &DetectSettings) -> Self {
-        let tiles = tiles_cpu(frame, &params(frame, settings));
+        let tiles = cpu::tile_clip::clipped_tile_stats(&frame.pixels, &params(frame, settings));
         Detector {
             frame,
             settings: *settings,

@@ -10,7 +10,6 @@
 //! detection at one offset, or at one reflection.
 
 use super::detect::Detection;
-use super::refine::Match;
 use rustc_hash::{FxHashMap, FxHashSet};
 
 /// Matches with a brighter copy below which a solution is never refused.
@@ -26,21 +25,21 @@ pub const RELATION_CELL_PX: f64 = 4.0;
 
 /// The most matches that have a brighter unmatched detection in one relation: at one offset
 /// (unmatched − matched), or one reflection (unmatched + matched), within
-/// [`RELATION_CELL_PX`].
-pub fn copied_matches(dets: &[Detection], matches: &[Match]) -> usize {
-    let matched: FxHashSet<usize> = matches.iter().map(|m| m.det).collect();
+/// [`RELATION_CELL_PX`]. `matched`: the indices in `dets` of the matched detections.
+pub fn copied_matches(dets: &[Detection], matched: &[usize]) -> usize {
+    let is_matched: FxHashSet<usize> = matched.iter().copied().collect();
     let unmatched: Vec<&Detection> = dets
         .iter()
         .enumerate()
-        .filter(|(i, _)| !matched.contains(i))
+        .filter(|(i, _)| !is_matched.contains(i))
         .map(|(_, d)| d)
         .collect();
     let mut best = 0;
     for sign in [-1.0, 1.0] {
         // Cell of each relation → the matches that have a brighter copy in it.
         let mut cells: FxHashMap<(i64, i64), Vec<usize>> = FxHashMap::default();
-        for (k, m) in matches.iter().enumerate() {
-            let a = &dets[m.det];
+        for (k, &m) in matched.iter().enumerate() {
+            let a = &dets[m];
             for u in unmatched.iter().filter(|u| u.flux > a.flux) {
                 let key = (
                     ((u.x + sign * a.x) / RELATION_CELL_PX).round() as i64,
@@ -65,10 +64,16 @@ pub fn copied_matches(dets: &[Detection], matches: &[Match]) -> usize {
     best
 }
 
-/// Whether `matches` explain the brightest of `dets` (see the module documentation).
-pub fn explains_brightest(dets: &[Detection], matches: &[Match]) -> bool {
-    let copied = copied_matches(dets, matches);
-    copied < MIN_COPIES || (copied as f64) <= MAX_COPIED * matches.len() as f64
+/// Whether the matched detections (indices in `dets`) explain the brightest of `dets` (see the
+/// module documentation).
+pub fn explains_brightest(dets: &[Detection], matched: &[usize]) -> bool {
+    explained(copied_matches(dets, matched), matched.len())
+}
+
+/// Whether `copied` of `matches` matches with a brighter copy in one relation leave the
+/// solution standing.
+pub fn explained(copied: usize, matches: usize) -> bool {
+    copied < MIN_COPIES || (copied as f64) <= MAX_COPIED * matches as f64
 }
 
 #[cfg(test)]
@@ -87,16 +92,8 @@ mod tests {
         }
     }
 
-    fn matched(dets: &[usize]) -> Vec<Match> {
-        dets.iter()
-            .map(|&det| Match {
-                det,
-                ref_id: det as u32,
-                residual_arcsec: 0.1,
-                residual_px: 0.1,
-                sigma_px: None,
-            })
-            .collect()
+    fn matched(dets: &[usize]) -> Vec<usize> {
+        dets.to_vec()
     }
 
     /// 12 stars on a pseudo-random scatter, brightest first.

@@ -279,13 +279,16 @@ pub fn refine(
     let accepted = false_match_prob <= s.max_false_prob;
     // An accepted solution whose matches have brighter unmatched copies (a double exposure's,
     // ghosts) is no solution: the search goes on.
-    if accepted && !super::explain::explains_brightest(dets, &matches) {
-        tracing::debug!(
-            "refused: {} of {} matches have a brighter unmatched copy in one relation",
-            super::explain::copied_matches(dets, &matches),
-            matches.len()
-        );
-        return None;
+    if accepted {
+        let matched: Vec<usize> = matches.iter().map(|m| m.det).collect();
+        let copied = super::explain::copied_matches(dets, &matched);
+        if !super::explain::explained(copied, matches.len()) {
+            tracing::debug!(
+                "refused: {copied} of {} matches have a brighter unmatched copy in one relation",
+                matches.len()
+            );
+            return None;
+        }
     }
     if accepted && s.fit == CameraFit::None && 3.0 * scatter > s.match_radius_px {
         // The scatter of matches cut off at the match radius understates the true one.

@@ -23,7 +23,7 @@ pub mod tracklet;
 
 use crate::cpu::centroid::Blob;
 use crate::cpu::streak_filter::{BIN, StreakParams, grid, mask_runs, streak_mask};
-use crate::cpu::threshold::{DetectParams, TileStats, background_at, tile_stats};
+use crate::cpu::threshold::{DetectParams, TileStats, background_at};
 use crate::io::frame::Frame;
 use crate::sky;
 use fit::StreakFit;
@@ -124,7 +124,7 @@ pub fn detect_cpu(
     k_detect: f32,
 ) -> (Vec<Blob>, Vec<StreakFit>) {
     use crate::cpu::{centroid, components, threshold};
-    let tiles = crate::cpu::tile_clip::tile_clip(&tile_stats(&frame.pixels, p), p);
+    let tiles = crate::cpu::tile_clip::clipped_tile_stats(&frame.pixels, p);
     let runs = threshold::threshold(&frame.pixels, &tiles, p);
     let labels = components::components(&runs, p.width);
     let blobs = centroid::centroid(&frame.pixels, &runs, &labels, &tiles, p);

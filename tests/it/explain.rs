@@ -122,7 +122,10 @@ fn the_copies_attitude_is_refused_and_the_bright_images_accepted() {
             );
             (
                 (
-                    gpustar::solve::explain::copied_matches(&dets, &r.matches),
+                    gpustar::solve::explain::copied_matches(
+                        &dets,
+                        &r.matches.iter().map(|m| m.det).collect::<Vec<_>>(),
+                    ),
                     r.matches.len(),
                 ),
                 r.false_match_prob,

@@ -410,7 +410,7 @@ fn streak_mask_gpu_equals_cpu() {
         let sp = StreakParams::new(&p, 3.5, 5.0);
         let (blobs, pixels) = gpu.detect_streaks(&refs, &p, &sp).unwrap();
         for (k, f) in frames.iter().enumerate() {
-            let tiles = gpustar::cpu::tile_clip::tile_clip(&tile_stats(&f.pixels, &p), &p);
+            let tiles = gpustar::cpu::tile_clip::clipped_tile_stats(&f.pixels, &p);
             assert_eq!(pixels[k].tiles, tiles, "{w}x{h} frame {k}: tiles");
             let cpu = streak_mask(&f.pixels, &tiles, &p, &sp);
             assert_eq!(pixels[k].mask, cpu, "{w}x{h} frame {k}: streak mask");

@@ -93,7 +93,7 @@ pub fn cpu_detect(
     p: &gpustar::cpu::threshold::DetectParams,
 ) -> CpuDetect {
     use gpustar::cpu::*;
-    let tiles = tile_clip::tile_clip(&threshold::tile_stats(&f.pixels, p), p);
+    let tiles = tile_clip::clipped_tile_stats(&f.pixels, p);
     let runs = threshold::threshold(&f.pixels, &tiles, p);
     let labels = components::components(&runs, p.width);
     CpuDetect {
