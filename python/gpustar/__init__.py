@@ -385,7 +385,7 @@ def batch(directory: PathLike, camera: Optional[PathLike] = None,
           dark: Optional[PathLike] = None, dark_median: bool = False,
           wcs_dir: Optional[PathLike] = None, annotate_dir: Optional[PathLike] = None,
           tdm: Optional[PathLike] = None, iod: Optional[PathLike] = None, iod_station: int = 9999,
-          progress: Progress = None, **options: Any) -> Batch:
+          overwrite: bool = False, progress: Progress = None, **options: Any) -> Batch:
     """``gpustar batch DIRECTORY``: every image file of the directory (sorted by path),
     decoded and solved on worker threads (or the GPU in batches), as an iterator of results
     in input order. ``output`` also writes the records to a file, as JSON Lines or
@@ -395,7 +395,8 @@ def batch(directory: PathLike, camera: Optional[PathLike] = None,
     is subtracted before detection; ``wcs_dir`` gets a FITS WCS header per solved frame,
     ``annotate_dir`` an annotated PNG per frame; with ``streaks=True``, ``tdm`` and ``iod``
     write the streaks as a CCSDS TDM and as IOD lines (``iod_station``: your COSPAR site)
-    when the run ends. Each is the command line's option of that name. ``progress`` as in
+    when the run ends; ``overwrite`` lets those replace files gpustar did not write (never an
+    input, never ``output``). Each is the command line's option of that name. ``progress`` as in
     :meth:`Solver.solve_many`; other options as :class:`Solver`'s.
     """
     path = lambda p: None if p is None else os.fspath(p)  # noqa: E731
@@ -403,7 +404,7 @@ def batch(directory: PathLike, camera: Optional[PathLike] = None,
         os.fspath(directory), path(camera), fov_deg, path(catalog), backend, path(output), resume,
         retry_errors, shard, recursive, sequence, frame_interval_s, options or None, format,
         path(dark), dark_median, path(wcs_dir), path(annotate_dir), path(tdm), path(iod),
-        int(iod_station))
+        int(iod_station), bool(overwrite))
     return Batch(run, progress)
 
 

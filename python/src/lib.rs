@@ -1040,7 +1040,7 @@ impl Drop for ManyRun {
 #[pyo3(signature = (directory, camera=None, fov_deg=None, catalog=None, backend="auto",
     output=None, resume=false, retry_errors=false, shard=None, recursive=false, sequence=false,
     frame_interval_s=None, options=None, format="jsonl", dark=None, dark_median=false,
-    wcs_dir=None, annotate_dir=None, tdm=None, iod=None, iod_station=NO_SITE))]
+    wcs_dir=None, annotate_dir=None, tdm=None, iod=None, iod_station=NO_SITE, overwrite=false))]
 #[allow(clippy::too_many_arguments)]
 fn start_batch(
     py: Python<'_>,
@@ -1065,6 +1065,7 @@ fn start_batch(
     tdm: Option<PathBuf>,
     iod: Option<PathBuf>,
     iod_station: u16,
+    overwrite: bool,
 ) -> PyResult<BatchRun> {
     let format = <Format as clap::ValueEnum>::from_str(format, true)
         .map_err(|_| config(format!("format: {format:?} is not one of jsonl, csv")))?;
@@ -1089,6 +1090,7 @@ fn start_batch(
     if retry_errors && !resume {
         return Err(config("retry_errors goes with resume=True"));
     }
+    let catalog_path = catalog.clone();
     let mut b = build(camera.as_ref(), fov_deg.as_ref(), catalog, backend, options)?;
     if b.solvers.streaks.is_none() {
         for (k, given) in [("tdm", tdm.is_some()), ("iod", iod.is_some())] {
@@ -1104,12 +1106,13 @@ fn start_batch(
         (None, true) => Darks::directory_median(),
         (None, false) => Darks::None,
     };
-    b.solvers.products = Products {
+    let mut exports = Exports::new(tdm, iod, iod_station);
+    let mut products = Products {
         wcs_dir,
         annotate_dir,
+        overwrite,
+        ..Products::default()
     };
-    let mut exports = Exports::new(tdm, iod, iod_station);
-    exports.check_paths().map_err(py_err)?;
     if sequence && b.solvers.streaks.is_some() {
         return Err(config(
             "sequence and streaks do not go together yet: run the sequences and the streak \
@@ -1131,6 +1134,27 @@ fn start_batch(
             })
         });
     }
+    // Every output checked before any work, and before `output` is emptied (as the command
+    // line does).
+    let read: Vec<(&std::path::Path, &'static str)> =
+        [(&catalog_path, "the catalog"), (&dark, "the dark frame")]
+            .into_iter()
+            .filter_map(|(p, w)| p.as_deref().map(|p| (p, w)))
+            .collect();
+    gpustar::batch::claims::check_outputs(
+        &gpustar::batch::claims::RunFiles {
+            dir: Some((&directory, recursive)),
+            inputs: &list,
+            read,
+            records: output.as_deref(),
+            stdout: false,
+            resume,
+        },
+        &exports,
+        &mut products,
+    )
+    .map_err(py_err)?;
+    b.solvers.products = products;
     let (out, header): (Box<dyn std::io::Write + Send>, bool) = match &output {
         Some(p) => {
             let opened = output::open_output(p, format, resume, retry_errors).map_err(py_err)?;

@@ -5,6 +5,8 @@
 //! being handed out and being written (the writer returns a ticket for each record it writes,
 //! and the feeder needs one to hand out the next input).
 
+pub mod claims;
+
 use crate::error::Result;
 use crate::io::inputs::Input;
 use crate::io::output::RecordWriter;

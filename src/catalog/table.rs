@@ -223,13 +223,19 @@ const MAGIC: &[u8; 8] = b"GPSTBL03";
 /// Where cached tables live: `$GPUSTAR_CACHE_DIR`, else `$XDG_CACHE_HOME/gpustar`, else
 /// `~/.cache/gpustar`.
 pub fn cache_dir() -> Option<PathBuf> {
-    if let Some(d) = std::env::var_os("GPUSTAR_CACHE_DIR") {
-        return Some(PathBuf::from(d));
+    // An empty variable is unset (as XDG says), not the working directory.
+    let var = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    if let Some(d) = var("GPUSTAR_CACHE_DIR") {
+        return Some(d);
     }
-    if let Some(d) = std::env::var_os("XDG_CACHE_HOME") {
-        return Some(PathBuf::from(d).join("gpustar"));
+    if let Some(d) = var("XDG_CACHE_HOME") {
+        return Some(d.join("gpustar"));
     }
-    std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("gpustar"))
+    var("HOME").map(|h| h.join(".cache").join("gpustar"))
 }
 
 /// How the table of a run was obtained.

@@ -355,6 +355,11 @@ pub struct SolveOpts {
     /// nothing matched as cyan crosses), at the input's relative path with the extension .png.
     #[arg(long, value_name = "DIR")]
     pub annotate_dir: Option<PathBuf>,
+    /// Replace files at the --tdm, --iod, --wcs-dir and --annotate-dir paths that gpustar did
+    /// not write (astrometry.net's .wcs files; IOD lines, which carry no mark of their
+    /// writer). Never an input, and never the records of -o.
+    #[arg(long)]
+    pub overwrite: bool,
     /// No progress bar, warnings or summary on stderr.
     #[arg(short, long)]
     pub quiet: bool,

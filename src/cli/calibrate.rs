@@ -3,10 +3,11 @@
 
 use super::args::*;
 use super::solve::*;
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use gpustar::calibrate::{self, CENTRE_SHIFT_SIGMAS, FitOptions, Step};
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
+use gpustar::io::guard::{Claims, Kind, check_replaceable, write_atomically};
 use gpustar::io::inputs;
 use gpustar::record::{Record, Status};
 use std::path::{Path, PathBuf};
@@ -30,6 +31,19 @@ pub(crate) fn calibrate_cmd(
     if inputs.is_empty() {
         bail!("{}: no image files to calibrate with", dir.display());
     }
+    // The camera file is written at the end of a long fit: checked now (not an input, not a
+    // file gpustar did not write, a directory that takes it).
+    let mut claims = Claims::new();
+    claims.input_dir(dir, recursive);
+    for (path, _) in &inputs {
+        claims.input(path, "a frame");
+    }
+    claims.input(camera_path, "the --camera file");
+    if let Some(p) = &c.catalog {
+        claims.input(p, "the --catalog");
+    }
+    claims.output(out, "-o")?;
+    check_replaceable(out, Kind::Camera, false)?;
     let (start, camera_mag) = Camera::from_toml_file(camera_path)?;
     let catalog = Catalog::load(c.catalog.as_deref())?;
     let found = calibrate::calibrate(
@@ -95,7 +109,7 @@ pub(crate) fn calibrate_cmd(
         fit.rotations.len()
     );
     let text = calibrate::camera_file(fit, &dir.display().to_string(), camera_mag);
-    std::fs::write(out, text).with_context(|| format!("cannot write {}", out.display()))?;
+    write_atomically(out, text.as_bytes())?;
     eprintln!("gpustar: wrote {}", out.display());
     Ok(ExitCode::SUCCESS)
 }

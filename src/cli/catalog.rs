@@ -4,7 +4,7 @@
 use anyhow::{Context, Result, bail};
 use gpustar::catalog::formats::{self, Format};
 use gpustar::catalog::{Catalog, StarId, store};
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -105,7 +105,7 @@ pub(crate) fn import_cmd(
         file
     };
     match output {
-        Some(p) => gpustar::io::output::write_atomically(p, &out)?,
+        Some(p) => gpustar::io::guard::write_atomically(p, &out)?,
         None => std::io::stdout().write_all(&out)?,
     }
     Ok(ExitCode::SUCCESS)
@@ -126,14 +126,9 @@ fn check_output(out: &Path, inputs: &[PathBuf], csv: bool) -> Result<()> {
             i.display()
         );
     }
-    let head = match std::fs::File::open(out) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(e).with_context(|| format!("cannot read {}", out.display())),
-        Ok(f) => {
-            let mut head = Vec::new();
-            std::io::Read::take(f, 64).read_to_end(&mut head)?;
-            head
-        }
+    // At most its first bytes, and only of a regular file (a FIFO or a device is refused).
+    let Some(head) = gpustar::io::guard::existing_head(out)? else {
+        return Ok(());
     };
     let ours = head.is_empty()
         || store::is_store(&head)

@@ -36,7 +36,15 @@ pub(crate) fn merge_cmd(
         }
     };
     let out: Box<dyn Write + Send> = match &output {
-        Some(p) => Box::new(output::open_output(p, Format::Jsonl, false, false)?.file),
+        Some(p) => {
+            // Not over a part: it would be emptied while its records are being written.
+            let mut claims = gpustar::io::guard::Claims::new();
+            for part in parts {
+                claims.input(part, "a part to merge");
+            }
+            claims.output(p, "-o")?;
+            Box::new(output::open_output(p, Format::Jsonl, false, false)?.file)
+        }
         None => Box::new(std::io::stdout()),
     };
     let mut w = RecordWriter::new(out, Format::Jsonl, false);

@@ -176,6 +176,18 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Command::Batch { dir, opts, run } => {
             let mut inputs = inputs::list(&dir, run.recursive)?;
+            // A batch never ends "0 files", exit 0, having read nothing.
+            if inputs.is_empty() {
+                anyhow::bail!(
+                    "{} holds no image files (PNG, JPEG, TIFF, FITS){}",
+                    dir.display(),
+                    if run.recursive {
+                        ""
+                    } else {
+                        "; --recursive reads its subdirectories too"
+                    }
+                );
+            }
             if let Some(shard) = run.shard {
                 // A sequence goes to one shard whole: its frames depend on each other.
                 inputs.retain(|i| {
@@ -186,7 +198,7 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
                     })
                 });
             }
-            run_solve(inputs, &opts, &run)
+            run_solve(inputs, Some((&dir, run.recursive)), &opts, &run)
         }
         Command::Solve { image, opts } => {
             let name = image.display().to_string();
@@ -205,6 +217,7 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
                     name,
                     replay: false,
                 }],
+                None,
                 &opts,
                 &run,
             )

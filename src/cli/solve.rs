@@ -78,7 +78,14 @@ pub(crate) fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
     }
 }
 
-pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Result<ExitCode> {
+/// Run `solve` or `batch` over `inputs`, listed from `dir` (with its subdirectories when the
+/// flag is set; None for `solve`'s one frame).
+pub(crate) fn run_solve(
+    inputs: Vec<Input>,
+    dir: Option<(&std::path::Path, bool)>,
+    o: &SolveOpts,
+    b: &RunArgs,
+) -> Result<ExitCode> {
     if b.sequence && o.streaks.streaks {
         anyhow::bail!(
             "--sequence and --streaks do not go together yet: run the sequences and the \
@@ -127,7 +134,34 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
         None => None,
     };
     let mut exports = Exports::new(so.tdm.clone(), so.iod.clone(), so.iod_station);
-    exports.check_paths()?;
+    let mut products = Products {
+        wcs_dir: o.wcs_dir.clone(),
+        annotate_dir: o.annotate_dir.clone(),
+        overwrite: o.overwrite,
+        ..Products::default()
+    };
+    // Every output checked before any work, and before -o is emptied.
+    let read = [
+        (o.catalog.catalog.as_deref(), "the --catalog"),
+        (o.camera.camera.as_deref(), "the --camera file"),
+        (o.dark.as_deref(), "the --dark frame"),
+        (so.tle.as_deref(), "the --tle file"),
+    ];
+    batch::claims::check_outputs(
+        &batch::claims::RunFiles {
+            dir,
+            inputs: &inputs,
+            read: read
+                .iter()
+                .filter_map(|(p, w)| p.map(|p| (p, *w)))
+                .collect(),
+            records: o.output.as_deref(),
+            stdout: true,
+            resume: b.resume,
+        },
+        &exports,
+        &mut products,
+    )?;
     // The output, and what an earlier run already wrote to it.
     let mut inputs = inputs;
     let mut header = true;
@@ -198,10 +232,7 @@ pub(crate) fn run_solve(inputs: Vec<Input>, o: &SolveOpts, b: &RunArgs) -> Resul
         (None, true) => Darks::directory_median(),
         (None, false) => Darks::None,
     };
-    solvers.products = Products {
-        wcs_dir: o.wcs_dir.clone(),
-        annotate_dir: o.annotate_dir.clone(),
-    };
+    solvers.products = products;
     solvers.streaks = so.streaks.then_some(StreakOptions {
         settings: StreakSettings {
             k_sigma: so.streak_sigma,

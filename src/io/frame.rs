@@ -100,6 +100,17 @@ impl Frame<'static> {
                 error: e,
             },
         })?;
+        if meta.is_dir() {
+            // Listed because it could not be read (io::inputs::list): its frames are unknown.
+            let why = std::fs::read_dir(path)
+                .err()
+                .map_or("unreadable".into(), |e| e.to_string());
+            fail!(
+                Input,
+                "cannot read the directory {shown} ({why}): the frames in it have no record; make \
+                 it readable and rerun with --resume --retry-errors"
+            );
+        }
         if !meta.is_file() {
             fail!(
                 Input,

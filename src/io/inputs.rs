@@ -50,7 +50,8 @@ pub(crate) fn escape_component(c: &std::ffi::OsStr) -> String {
 /// Every file under `dir` (in subdirectories too with `recursive`) whose extension is an image
 /// type gpustar reads, sorted by path. Symbolic links to files are inputs (a broken or looping
 /// one gets an error record when it is read); links to directories are not followed.
-/// Unreadable directories are skipped with a warning.
+/// A directory that cannot be read is refused; a subdirectory that cannot be read is listed
+/// as an input of its own (its error record says why), with a warning.
 pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
     if !dir.is_dir() {
         fail!(Input, "{} is not a directory", dir.display());
@@ -64,13 +65,24 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
     for entry in walk {
         let entry = match entry {
             Ok(e) => e,
+            // The directory itself cannot be read: no run, rather than "0 files" and exit 0.
+            Err(e) if e.depth() == 0 => {
+                fail!(Input, "cannot read the directory {}: {e}", dir.display())
+            }
+            // A subdirectory that cannot be read is an input of its own, so that it gets an
+            // error record (io::frame says why) and the run's exit status counts it.
             Err(e) => {
-                tracing::warn!(
-                    "skipping {}: {e}",
-                    e.path()
-                        .map(|p| p.display().to_string())
-                        .unwrap_or_default()
-                );
+                tracing::warn!("{e}: the frames in it get no record");
+                if let Some(p) = e.path()
+                    && p.is_dir()
+                    && let Ok(rel) = p.strip_prefix(dir)
+                {
+                    out.push(Input {
+                        path: p.to_path_buf(),
+                        name: relative_name(rel),
+                        replay: false,
+                    });
+                }
                 continue;
             }
         };

@@ -8,6 +8,7 @@ pub mod bayer;
 pub mod dark;
 pub mod fits;
 pub mod frame;
+pub mod guard;
 pub mod inputs;
 pub mod output;
 pub mod wcs;

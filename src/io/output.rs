@@ -223,12 +223,18 @@ pub struct Output {
 const JSONL_START: &str = "{\"file\":";
 const CSV_START: &str = "file,status,";
 
-/// Does this (possibly torn) first line start like gpustar output of either format?
-fn looks_like_output(first: &[u8]) -> bool {
-    [JSONL_START, CSV_START].iter().any(|m| {
-        let n = first.len().min(m.len());
-        n > 0 && first[..n] == m.as_bytes()[..n]
-    })
+/// Does a file starting with `bytes` hold gpustar output of either format? Its first line is
+/// a whole record or the CSV header; a file of one unterminated line (a first write torn by a
+/// crash) must at least start with a record's first key or the header's first columns. A
+/// pretty-printed JSON file (first line `{`) or a text that starts with `f` is not ours.
+fn looks_like_output(bytes: &[u8]) -> bool {
+    match bytes.iter().position(|&b| b == b'\n') {
+        Some(end) => std::str::from_utf8(&bytes[..end])
+            .is_ok_and(|t| is_csv_header(t) || serde_json::from_str::<Record>(t).is_ok()),
+        None => [JSONL_START, CSV_START]
+            .iter()
+            .any(|m| bytes.starts_with(m.as_bytes())),
+    }
 }
 
 /// Open `-o PATH` for a run and lock it, so that a second process on the same file refuses
@@ -283,8 +289,7 @@ pub fn open_output(
     file.read_to_end(&mut bytes)
         .with_context(|| format!("cannot read {shown}"))?;
     if !resume {
-        let first = bytes.split(|&b| b == b'\n').next().unwrap_or_default();
-        if !bytes.is_empty() && !looks_like_output(first) {
+        if !bytes.is_empty() && !looks_like_output(&bytes) {
             fail!(
                 Output,
                 "{shown} exists and does not hold gpustar results (its first line is neither a \
@@ -462,82 +467,6 @@ fn parse_lines(bytes: &[u8], format: Format, path: &Path) -> Result<(Vec<Line>, 
         start = end + 1;
     }
     Ok((lines, start))
-}
-
-/// Refuse `path` as a file to write at a run's end unless it can be: its directory exists and
-/// takes files, and it is absent, empty, or `ours` (text gpustar writes there).
-pub fn check_replaceable(path: &Path, ours: impl Fn(&str) -> bool, what: &str) -> Result<()> {
-    let shown = path.display();
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if !dir.is_dir() {
-        fail!(
-            Output,
-            "cannot write {shown}: {} is not a directory",
-            dir.display()
-        );
-    }
-    if tempfile::NamedTempFile::new_in(dir).is_err() {
-        fail!(
-            Output,
-            "cannot write {shown}: cannot create a file in {}",
-            dir.display()
-        );
-    }
-    match std::fs::read(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => Err(e).with_context(|| format!("cannot read {shown}")),
-        Ok(b) if b.is_empty() || std::str::from_utf8(&b).is_ok_and(&ours) => Ok(()),
-        Ok(_) => fail!(
-            Output,
-            "{shown} exists and does not hold {what}: not replaced; remove it or choose \
-             another path"
-        ),
-    }
-}
-
-/// Write a whole file through a new file in the same directory renamed over `path`: a crash
-/// or a full disk leaves the old file or the new one, never a part. The file keeps the old
-/// one's permissions, or gets a new file's (0666 less the umask; the temporary file's own
-/// are 0600).
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    let permissions = match std::fs::metadata(path) {
-        Ok(m) => Some(m.permissions()),
-        Err(_) => new_file_permissions(dir),
-    };
-    if let Some(p) = permissions {
-        tmp.as_file()
-            .set_permissions(p)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-    }
-    tmp.write_all(bytes)
-        .and_then(|_| tmp.as_file().sync_all())
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    tmp.persist(path)
-        .map_err(|e| e.error)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(())
-}
-
-/// The permissions a new file gets in `dir` (0666 less the umask), found by making one: the
-/// umask cannot be read without changing it, which would race other threads.
-fn new_file_permissions(dir: &Path) -> Option<std::fs::Permissions> {
-    let probe = dir.join(format!(".gpustar-mode-{}", std::process::id()));
-    let made = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&probe)
-        .and_then(|f| f.metadata());
-    let _ = std::fs::remove_file(&probe);
-    made.ok().map(|m| m.permissions())
 }
 
 /// Read the records of a JSON Lines file (a torn last line is an error: see

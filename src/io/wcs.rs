@@ -168,7 +168,7 @@ pub fn write_wcs_file(path: &Path, camera: &Camera, r: &Matrix3<f64>) -> Result<
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create directory {}", dir.display()))?;
     }
-    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+    crate::io::guard::write_atomically(path, text.as_bytes())
 }
 
 /// The linear part of the WCS.

@@ -241,7 +241,7 @@ impl Solvers {
         let found = found.as_deref();
         self.add_streaks(&mut r, d, sol, found);
         let drawn = found.unwrap_or_default();
-        if let Err(e) = self.products.write(&d.path, &d.name, frame, sol, drawn) {
+        if let Err(e) = self.products.write(&d.name, frame, sol, drawn) {
             // The solution stands; the user learns which file is missing and why.
             tracing::warn!("{}: {e:#}", d.name);
             r.warnings.push(format!("{e:#}"));

@@ -182,10 +182,22 @@ pub fn write_png(path: &Path, a: &Annotation) -> crate::error::Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating annotation directory {}", dir.display()))?;
     }
-    render(a)
-        .save_with_format(path, image::ImageFormat::Png)
+    // Marked as gpustar's (a tEXt chunk), so that a later run knows it may replace it.
+    let img = render(a);
+    let mut bytes = Vec::new();
+    let mut e = png::Encoder::new(&mut bytes, img.width(), img.height());
+    e.set_color(png::ColorType::Rgb);
+    e.set_depth(png::BitDepth::Eight);
+    let (key, value) = crate::io::guard::PNG_SOFTWARE;
+    e.add_text_chunk(key.into(), value.into())
+        .and_then(|_| e.write_header())
+        .and_then(|mut w| {
+            w.write_image_data(img.as_raw())?;
+            w.finish()
+        })
         .into_kind(Error::Output)
-        .with_context(|| format!("writing annotated PNG {}", path.display()))
+        .with_context(|| format!("encoding annotated PNG {}", path.display()))?;
+    crate::io::guard::write_atomically(path, &bytes)
 }
 
 /// Text scale: 5×7 glyphs stay legible when big frames are viewed shrunk to a screen.

@@ -5,12 +5,15 @@
 pub mod annotate;
 
 use self::annotate::{Annotation, Mark};
-use crate::error::{Result, fail};
-use crate::io::frame::Frame;
+use crate::error::{Context, Result};
+use crate::io::frame::{Frame, is_image_path};
+use crate::io::guard::{Claims, Kind, check_existing, check_takes_files};
+use crate::io::inputs::Input;
 use crate::solve::attitude::pointing;
 use crate::solve::refine::stars_in_view;
 use crate::solve::{Outcome, Solution};
 use crate::streaks::fit::StreakFit;
+use std::collections::{HashMap, HashSet};
 use std::path::{Component, Path, PathBuf};
 
 /// Where per-frame products go; None = not written.
@@ -18,35 +21,135 @@ use std::path::{Component, Path, PathBuf};
 pub struct Products {
     pub wcs_dir: Option<PathBuf>,
     pub annotate_dir: Option<PathBuf>,
+    /// Replace files there that gpustar did not write (`--overwrite`).
+    pub overwrite: bool,
+    /// Inputs whose products keep the input's extension (`x.fits` → `x.fits.wcs`): another
+    /// image beside them has the same stem, and the two would write one file. Found by
+    /// [`Products::check`].
+    pub keep_extension: HashSet<String>,
 }
 
 impl Products {
-    /// Write the products asked for of one frame (read from `input`, named `name`).
+    /// Before a run: make the directories, name every input's products, and claim each one
+    /// (none on an input, on another output, or on a frame the next run would read), refusing
+    /// files there that gpustar did not write unless `overwrite`.
+    pub fn check(&mut self, inputs: &[Input], claims: &mut Claims) -> Result<()> {
+        let wanted: Vec<(PathBuf, &str, &str, Kind)> = [
+            (&self.wcs_dir, "--wcs-dir", "wcs", Kind::Wcs),
+            (
+                &self.annotate_dir,
+                "--annotate-dir",
+                "png",
+                Kind::Annotation,
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(d, o, e, k)| d.clone().map(|d| (d, o, e, k)))
+        .collect();
+        if wanted.is_empty() {
+            return Ok(());
+        }
+        self.keep_extension = shared_stems(inputs);
+        let (mut first, mut refused) = (None, 0);
+        for i in inputs {
+            for (dir, option, ext, kind) in &wanted {
+                let path = self.path(dir, &i.name, ext);
+                let checked = claims
+                    .output(&path, option)
+                    .and_then(|_| check_existing(&path, *kind, self.overwrite));
+                if let Err(e) = checked {
+                    refused += 1;
+                    first.get_or_insert(e);
+                }
+            }
+        }
+        match first {
+            None => {}
+            Some(e) if refused == 1 => return Err(e),
+            Some(e) => {
+                return Err(e).with_context(|| {
+                    format!("{refused} of the products this run would write are refused; the first")
+                });
+            }
+        }
+        // Made only now, when nothing is refused: a refused run leaves no folder behind.
+        for (dir, option, ..) in &wanted {
+            std::fs::create_dir_all(dir)
+                .and_then(|_| std::fs::read_dir(dir).map(drop))
+                .with_context(|| format!("{option} {}", dir.display()))?;
+            check_takes_files(dir).with_context(|| format!("{option} {}", dir.display()))?;
+        }
+        Ok(())
+    }
+
+    /// Where the product `ext` of the input named `name` goes in `dir`.
+    pub fn path(&self, dir: &Path, name: &str, ext: &str) -> PathBuf {
+        if self.keep_extension.contains(name) {
+            let mut p = product_path(dir, name, "");
+            let mut file = p.file_name().unwrap_or_default().to_os_string();
+            let given = Path::new(name).extension().unwrap_or_default();
+            file.push(".");
+            file.push(given);
+            file.push(".");
+            file.push(ext);
+            p.set_file_name(file);
+            p
+        } else {
+            product_path(dir, name, ext)
+        }
+    }
+
+    /// Write the products asked for of one frame (named `name`).
     pub fn write(
         &self,
-        input: &Path,
         name: &str,
         frame: &Frame,
         sol: &Solution,
         streaks: &[StreakFit],
     ) -> Result<()> {
         if let (Some(dir), Outcome::Solved(r, _)) = (&self.wcs_dir, &sol.outcome) {
-            crate::io::wcs::write_wcs_file(&product_path(dir, name, "wcs"), &r.camera, &r.r)?;
+            crate::io::wcs::write_wcs_file(&self.path(dir, name, "wcs"), &r.camera, &r.r)?;
         }
         if let Some(dir) = &self.annotate_dir {
-            let out = product_path(dir, name, "png");
-            if same_file(&out, input) {
-                fail!(
-                    Output,
-                    "not writing the annotated image over its input {}: choose another \
-                     --annotate-dir",
-                    input.display()
-                );
-            }
+            let out = self.path(dir, name, "png");
             annotate::write_png(&out, &annotation(frame, sol, streaks))?;
         }
         Ok(())
     }
+}
+
+/// The names of inputs that share their directory and stem with another image file there
+/// (`x.fits` beside `x.png`), whether or not that file is an input of this run (a shard, a
+/// resumed run): each directory is read once.
+fn shared_stems(inputs: &[Input]) -> HashSet<String> {
+    let mut stems: HashMap<PathBuf, HashMap<std::ffi::OsString, usize>> = HashMap::new();
+    let mut shared = HashSet::new();
+    for i in inputs {
+        let (Some(dir), Some(stem)) = (i.path.parent(), i.path.file_stem()) else {
+            continue;
+        };
+        let counts = stems.entry(dir.to_path_buf()).or_insert_with(|| {
+            let mut counts = HashMap::new();
+            let listed = std::fs::read_dir(if dir.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                dir
+            });
+            for e in listed.into_iter().flatten().flatten() {
+                let p = e.path();
+                if is_image_path(&p)
+                    && let Some(s) = p.file_stem()
+                {
+                    *counts.entry(s.to_os_string()).or_insert(0) += 1;
+                }
+            }
+            counts
+        });
+        if counts.get(stem).is_some_and(|&n| n > 1) {
+            shared.insert(i.name.clone());
+        }
+    }
+    shared
 }
 
 /// `dir/name` with the extension replaced; only the normal components of `name` count, so a
@@ -60,13 +163,6 @@ pub fn product_path(dir: &Path, name: &str, ext: &str) -> PathBuf {
     }
     p.set_extension(ext);
     p
-}
-
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    }
 }
 
 /// What the annotated image shows: identified detections with their catalog ids, the other

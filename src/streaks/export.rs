@@ -18,9 +18,11 @@
 
 use super::formats::{self, AngleObs, IodObs, Track};
 use crate::error::{Context, Result};
+use crate::io::guard::{Claims, Kind, check_replaceable, remember_written, write_atomically};
 use crate::record::{Record, StreakEnd, StreakRecord};
 use crate::sky::Utc;
 use std::collections::BTreeMap;
+use std::io::Read;
 use std::path::PathBuf;
 
 /// The observations of a run, collected record by record (in input order).
@@ -282,18 +284,20 @@ impl Exports {
         (out, left_out)
     }
 
-    /// Refuse, before a run, export paths that could not be written at its end: a directory
-    /// that does not exist, or a file there that gpustar did not write (it is never replaced).
-    pub fn check_paths(&self) -> Result<()> {
+    /// Claim the export paths and refuse, before a run, those that could not be written at
+    /// its end: a directory that does not exist, a path that is not a regular file, an input
+    /// or another output of the run, or a file gpustar did not write (replaced only with
+    /// `overwrite`). IOD lines carry no mark of their writer: gpustar knows an IOD file as its
+    /// own by the stamp it kept when it wrote it (unchanged since), or with `resume` (the run
+    /// that wrote it goes on, and its exports are written whole again).
+    pub fn check_paths(&self, claims: &mut Claims, overwrite: bool, resume: bool) -> Result<()> {
         if let Some(p) = &self.tdm {
-            crate::io::output::check_replaceable(
-                p,
-                |text| text.starts_with("CCSDS_TDM_VERS"),
-                "a TDM",
-            )?;
+            claims.output(p, "--tdm")?;
+            check_replaceable(p, Kind::Tdm, overwrite)?;
         }
         if let Some(p) = &self.iod {
-            crate::io::output::check_replaceable(p, formats::iod_like, "IOD lines")?;
+            claims.output(p, "--iod")?;
+            check_replaceable(p, Kind::Iod, overwrite || resume)?;
         }
         Ok(())
     }
@@ -321,12 +325,15 @@ impl Exports {
                 // sattools takes the last byte of every line for its newline.
                 text.push('\n');
             }
-            match crate::io::output::write_atomically(p, text.as_bytes()) {
-                Ok(()) => said.push(format!(
-                    "{} (IOD, {} lines)",
-                    p.display(),
-                    written.iod_lines.len()
-                )),
+            match write_atomically(p, text.as_bytes()) {
+                Ok(()) => {
+                    remember_written(p);
+                    said.push(format!(
+                        "{} (IOD, {} lines)",
+                        p.display(),
+                        written.iod_lines.len()
+                    ))
+                }
                 Err(e) => {
                     failed.get_or_insert(e);
                 }
@@ -358,17 +365,32 @@ impl Exports {
 
 fn write_tdm(tracks: &[Track], p: &std::path::Path, created_utc: &str) -> Result<String> {
     if tracks.is_empty() {
-        let removed = match std::fs::remove_file(p) {
-            Ok(()) => "; the older file there removed",
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => "",
-            Err(e) => {
-                return Err(e).with_context(|| {
-                    format!(
-                        "no streak with a timed observation, so no TDM; cannot remove the \
-                         older {}",
-                        p.display()
-                    )
-                });
+        // An older TDM of gpustar's would be taken for this run's: it goes. Anything else
+        // (another program's TDM, kept with --overwrite; a link) is left as it is.
+        let older_is_ours = std::fs::symlink_metadata(p).is_ok_and(|m| m.is_file())
+            && std::fs::File::open(p).is_ok_and(|f| {
+                let mut head = Vec::new();
+                std::io::Read::take(f, 4096).read_to_end(&mut head).is_ok() && Kind::Tdm.ours(&head)
+            });
+        let removed = if !older_is_ours {
+            if std::fs::symlink_metadata(p).is_ok() {
+                "; the file there, not a TDM gpustar wrote, left as it was"
+            } else {
+                ""
+            }
+        } else {
+            match std::fs::remove_file(p) {
+                Ok(()) => "; the older file there removed",
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => "",
+                Err(e) => {
+                    return Err(e).with_context(|| {
+                        format!(
+                            "no streak with a timed observation, so no TDM; cannot remove the \
+                             older {}",
+                            p.display()
+                        )
+                    });
+                }
             }
         };
         return Ok(format!(
@@ -379,7 +401,7 @@ fn write_tdm(tracks: &[Track], p: &std::path::Path, created_utc: &str) -> Result
     }
     let text = formats::tdm_text(created_utc, "GPUSTAR", tracks)
         .with_context(|| format!("cannot write {}", p.display()))?;
-    crate::io::output::write_atomically(p, text.as_bytes())?;
+    write_atomically(p, text.as_bytes())?;
     let obs: usize = tracks.iter().map(|t| t.observations.len()).sum();
     Ok(format!(
         "{} (TDM, {} objects, {obs} observations)",

@@ -27,6 +27,7 @@ mod gpu_pipeline;
 mod hint;
 mod layout;
 mod noise;
+mod outputs;
 mod parity;
 mod pattern;
 mod pixel_aspect;

@@ -346,7 +346,23 @@ fn exports_without_streaks_with_odd_names_and_after_a_failed_run() {
         .find(|&k| truth[k]["streaks"].as_array().unwrap().is_empty())
         .expect("a frame without a streak");
     std::fs::copy(dir.join(name(k)), empty.join(name(k))).unwrap();
-    std::fs::write(&tdm, "CCSDS_TDM_VERS = 2.0\n").unwrap();
+    // Another program's TDM is refused before the run, untouched; with --overwrite and
+    // nothing to export it is left as it was (issue 45, item 6).
+    let theirs = "CCSDS_TDM_VERS = 2.0\nCREATION_DATE = 2026-01-01T00:00:00\nORIGINATOR = OTHER\n";
+    std::fs::write(&tdm, theirs).unwrap();
+    let out = exports_run(&empty, &tdm, &iod, &[]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("does not hold a TDM gpustar wrote"), "{err}");
+    let out = exports_run(&empty, &tdm, &iod, &["--overwrite"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("not a TDM gpustar wrote, left as it was"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&tdm).unwrap(), theirs);
+    std::fs::write(&tdm, theirs.replace("OTHER", "GPUSTAR")).unwrap();
     let out = exports_run(&empty, &tdm, &iod, &[]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
