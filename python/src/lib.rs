@@ -1155,9 +1155,14 @@ fn start_batch(
     )
     .map_err(py_err)?;
     b.solvers.products = products;
+    let mut retried_order: Option<(PathBuf, Vec<String>)> = None;
     let (out, header): (Box<dyn std::io::Write + Send>, bool) = match &output {
         Some(p) => {
             let opened = output::open_output(p, format, resume, retry_errors).map_err(py_err)?;
+            // Redone error records are put back in their places when the run ends.
+            if opened.previous.retried > 0 {
+                retried_order = Some((p.clone(), list.iter().map(|i| i.name.clone()).collect()));
+            }
             list = batch::resumed_inputs(list, &opened.previous.done, sequence);
             // The exports are written whole at the end, with the streaks already recorded.
             if resume && exports.wanted() {
@@ -1201,6 +1206,12 @@ fn start_batch(
                 let _ = tx.send(r.to_json_line());
             },
         )?;
+        if let (Some((path, order)), None, false) =
+            (&retried_order, &summary.write_error, summary.interrupted)
+        {
+            writer.flush()?;
+            output::restore_input_order(path, format, order)?;
+        }
         if exports.wanted() && summary.write_error.is_none() {
             exports.finish(&gpustar::sky::now_utc_iso())?;
         }

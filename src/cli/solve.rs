@@ -166,10 +166,16 @@ pub(crate) fn run_solve(
     let mut inputs = inputs;
     let mut header = true;
     let mut errors_before = 0;
+    // With error records taken out to be redone: every input's name in order, to put their
+    // new records back in their places when the run ends.
+    let mut retried_order: Option<Vec<String>> = None;
     let out: Box<dyn Write + Send> = match &o.output {
         Some(p) => {
             let opened = output::open_output(p, o.format, b.resume, b.retry_errors)?;
             let prev = opened.previous;
+            if prev.retried > 0 {
+                retried_order = Some(inputs.iter().map(|i| i.name.clone()).collect());
+            }
             let before = inputs.len();
             let already = inputs
                 .iter()
@@ -282,6 +288,15 @@ pub(crate) fn run_solve(
         },
     )?;
     bar.finish_and_clear();
+    if let (Some(order), Some(p), None, false) = (
+        &retried_order,
+        &o.output,
+        &summary.write_error,
+        summary.interrupted,
+    ) {
+        writer.flush()?;
+        output::restore_input_order(p, o.format, order)?;
+    }
     if exports.wanted() && summary.write_error.is_none() {
         let said = exports.finish(&gpustar::sky::now_utc_iso())?;
         if !o.quiet {

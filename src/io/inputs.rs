@@ -17,8 +17,11 @@ pub struct Input {
 
 /// The name of a path relative to the directory: components joined by '/'. A component that
 /// is not UTF-8 is escaped reversibly: each byte that is not part of a UTF-8 character as
-/// `\xNN` (two lower-case hex digits) and each backslash as `\\`, so that names differing
-/// only in such bytes stay different. UTF-8 components are kept as they are.
+/// `\xNN` (two lower-case hex digits) and each backslash as `\\`. A UTF-8 component is kept
+/// as it is but for a backslash followed by `x` or by another backslash, which is written
+/// `\\`: so that no name spells out another's escape (`a\xff.png` beside a file whose name
+/// holds the byte 0xff), and every name reads back to its bytes (`\\` is a backslash, `\xNN`
+/// a byte, any other backslash itself).
 fn relative_name(rel: &Path) -> String {
     rel.components()
         .map(|c| escape_component(c.as_os_str()))
@@ -34,7 +37,18 @@ pub(crate) fn escape_component(c: &std::ffi::OsStr) -> String {
 #[cfg(unix)]
 pub(crate) fn escape_component(c: &std::ffi::OsStr) -> String {
     if let Some(s) = c.to_str() {
-        return s.to_string();
+        if !s.contains("\\\\") && !s.contains("\\x") {
+            return s.to_string();
+        }
+        let mut out = String::with_capacity(s.len() + 2);
+        let mut chars = s.chars().peekable();
+        while let Some(ch) = chars.next() {
+            out.push(ch);
+            if ch == '\\' && matches!(chars.peek(), Some('\\' | 'x')) {
+                out.push('\\');
+            }
+        }
+        return out;
     }
     use std::os::unix::ffi::OsStrExt;
     let mut out = String::new();
@@ -106,9 +120,8 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
     // walkdir sorts each directory by file name; sort the whole list by record name so the
     // order is the same whatever the file system.
     out.sort_by(|a, b| a.name.cmp(&b.name));
-    // Escaped names are unique but for a UTF-8 name spelling out another's escape
-    // (`a\xff.png` beside a file whose name holds the byte 0xff): refuse rather than give
-    // two inputs one record.
+    // Names are unique (the escape reads back to the bytes), but for a build without Unix
+    // names (their lossy names can collide): refuse rather than give two inputs one record.
     if let Some(w) = out.windows(2).find(|w| w[0].name == w[1].name) {
         fail!(
             Input,

@@ -469,6 +469,31 @@ fn parse_lines(bytes: &[u8], format: Format, path: &Path) -> Result<(Vec<Line>, 
     Ok((lines, start))
 }
 
+/// Put the records of `path` back in input order (`order`: the names of the run's inputs), the
+/// CSV header first: `--retry-errors` takes error records out and writes their new records at
+/// the end. Written through a new file renamed over the old; records of names not in `order`
+/// keep their places after the others.
+pub fn restore_input_order(path: &Path, format: Format, order: &[String]) -> Result<()> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (mut lines, complete) = parse_lines(&bytes, format, path)?;
+    let rank: HashMap<&str, usize> = order
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.as_str(), i))
+        .collect();
+    // The header (no file) first; a stable sort keeps the rest as they were among equals.
+    lines.sort_by_key(|l| match &l.file {
+        None => (0, 0),
+        Some(f) => (1, rank.get(f.as_str()).copied().unwrap_or(usize::MAX)),
+    });
+    let mut out = Vec::with_capacity(bytes.len());
+    for l in &lines {
+        out.extend_from_slice(&bytes[l.range.clone()]);
+    }
+    out.extend_from_slice(&bytes[complete..]);
+    crate::io::guard::write_atomically(path, &out)
+}
+
 /// Read the records of a JSON Lines file (a torn last line is an error: see
 /// [`crate::record::read_jsonl`]).
 pub fn read_records(path: &Path) -> Result<Vec<Record>> {

@@ -182,8 +182,11 @@ impl Solvers {
     /// Read and decode one file, and remove its fixed pattern when asked.
     pub fn decode(&self, path: &Path, name: &str) -> Decoded<'static> {
         // Fault injection (tests/it/faults.rs): the input of this name never finishes, as a
-        // frame stuck in a bug would; the stop request must end the run all the same.
-        if std::env::var_os("GPUSTAR_FAULT_STALL").is_some_and(|v| v == name) {
+        // frame stuck in a bug would; the stop request must end the run all the same. Test
+        // builds only: a release binary ignores the variable.
+        if cfg!(debug_assertions)
+            && std::env::var_os("GPUSTAR_FAULT_STALL").is_some_and(|v| v == name)
+        {
             loop {
                 std::thread::sleep(std::time::Duration::from_secs(1));
             }
