@@ -175,8 +175,7 @@ impl Catalog {
             None => Ok(Catalog::builtin()),
             Some(p) => {
                 let start = std::time::Instant::now();
-                let bytes = std::fs::read(p)
-                    .with_context(|| format!("cannot read catalog {}", p.display()))?;
+                let bytes = crate::io::read_regular_file(p, "catalog")?;
                 let source = p.display().to_string();
                 if store::is_store(&bytes) {
                     let c = store::read(&bytes, &source)?;

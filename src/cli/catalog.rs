@@ -26,7 +26,7 @@ pub(crate) fn import_cmd(
         check_output(out, inputs, csv_out)?;
     }
     let read = |input: &PathBuf| -> Result<Vec<u8>> {
-        std::fs::read(input).with_context(|| format!("cannot read {}", input.display()))
+        Ok(gpustar::io::read_regular_file(input, "catalog")?)
     };
     let out = if csv_out {
         let [input] = inputs else {

@@ -15,7 +15,7 @@
 //! propagated exactly.
 
 use super::{Station, Utc};
-use crate::error::{Context, Result};
+use crate::error::Result;
 use std::sync::{Arc, Mutex};
 
 /// Spacing of the coarse propagation (seconds of UTC).
@@ -114,8 +114,7 @@ impl TleCatalog {
     /// file. Objects whose elements SGP4 refuses are skipped with a warning; a file with no
     /// usable object is an error.
     pub fn load(path: &std::path::Path) -> Result<TleCatalog> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read --tle {}", path.display()))?;
+        let text = crate::io::read_regular_text(path, "--tle")?;
         TleCatalog::from_text(&text, &format!("--tle {}", path.display()))
     }
 

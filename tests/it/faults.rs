@@ -694,6 +694,54 @@ fn frames_of_another_size_are_refused_before_decoding() {
     assert!(peak_mb < 600.0, "{peak_mb:.0} MB");
 }
 
+/// Issue 45, item 3: a FIFO or a directory given as `--catalog`, `--tle`, `--camera`,
+/// `--dark` or to `catalog import` is refused before it is opened, naming what it is (a FIFO
+/// held the run forever; `/dev/zero` was read until memory ran out).
+#[cfg(unix)]
+#[test]
+fn option_files_that_are_not_regular_files_are_refused_before_reading() {
+    let s = set(1);
+    let fifo = s.root.join("pipe");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let camera = s.dir.join("camera.toml");
+    let camera = camera.to_str().unwrap();
+    let empty = s.root.join("empty-dir");
+    std::fs::create_dir(&empty).unwrap();
+    let mut k = 0;
+    for (path, kind) in [(&fifo, "a FIFO"), (&empty, "a directory")] {
+        let path = path.to_str().unwrap();
+        for args in [
+            vec!["--camera", camera, "--catalog", path],
+            vec!["--camera", camera, "--streaks", "--tle", path],
+            vec!["--camera", path],
+            vec!["--camera", camera, "--dark", path],
+        ] {
+            k += 1;
+            let out = s.root.join(format!("r{k}.jsonl"));
+            let o = run(cpu_batch(&s.dir, &out, &args), 30);
+            let e = stderr(&o);
+            assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+            assert!(
+                e.contains(&format!("not a regular file but {kind}")),
+                "{args:?}: {e}"
+            );
+        }
+        let mut c = gpustar();
+        c.args(["catalog", "import", path, "-o"])
+            .arg(s.root.join("c.gpustarcat"));
+        let o = run(c, 30);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{e}");
+        assert!(e.contains(&format!("not a regular file but {kind}")), "{e}");
+    }
+}
+
 /// `--tdm` and `--iod` after `--resume` hold the streaks of the whole file, not only of the
 /// inputs this run did (they are written whole at the end), in both formats.
 #[test]
