@@ -120,7 +120,14 @@ impl Satellite {
         self.teme_at_jd(t.jd1 + t.jd2)
     }
 
-    fn teme_at_jd(&self, jd: f64) -> Option<([f64; 3], [f64; 3])> {
+    /// The elements' epoch, UTC Julian date (for the fuzz suite).
+    #[cfg(test)]
+    pub(crate) fn epoch_jd(&self) -> f64 {
+        self.epoch_jd
+    }
+
+    /// [`Satellite::teme`] at a UTC Julian date.
+    pub(crate) fn teme_at_jd(&self, jd: f64) -> Option<([f64; 3], [f64; 3])> {
         let minutes = (jd - self.epoch_jd) * 1440.0;
         let p = self
             .constants
