@@ -84,8 +84,7 @@ impl Camera {
 
     /// Read a camera TOML file; returns the camera and its optional `mag_limit`.
     pub fn from_toml_file(path: &Path) -> Result<(Camera, Option<f64>)> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read camera file {}", path.display()))?;
+        let text = crate::io::read_regular_text(path, "camera file")?;
         Camera::from_toml(&text).with_context(|| format!("camera file {}", path.display()))
     }
 

@@ -6,7 +6,8 @@
 //!
 //! Properties: decoding never panics and never stalls; an output file is either refused
 //! untouched or only its torn last line is cut; CSV rows give back their file name whatever it
-//! holds; record names escape reversibly. `GPUSTAR_FUZZ_SCALE=N cargo test --lib fuzz --
+//! holds; record names escape reversibly; imported catalogs hold only stars whose values are a
+//! star's; TLE files give satellites that propagate, or an error. `GPUSTAR_FUZZ_SCALE=N cargo test --lib fuzz --
 //! --nocapture` searches N times longer and prints what each property tried.
 
 use crate::io::output::{Format, csv_fields, csv_row, open_output};
@@ -404,5 +405,168 @@ fn resume_refuses_or_cuts_only_a_torn_line() {
                 }
             }
         })
+    });
+}
+
+/// A value of catalog column `col` (RA, Dec, magnitude, two proper motions, epoch or
+/// parallax): mostly one a star could have, else any float or a nasty value (text that is no
+/// number refuses the whole file, so it is drawn less).
+fn catalog_value(col: usize, (pick, unit, any, nasty): (u8, f64, f64, usize)) -> String {
+    const PLAUSIBLE: [(f64, f64); 7] = [
+        (-10.0, 370.0),
+        (-95.0, 95.0),
+        (-3.0, 45.0),
+        (-2e4, 2e4),
+        (-2e4, 2e4),
+        (900.0, 3100.0),
+        (0.0, 100.0),
+    ];
+    let (lo, hi) = PLAUSIBLE[col % PLAUSIBLE.len()];
+    match pick {
+        0..6 => (lo + unit * (hi - lo)).to_string(),
+        6 => format!("{any:e}"),
+        _ => NASTY[nasty].trim_matches('\'').to_string(),
+    }
+}
+
+/// Rows of a user catalog CSV or a Gaia archive CSV with nasty values in any column, ids that
+/// repeat, a UTF-8 byte-order mark or not: an error, or stars whose every value is in its
+/// physical range (RA in [0, 2π), Dec within ±90°, finite magnitude, proper motion and epoch);
+/// never a panic, never a stall.
+#[test]
+fn catalog_rows() {
+    const HEADERS: [&str; 2] = [
+        "id,ra_deg,dec_deg,mag,pmra_mas_yr,pmdec_mas_yr,epoch",
+        "source_id,ra,dec,phot_g_mean_mag,pmra,pmdec,parallax",
+    ];
+    let value = (0u8..8, 0.0f64..=1.0, any::<f64>(), 0..NASTY.len());
+    let row = (0usize..4, proptest::collection::vec(value, 6));
+    let strategy = (
+        0usize..2,
+        any::<bool>(),
+        proptest::collection::vec(row, 0..8),
+    );
+    fuzz("catalog_rows", 1500, strategy, |(kind, bom, rows)| {
+        let mut text = String::from(if bom { "\u{feff}" } else { "" });
+        text.push_str(HEADERS[kind]);
+        text.push('\n');
+        for (id, values) in rows {
+            // Few ids, so that some repeat.
+            let values: Vec<String> = values
+                .into_iter()
+                .enumerate()
+                .map(|(col, v)| catalog_value(col, v))
+                .collect();
+            text.push_str(&format!("{id},{}\n", values.join(",")));
+        }
+        within_limit(
+            "catalog::formats::read",
+            || match crate::catalog::formats::read(text.as_bytes(), None, None, "fuzz") {
+                Err(e) if e.to_string().contains("no star") => Ok("no star kept"),
+                Err(_) => Ok("refused"),
+                Ok(c) => {
+                    for s in &c.stars {
+                        prop_assert!((0.0..std::f64::consts::TAU).contains(&s.ra_rad), "{s:?}");
+                        prop_assert!(s.dec_rad.abs() <= std::f64::consts::FRAC_PI_2, "{s:?}");
+                        prop_assert!(s.mag.is_finite(), "{s:?}");
+                        prop_assert!(s.pmra_mas_yr.is_finite() && s.pmdec_mas_yr.is_finite());
+                        prop_assert!(s.epoch.is_finite(), "{s:?}");
+                    }
+                    Ok(if c.out_of_range + c.repeated > 0 {
+                        "read, rows left out"
+                    } else {
+                        "read whole"
+                    })
+                }
+            },
+        )
+    });
+}
+
+/// A valid TLE pair (the ISS, checksums right).
+const ISS: [&str; 2] = [
+    "1 25544U 98067A   08264.51782528 -.00002182  00000-0 -11606-4 0  2927",
+    "2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.72125391563537",
+];
+
+/// The columns of each TLE field (0-based start, width), lines 1 and 2: the catalog number,
+/// designator, epoch, drag terms, element set; inclination, node, eccentricity, perigee,
+/// mean anomaly, mean motion, revolution; and the checksum.
+const TLE_FIELDS: [(usize, usize, usize); 17] = [
+    (0, 2, 5),
+    (0, 9, 8),
+    (0, 18, 14),
+    (0, 33, 10),
+    (0, 44, 8),
+    (0, 53, 8),
+    (0, 64, 4),
+    (0, 68, 1),
+    (1, 2, 5),
+    (1, 8, 8),
+    (1, 17, 8),
+    (1, 26, 7),
+    (1, 34, 8),
+    (1, 43, 8),
+    (1, 52, 11),
+    (1, 63, 5),
+    (1, 68, 1),
+];
+
+/// TLE files with nasty values in any field (kept to the field's width or not, so that lines
+/// change length), lines cut or lengthened, pairs repeated, a byte-order mark: an error, or
+/// satellites that SGP4 propagates at their own epoch to a finite state or none; never a
+/// panic, never a stall.
+#[test]
+fn tles() {
+    let edit = (0..TLE_FIELDS.len(), 0..NASTY.len(), any::<bool>());
+    let strategy = (
+        proptest::collection::vec(edit, 0..4),
+        proptest::option::of((0usize..2, 0usize..90)),
+        1usize..4,
+        any::<bool>(),
+    );
+    fuzz("tles", 1500, strategy, |(edits, resize, copies, bom)| {
+        let mut lines = ISS.map(str::to_string);
+        for (field, value, fit) in edits {
+            let (l, start, width) = TLE_FIELDS[field];
+            let v = NASTY[value];
+            let v = if fit {
+                format!("{v:>width$.width$}")
+            } else {
+                v.to_string()
+            };
+            let line = &mut lines[l];
+            let end = (start + width).min(line.len());
+            if start <= line.len() {
+                line.replace_range(start..end, &v);
+            }
+        }
+        if let Some((l, n)) = resize {
+            let line = &mut lines[l];
+            if n < line.len() {
+                line.truncate(n);
+            } else {
+                line.push_str(&"9".repeat(n - line.len()));
+            }
+        }
+        let mut text = String::from(if bom { "\u{feff}ISS\n" } else { "" });
+        for _ in 0..copies {
+            text.push_str(&format!("{}\n{}\n", lines[0], lines[1]));
+        }
+        within_limit(
+            "TleCatalog::from_text",
+            || match crate::sky::tle::TleCatalog::from_text(&text, "fuzz") {
+                Err(_) => Ok("refused"),
+                Ok(c) => {
+                    prop_assert!(c.satellites.len() == 1, "{} satellites", c.satellites.len());
+                    for s in &c.satellites {
+                        if let Some((r, v)) = s.teme_at_jd(s.epoch_jd()) {
+                            prop_assert!(r.iter().chain(&v).all(|x| x.is_finite()));
+                        }
+                    }
+                    Ok("read")
+                }
+            },
+        )
     });
 }

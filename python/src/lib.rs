@@ -1102,7 +1102,14 @@ fn start_batch(
     // As `--dark`, `--dark-median`, `--wcs-dir`, `--annotate-dir`, `--tdm`, `--iod`: the
     // library's own.
     b.solvers.darks = match (&dark, dark_median) {
-        (Some(p), _) => Darks::from_file(p).map_err(py_err)?,
+        (Some(p), _) => {
+            // A camera file fixes the frames' size, and so the dark's.
+            let expect = match &b.solvers.camera {
+                CameraSource::Fixed(c) => Some((c.width, c.height)),
+                _ => None,
+            };
+            Darks::from_file(p, expect).map_err(py_err)?
+        }
         (None, true) => Darks::directory_median(),
         (None, false) => Darks::None,
     };

@@ -175,8 +175,7 @@ impl Catalog {
             None => Ok(Catalog::builtin()),
             Some(p) => {
                 let start = std::time::Instant::now();
-                let bytes = std::fs::read(p)
-                    .with_context(|| format!("cannot read catalog {}", p.display()))?;
+                let bytes = crate::io::read_regular_file(p, "catalog")?;
                 let source = p.display().to_string();
                 if store::is_store(&bytes) {
                     let c = store::read(&bytes, &source)?;
@@ -273,9 +272,15 @@ impl Catalog {
     /// Parse gpustar's catalog CSV (`hip,ra_rad,dec_rad,pmra_mas_yr,pmdec_mas_yr,hp_mag`,
     /// `#` comment lines, one header line).
     pub fn parse(text: &str, source: &str) -> Result<Catalog> {
+        Catalog::parse_counted(text, source).map(|(c, _)| c)
+    }
+
+    /// [`Catalog::parse`], with how many rows were left out of range (and warned of).
+    pub(crate) fn parse_counted(text: &str, source: &str) -> Result<(Catalog, usize)> {
         let mut stars = Vec::new();
         let mut header_seen = false;
-        for (n, line) in text.lines().enumerate() {
+        let mut out_of_range = formats::Tally::default();
+        for (n, line) in text.trim_start_matches('\u{feff}').lines().enumerate() {
             let line = line.trim();
             if line.is_empty() || line.starts_with('#') {
                 continue;
@@ -321,7 +326,7 @@ impl Catalog {
             let hip = f[0].parse::<u32>().map_err(|e| {
                 error!(Catalog, "{source}: line {}: bad HIP {:?}: {e}", n + 1, f[0])
             })?;
-            stars.push(Star {
+            let mut star = Star {
                 id: StarId::Hip(hip),
                 hip: Some(hip),
                 ra_rad: num(1)?,
@@ -330,17 +335,18 @@ impl Catalog {
                 pmdec_mas_yr: num(4)?,
                 mag: num(5)?,
                 epoch: HIPPARCOS_EPOCH,
-            });
+            };
+            match formats::out_of_range(&mut star) {
+                None => stars.push(star),
+                Some(why) => out_of_range.add(n + 1, || why),
+            }
         }
+        out_of_range.warn(source, "line", formats::OUT_OF_RANGE);
         if stars.is_empty() {
             fail!(Catalog, "{source}: no stars");
         }
-        Ok(Catalog::new(
-            stars,
-            Vec::new(),
-            source,
-            fnv1a(text.as_bytes()),
-        ))
+        let catalog = Catalog::new(stars, Vec::new(), source, fnv1a(text.as_bytes()));
+        Ok((catalog, out_of_range.count))
     }
 
     /// Faintest magnitude in the catalog.

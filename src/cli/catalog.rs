@@ -26,7 +26,7 @@ pub(crate) fn import_cmd(
         check_output(out, inputs, csv_out)?;
     }
     let read = |input: &PathBuf| -> Result<Vec<u8>> {
-        std::fs::read(input).with_context(|| format!("cannot read {}", input.display()))
+        Ok(gpustar::io::read_regular_file(input, "catalog")?)
     };
     let out = if csv_out {
         let [input] = inputs else {
@@ -34,14 +34,15 @@ pub(crate) fn import_cmd(
         };
         let bytes = read(input)?;
         let source = input.display().to_string();
-        let format = format.or_else(|| Format::detect(&bytes));
+        let bytes = formats::without_bom(&bytes);
+        let format = format.or_else(|| Format::detect(bytes));
         if format != Some(Format::Hip2) {
             bail!(
                 "{source}: the catalog CSV is made from hip2.dat only; give -o FILE (not .csv) \
                  for a gpustar catalog file"
             );
         }
-        let text = std::str::from_utf8(&bytes).with_context(|| format!("{source}: not text"))?;
+        let text = std::str::from_utf8(bytes).with_context(|| format!("{source}: not text"))?;
         gpustar::catalog::import_hip2(text, max_mag.unwrap_or(CSV_MAX_MAG))?.into_bytes()
     } else {
         let mut stars = Vec::new();
@@ -75,14 +76,15 @@ pub(crate) fn import_cmd(
                 stars.push(s);
             }
             eprintln!(
-                "{source}: {}, {n} stars{}{}",
+                "{source}: {}, {n} stars{}{}{}",
                 imported.format.name(),
                 max_mag.map_or(String::new(), |m| format!(" at or brighter than {m}")),
                 if inputs.len() > 1 {
                     format!(", {} new", stars.len() - before)
                 } else {
                     String::new()
-                }
+                },
+                left_out(imported.out_of_range, imported.repeated)
             );
         }
         let n = stars.len();
@@ -109,6 +111,16 @@ pub(crate) fn import_cmd(
         None => std::io::stdout().write_all(&out)?,
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// What a file's import left out (the warnings name the first row of each), or nothing.
+fn left_out(out_of_range: usize, repeated: usize) -> String {
+    match (out_of_range, repeated) {
+        (0, 0) => String::new(),
+        (o, 0) => format!(" ({o} out of range left out)"),
+        (0, r) => format!(" ({r} repeated ids left out)"),
+        (o, r) => format!(" ({o} out of range and {r} repeated ids left out)"),
+    }
 }
 
 /// Refuse an output that is one of the inputs, or an existing file gpustar did not write (a

@@ -229,12 +229,17 @@ pub(crate) fn run_solve(
         Some(BackendNote::Info(i)) => tracing::info!("{i}"),
         None => {}
     }
+    // A camera file fixes the frames' size, and so the dark's.
+    let expect = match &camera {
+        CameraSource::Fixed(c) => Some((c.width, c.height)),
+        _ => None,
+    };
     let mut solvers = Solvers::new(catalog, s, camera);
     if let Some(h) = o.hint {
         solvers = solvers.with_hints(h);
     }
     solvers.darks = match (&o.dark, o.dark_median) {
-        (Some(path), _) => Darks::from_file(path).context("--dark")?,
+        (Some(path), _) => Darks::from_file(path, expect).context("--dark")?,
         (None, true) => Darks::directory_median(),
         (None, false) => Darks::None,
     };

@@ -38,9 +38,23 @@ type DarkKey = (PathBuf, u32, u32);
 type DarkResult = Result<Arc<Frame<'static>>, String>;
 
 impl Darks {
-    /// Read the dark frame of `--dark FILE`.
-    pub fn from_file(path: &Path) -> crate::error::Result<Darks> {
-        let frame = Frame::read(path)?;
+    /// Read the dark frame of `--dark FILE`. With `expect`, the frames' (width, height) from a
+    /// camera file, a dark of another size is refused from its header before it is decoded: a
+    /// PNG of a few hundred kB can declare 30000² pixels, 1.8 GB decoded. Without it (frames
+    /// of any size), the decoders' limits on frames apply.
+    pub fn from_file(path: &Path, expect: Option<(u32, u32)>) -> crate::error::Result<Darks> {
+        if let Some((w, h)) = expect
+            && let Some((dw, dh)) = header_size(path)
+            && (dw, dh) != (w, h)
+        {
+            crate::error::fail!(
+                Input,
+                "the dark frame {} is {dw}x{dh} but the camera file says {w}x{h}: pass a dark \
+                 of this camera",
+                path.display()
+            );
+        }
+        let (frame, _) = Frame::read_info_sized(path, expect)?;
         Ok(Darks::File {
             path: path.to_path_buf(),
             frame,
@@ -89,6 +103,22 @@ impl Darks {
             }
         }
     }
+}
+
+/// The size an image file's header declares (PNG, JPEG, TIFF: read without decoding), or
+/// None for a file the image decoders do not know (FITS, whose data are not compressed and so
+/// no larger than the file) or cannot open: [`Frame::read_info_sized`] then says what is wrong.
+fn header_size(path: &Path) -> Option<(u32, u32)> {
+    // Not opened unless regular: a FIFO would block the open.
+    if !std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+        return None;
+    }
+    image::ImageReader::open(path)
+        .ok()?
+        .with_guessed_format()
+        .ok()?
+        .into_dimensions()
+        .ok()
 }
 
 /// `frame − dark`, shifted back up by the dark's median so the background keeps its noise on

@@ -115,7 +115,7 @@ impl Frame<'static> {
             fail!(
                 Input,
                 "cannot read {shown}: not a regular file but {}",
-                file_kind(&meta.file_type())
+                super::file_kind(&meta.file_type())
             );
         }
         if meta.len() == 0 {
@@ -420,28 +420,6 @@ fn decode_error(shown: &str, e: ImageError) -> crate::error::Error {
             MAX_ALLOC >> 20
         ),
         _ => error!(Input, "cannot decode {shown}: {e}"),
-    }
-}
-
-/// What a path that is not a regular file is, for messages.
-fn file_kind(t: &std::fs::FileType) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if t.is_fifo() {
-            return "a FIFO (named pipe)";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-    }
-    if t.is_dir() {
-        "a directory"
-    } else {
-        "something else"
     }
 }
 

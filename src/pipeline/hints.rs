@@ -5,7 +5,7 @@
 use super::{Decoded, SharedSolver, Solvers};
 use crate::io::frame::Frame;
 use crate::record::Record;
-use crate::sky::hint::{Hint, HintSource, hint_from_header};
+use crate::sky::hint::{Hint, HintSource, header_hint};
 use crate::solve::detect::Detection;
 use crate::solve::hinted::regional_solver;
 use crate::solve::{Outcome, Solution, Solver};
@@ -21,9 +21,16 @@ impl Solvers {
 
     /// The pointing hint of a frame, if the run uses hints and the frame has one.
     pub fn hint_of(&self, d: &Decoded, frame: &Frame) -> Option<Hint> {
-        match self.hint? {
-            HintSource::Fixed(h) => Some(h),
-            HintSource::Header { radius_deg } => hint_from_header(
+        self.hint_and_notes(d, frame).0
+    }
+
+    /// [`Solvers::hint_of`], and with `--hint header` why the frame's pointing keywords that
+    /// were not used were not (for its record's warnings).
+    pub fn hint_and_notes(&self, d: &Decoded, frame: &Frame) -> (Option<Hint>, Vec<String>) {
+        match self.hint {
+            None => (None, Vec::new()),
+            Some(HintSource::Fixed(h)) => (Some(h), Vec::new()),
+            Some(HintSource::Header { radius_deg }) => header_hint(
                 &|k| d.keywords.get(k).cloned(),
                 (frame.width, frame.height),
                 radius_deg,

@@ -238,7 +238,9 @@ impl Solvers {
             },
         };
         r.warnings.extend(d.warnings.iter().cloned());
-        r.hint = self.hint_of(d, frame).map(|h| hint_record(&h, &r));
+        let (hint, notes) = self.hint_and_notes(d, frame);
+        r.warnings.extend(notes);
+        r.hint = hint.map(|h| hint_record(&h, &r));
         // A solved frame's catalog says which tracks are chains of its stars.
         let found = found.map(|f| streaks::catalog_chain::off_catalog_chains(f, sol));
         let found = found.as_deref();

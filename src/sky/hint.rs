@@ -120,10 +120,43 @@ pub fn hint_from_header(
     size: (u32, u32),
     radius_deg: f64,
 ) -> Option<Hint> {
+    header_hint(get, size, radius_deg).0
+}
+
+/// [`hint_from_header`], with why each pointing keyword the header has was not used (a value
+/// that is not an angle, a declination beyond ±90, half a pair): a frame's record says so
+/// rather than solving it lost-in-space without a word. A WCS reference point away from the
+/// frame's centre is no pointing and not a fault: it is passed over silently.
+pub fn header_hint(
+    get: &dyn Fn(&str) -> Option<String>,
+    size: (u32, u32),
+    radius_deg: f64,
+) -> (Option<Hint>, Vec<String>) {
     let value = |k: &str| super::header::value(get, k).map(|v| v.trim_matches('\'').to_string());
+    let mut notes = Vec::new();
+    let not_used =
+        |k: &str, v: &str, why: &str| format!("--hint header: {k} = {v} not used: {why}");
     for (ra_key, dec_key, source) in PAIRS {
-        let (Some(ra), Some(dec)) = (value(ra_key), value(dec_key)) else {
-            continue;
+        let (ra, dec) = match (value(ra_key), value(dec_key)) {
+            (Some(ra), Some(dec)) => (ra, dec),
+            (None, None) => continue,
+            (Some(v), None) if ra_key != "CRVAL1" => {
+                notes.push(not_used(
+                    ra_key,
+                    &v,
+                    &format!("the header has no {dec_key}"),
+                ));
+                continue;
+            }
+            (None, Some(v)) if ra_key != "CRVAL1" => {
+                notes.push(not_used(
+                    dec_key,
+                    &v,
+                    &format!("the header has no {ra_key}"),
+                ));
+                continue;
+            }
+            _ => continue,
         };
         if ra_key == "CRVAL1" {
             let celestial = value("CTYPE1").is_some_and(|c| c.starts_with("RA--"))
@@ -137,17 +170,33 @@ pub fn hint_from_header(
                 continue;
             }
         }
-        let (Some(ra_deg), Some(dec_deg)) = (ra_of(&ra), dec_of(&dec)) else {
+        let (ra_deg, dec_deg) = (ra_of(&ra), dec_of(&dec));
+        if ra_deg.is_none() {
+            notes.push(not_used(
+                ra_key,
+                &ra,
+                "not a right ascension (degrees 0 to 360, or hours as HH:MM:SS)",
+            ));
+        }
+        if dec_deg.is_none() {
+            notes.push(not_used(
+                dec_key,
+                &dec,
+                "not a declination (degrees within ±90, or ±DD:MM:SS)",
+            ));
+        }
+        let (Some(ra_deg), Some(dec_deg)) = (ra_deg, dec_deg) else {
             continue;
         };
-        return Some(Hint {
+        let hint = Hint {
             ra_deg,
             dec_deg,
             radius_deg,
             source,
-        });
+        };
+        return (Some(hint), notes);
     }
-    None
+    (None, notes)
 }
 
 #[cfg(test)]
@@ -227,5 +276,49 @@ mod tests {
         // Unusable values are skipped, not guessed.
         assert!(hint_from_header(&header(&[("RA", "'x'"), ("DEC", "3")]), size, 1.0).is_none());
         assert!(hint_from_header(&header(&[]), size, 1.0).is_none());
+    }
+
+    #[test]
+    fn unusable_header_keywords_are_named_with_why() {
+        let size = (1024, 1024);
+        let (h, notes) = header_hint(&header(&[("RA", "'abc'"), ("DEC", "95")]), size, 1.0);
+        assert!(h.is_none());
+        assert_eq!(notes.len(), 2, "{notes:?}");
+        assert!(
+            notes[0].contains("RA = abc") && notes[0].contains("not a right ascension"),
+            "{notes:?}"
+        );
+        assert!(
+            notes[1].contains("DEC = 95") && notes[1].contains("within ±90"),
+            "{notes:?}"
+        );
+        // A later pair is used; the bad one is still named.
+        let (h, notes) = header_hint(
+            &header(&[("OBJCTRA", "'12 30 00'"), ("RA", "187.5"), ("DEC", "-45.5")]),
+            size,
+            1.0,
+        );
+        assert_eq!(h.unwrap().source, "RA/DEC");
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(notes[0].contains("OBJCTRA") && notes[0].contains("no OBJCTDEC"));
+        // Usable keywords, no header pointing at all, and a WCS reference point away from
+        // the centre: nothing to say.
+        for cards in [
+            &[("RA", "187.5"), ("DEC", "-45.5")][..],
+            &[],
+            &[
+                ("CTYPE1", "'RA---TAN'"),
+                ("CTYPE2", "'DEC--TAN'"),
+                ("CRVAL1", "187.5"),
+                ("CRVAL2", "-45.5"),
+                ("CRPIX1", "10.0"),
+                ("CRPIX2", "512.5"),
+            ],
+        ] {
+            assert!(
+                header_hint(&header(cards), size, 1.0).1.is_empty(),
+                "{cards:?}"
+            );
+        }
     }
 }

@@ -15,7 +15,7 @@
 //! propagated exactly.
 
 use super::{Station, Utc};
-use crate::error::{Context, Result};
+use crate::error::Result;
 use std::sync::{Arc, Mutex};
 
 /// Spacing of the coarse propagation (seconds of UTC).
@@ -26,6 +26,43 @@ const COARSE_KEPT: usize = 16;
 
 /// Light-seconds per km: the object is seen where it was range/c earlier.
 const C_KM_S: f64 = 299_792.458;
+
+/// Elements further than this from a frame's time get a warning (once a run): SGP4 from
+/// month-old elements of a low orbit is off by tens of kilometres along the track.
+pub const MAX_ELEMENT_AGE_DAYS: f64 = 30.0;
+
+/// The satellites with each NORAD id once: the newest elements of an id (the first of those
+/// at the same epoch), in the file's order; a warning names how many were left out and the
+/// first id. Files concatenated from several downloads repeat objects, and the older elements
+/// predict worse.
+fn newest_of_each(satellites: Vec<Satellite>, what: &str) -> Vec<Satellite> {
+    let mut newest: std::collections::HashMap<u64, usize> = std::collections::HashMap::new();
+    for (i, s) in satellites.iter().enumerate() {
+        let k = newest.entry(s.norad).or_insert(i);
+        if s.epoch_jd > satellites[*k].epoch_jd {
+            *k = i;
+        }
+    }
+    let left_out = satellites.len() - newest.len();
+    if left_out == 0 {
+        return satellites;
+    }
+    let first = satellites
+        .iter()
+        .enumerate()
+        .find(|(i, s)| newest[&s.norad] != *i)
+        .map_or(0, |(_, s)| s.norad);
+    tracing::warn!(
+        "{what}: {left_out} element sets repeat an object's NORAD id (the first: {first}); \
+         the newest of each is used"
+    );
+    satellites
+        .into_iter()
+        .enumerate()
+        .filter(|(i, s)| newest[&s.norad] == *i)
+        .map(|(_, s)| s)
+        .collect()
+}
 
 /// One object of the file.
 pub struct Satellite {
@@ -83,7 +120,14 @@ impl Satellite {
         self.teme_at_jd(t.jd1 + t.jd2)
     }
 
-    fn teme_at_jd(&self, jd: f64) -> Option<([f64; 3], [f64; 3])> {
+    /// The elements' epoch, UTC Julian date (for the fuzz suite).
+    #[cfg(test)]
+    pub(crate) fn epoch_jd(&self) -> f64 {
+        self.epoch_jd
+    }
+
+    /// [`Satellite::teme`] at a UTC Julian date.
+    pub(crate) fn teme_at_jd(&self, jd: f64) -> Option<([f64; 3], [f64; 3])> {
         let minutes = (jd - self.epoch_jd) * 1440.0;
         let p = self
             .constants
@@ -101,6 +145,8 @@ type Coarse = Arc<Vec<Option<([f64; 3], [f64; 3])>>>;
 pub struct TleCatalog {
     pub satellites: Vec<Satellite>,
     coarse: Mutex<Vec<(i64, Coarse)>>,
+    /// Whether [`TleCatalog::age_warning`] has been given.
+    age_warned: std::sync::atomic::AtomicBool,
 }
 
 impl std::fmt::Debug for TleCatalog {
@@ -114,8 +160,7 @@ impl TleCatalog {
     /// file. Objects whose elements SGP4 refuses are skipped with a warning; a file with no
     /// usable object is an error.
     pub fn load(path: &std::path::Path) -> Result<TleCatalog> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read --tle {}", path.display()))?;
+        let text = crate::io::read_regular_text(path, "--tle")?;
         TleCatalog::from_text(&text, &format!("--tle {}", path.display()))
     }
 
@@ -143,6 +188,7 @@ impl TleCatalog {
                 "{what}: no object with usable elements"
             )));
         }
+        let satellites = newest_of_each(satellites, what);
         Ok(TleCatalog::new(satellites))
     }
 
@@ -150,7 +196,41 @@ impl TleCatalog {
         TleCatalog {
             satellites,
             coarse: Mutex::new(Vec::new()),
+            age_warned: std::sync::atomic::AtomicBool::new(false),
         }
+    }
+
+    /// The first time frames at `t` use elements more than [`MAX_ELEMENT_AGE_DAYS`] from their
+    /// epoch: a warning naming how many and the first (later frames: None, so that a night of
+    /// frames logs it once). SGP4's errors grow by kilometres a day, so such predictions may
+    /// be far off and a streak they do not name may be the object all the same.
+    pub fn age_warning(&self, t: &Utc) -> Option<String> {
+        use std::sync::atomic::Ordering;
+        if self.age_warned.load(Ordering::Relaxed) {
+            return None;
+        }
+        let jd = t.jd1 + t.jd2;
+        let old: Vec<&Satellite> = self
+            .satellites
+            .iter()
+            .filter(|s| {
+                !(-MAX_ELEMENT_AGE_DAYS..=MAX_ELEMENT_AGE_DAYS).contains(&(jd - s.epoch_jd))
+            })
+            .collect();
+        let first = old.first()?;
+        if self.age_warned.swap(true, Ordering::Relaxed) {
+            return None;
+        }
+        Some(format!(
+            "--tle: {} of {} objects have elements more than {MAX_ELEMENT_AGE_DAYS} days from \
+             the frame time {} (the first, NORAD {}: {:.0} days): their predicted positions \
+             may be far off; use elements of the night",
+            old.len(),
+            self.satellites.len(),
+            t.iso(),
+            first.norad,
+            (jd - first.epoch_jd).abs()
+        ))
     }
 
     /// Every object's TEME state at coarse step `k` (UTC JD `k · COARSE_STEP_S / 86400`),
@@ -605,6 +685,56 @@ mod tests {
                 let _ = parse(&xml[..cut]);
             }
         }
+    }
+
+    /// Issue 45, item 2: a file that starts with a UTF-8 byte-order mark is read as without
+    /// it; an object given twice is kept once, with its newest elements.
+    #[test]
+    fn a_bom_is_read_past_and_a_repeated_object_keeps_its_newest_elements() {
+        let (l1, l2) = (ASTROPY[0].1, ASTROPY[0].2);
+        // The same object at an epoch a day later, its checksum made right again.
+        let mut newer = l1.replace("24075.00000000", "24076.00000000");
+        let sum: u32 = newer[..68]
+            .chars()
+            .map(|c| c.to_digit(10).unwrap_or((c == '-') as u32))
+            .sum();
+        newer.replace_range(68.., &(sum % 10).to_string());
+        let other = (ASTROPY[1].1, ASTROPY[1].2);
+        for text in [
+            format!("\u{feff}{l1}\n{l2}\n"),
+            format!("\u{feff}ISS\n{l1}\n{l2}\n"),
+        ] {
+            let c = TleCatalog::from_text(&text, "t").unwrap();
+            assert_eq!(c.satellites.len(), 1, "{text:?}");
+        }
+        let text = format!(
+            "{l1}\n{l2}\n{}\n{}\n{newer}\n{l2}\n{l1}\n{l2}\n",
+            other.0, other.1
+        );
+        let c = TleCatalog::from_text(&text, "t").unwrap();
+        let ids: Vec<u64> = c.satellites.iter().map(|s| s.norad).collect();
+        assert_eq!(ids, [43013, 25544]);
+        // 2024 day 76.0 (the newer set) is JD 2460385.5.
+        let jd = c.satellites[1].epoch_jd;
+        assert!((jd - 2_460_385.5).abs() < 1e-6, "{jd}");
+    }
+
+    /// Issue 45, item 2: elements far from the frame time are warned of once a run.
+    #[test]
+    fn old_elements_are_warned_of_once() {
+        let (e, _) = tle_lines(&format!("{}\n{}\n", ASTROPY[0].1, ASTROPY[0].2));
+        let cat = TleCatalog::new(vec![Satellite::from_elements(&e[0]).unwrap()]);
+        let epoch = Utc::parse("2024-03-15T00:00:00").unwrap();
+        assert_eq!(cat.age_warning(&epoch.add_seconds(29.0 * 86_400.0)), None);
+        let w = cat
+            .age_warning(&epoch.add_seconds(-45.0 * 86_400.0))
+            .unwrap();
+        assert!(
+            w.contains("1 of 1 objects") && w.contains("NORAD 25544: 45 days"),
+            "{w}"
+        );
+        assert!(w.contains("may be far off"), "{w}");
+        assert_eq!(cat.age_warning(&epoch.add_seconds(-90.0 * 86_400.0)), None);
     }
 
     /// The coarse prefilter's interpolation stays within metres of SGP4 itself.

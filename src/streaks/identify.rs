@@ -140,6 +140,9 @@ impl FrameSky<'_> {
         let (Some(topo0), Some(topo1)) = (self.topo(&t0), self.topo(&t1)) else {
             return;
         };
+        if let Some(w) = self.catalog.age_warning(&t0) {
+            tracing::warn!("{w}");
+        }
         let dt = self.exposure.duration_s().max(1e-3);
         let coarse0 = self.catalog.coarse_positions(&t0);
         let coarse1 = self.catalog.coarse_positions(&t1);

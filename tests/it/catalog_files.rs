@@ -169,3 +169,53 @@ fn import_never_overwrites_inputs_or_other_files_and_merges_inputs() {
         "{info:?}"
     );
 }
+
+/// Issue 45, item 1: rows whose values are not a star's (Dec 95, RA 1e300, proper motion,
+/// epoch or magnitude ±1e300) and repeated ids are left out, counted, and the first of each
+/// named, where they were taken silently; a file that starts with a UTF-8 byte-order mark is
+/// read as without it, where it was refused.
+#[test]
+fn import_leaves_out_impossible_rows_and_repeated_ids_and_reads_a_bom() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "id,ra_deg,dec_deg,mag,pmra_mas_yr,pmdec_mas_yr,epoch\n\
+                a,10,20,5,0,0,2000\n\
+                b,10,95,5,0,0,2000\n\
+                c,1e300,20,5,0,0,2000\n\
+                d,20,20,5,1e300,0,2000\n\
+                e,30,20,5,0,0,1e300\n\
+                f,40,20,-1e300,0,0,2000\n\
+                a,50,20,5,0,0,2000\n\
+                g,-10,30,6,0,0,2000\n\
+                h,360,-30,6,0,0,2000\n";
+    for (name, bytes) in [
+        ("plain", text.as_bytes().to_vec()),
+        (
+            "bom",
+            [b"\xEF\xBB\xBF".as_slice(), text.as_bytes()].concat(),
+        ),
+    ] {
+        let csv = dir.path().join(format!("{name}.csv"));
+        std::fs::write(&csv, bytes).unwrap();
+        let bin = dir.path().join(format!("{name}.gpustarcat"));
+        let (csv, bin) = (csv.to_str().unwrap(), bin.to_str().unwrap());
+        let out = run_ok(&["catalog", "import", csv, "-o", bin]);
+        let e = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            e.contains(&format!(
+                "{csv}: CSV, 3 stars (5 out of range and 1 repeated ids left out)"
+            )),
+            "{e}"
+        );
+        assert!(
+            e.contains("5 rows left out for a value out of its physical range (the first: line 3, Dec 95° is outside ±90)"),
+            "{e}"
+        );
+        assert!(
+            e.contains("1 rows left out for repeating an earlier row's id, whose first row is kept (the first: line 8, id \"a\")"),
+            "{e}"
+        );
+        let info = run_ok(&["info", "--catalog", bin]);
+        let info = String::from_utf8_lossy(&info.stdout);
+        assert!(info.contains("stars: 3 (mag 5.00 to 6.00)"), "{info}");
+    }
+}

@@ -658,20 +658,7 @@ fn frames_of_another_size_are_refused_before_decoding() {
     let s = set(1);
     let big = s.root.join("big");
     std::fs::create_dir(&big).unwrap();
-    let side = 20_000u32;
-    {
-        let file = std::io::BufWriter::new(std::fs::File::create(big.join("huge.png")).unwrap());
-        let mut enc = png::Encoder::new(file, side, side);
-        enc.set_color(png::ColorType::Grayscale);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_compression(png::Compression::Fast);
-        let mut w = enc.write_header().unwrap().into_stream_writer().unwrap();
-        let row = vec![0u8; side as usize];
-        for _ in 0..side {
-            std::io::Write::write_all(&mut w, &row).unwrap();
-        }
-        w.finish().unwrap();
-    }
+    blank_png(&big.join("huge.png"), 20_000);
     let out = s.root.join("r.jsonl");
     let camera = s.dir.join("camera.toml");
     let c = cpu_batch(&big, &out, &["--camera", camera.to_str().unwrap()]);
@@ -694,6 +681,109 @@ fn frames_of_another_size_are_refused_before_decoding() {
     let peak_mb = usage.ru_maxrss as f64 / 1024.0;
     println!("largest child's peak memory: {peak_mb:.0} MB");
     assert!(peak_mb < 600.0, "{peak_mb:.0} MB");
+}
+
+/// A black 8-bit PNG of `side`² pixels: under a megabyte on disk, `side`² bytes decoded.
+fn blank_png(path: &Path, side: u32) {
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut enc = png::Encoder::new(file, side, side);
+    enc.set_color(png::ColorType::Grayscale);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_compression(png::Compression::Fast);
+    let mut w = enc.write_header().unwrap().into_stream_writer().unwrap();
+    let row = vec![0u8; side as usize];
+    for _ in 0..side {
+        std::io::Write::write_all(&mut w, &row).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// Issue 45, item 4: a `--dark` PNG of 20000² pixels with a camera file of another size is
+/// refused from its header before the run (it was decoded whole, 1.2 GB, and then every
+/// frame's record said the sizes differ).
+#[test]
+fn a_dark_of_another_size_is_refused_before_decoding() {
+    let s = set(1);
+    let dark = s.root.join("dark.png");
+    blank_png(&dark, 20_000);
+    let out = s.root.join("r.jsonl");
+    let camera = s.dir.join("camera.toml");
+    let c = cpu_batch(
+        &s.dir,
+        &out,
+        &[
+            "--camera",
+            camera.to_str().unwrap(),
+            "--dark",
+            dark.to_str().unwrap(),
+        ],
+    );
+    let t0 = Instant::now();
+    let o = run(c, 60);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(
+        e.contains("--dark: the dark frame")
+            && e.contains("is 20000x20000 but the camera file says"),
+        "{e}"
+    );
+    println!("refused in {:.2} s", t0.elapsed().as_secs_f64());
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes into the struct it is given.
+    assert_eq!(
+        unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut usage) },
+        0
+    );
+    let peak_mb = usage.ru_maxrss as f64 / 1024.0;
+    assert!(peak_mb < 600.0, "{peak_mb:.0} MB");
+}
+
+/// Issue 45, item 3: a FIFO or a directory given as `--catalog`, `--tle`, `--camera`,
+/// `--dark` or to `catalog import` is refused before it is opened, naming what it is (a FIFO
+/// held the run forever; `/dev/zero` was read until memory ran out).
+#[cfg(unix)]
+#[test]
+fn option_files_that_are_not_regular_files_are_refused_before_reading() {
+    let s = set(1);
+    let fifo = s.root.join("pipe");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let camera = s.dir.join("camera.toml");
+    let camera = camera.to_str().unwrap();
+    let empty = s.root.join("empty-dir");
+    std::fs::create_dir(&empty).unwrap();
+    let mut k = 0;
+    for (path, kind) in [(&fifo, "a FIFO"), (&empty, "a directory")] {
+        let path = path.to_str().unwrap();
+        for args in [
+            vec!["--camera", camera, "--catalog", path],
+            vec!["--camera", camera, "--streaks", "--tle", path],
+            vec!["--camera", path],
+            vec!["--camera", camera, "--dark", path],
+        ] {
+            k += 1;
+            let out = s.root.join(format!("r{k}.jsonl"));
+            let o = run(cpu_batch(&s.dir, &out, &args), 30);
+            let e = stderr(&o);
+            assert_eq!(o.status.code(), Some(2), "{args:?}: {e}");
+            assert!(
+                e.contains(&format!("not a regular file but {kind}")),
+                "{args:?}: {e}"
+            );
+        }
+        let mut c = gpustar();
+        c.args(["catalog", "import", path, "-o"])
+            .arg(s.root.join("c.gpustarcat"));
+        let o = run(c, 30);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{e}");
+        assert!(e.contains(&format!("not a regular file but {kind}")), "{e}");
+    }
 }
 
 /// `--tdm` and `--iod` after `--resume` hold the streaks of the whole file, not only of the

@@ -208,3 +208,54 @@ fn hints_are_refused_with_sequences() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--hint is not used with --sequence"), "{err}");
 }
+
+/// Issue 45, item 5: under `--hint header`, pointing keywords that cannot be used (RA = 'abc',
+/// DEC = 95) are named in the frame's record with why, where they were passed over silently.
+#[test]
+fn unusable_header_pointing_keywords_are_named_in_the_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let card = |k: &str, v: &str| format!("{:<80}", format!("{k:<8}= {v:>20}"));
+    let side = 128usize;
+    let mut header = [
+        card("SIMPLE", "T"),
+        card("BITPIX", "8"),
+        card("NAXIS", "2"),
+        card("NAXIS1", &side.to_string()),
+        card("NAXIS2", &side.to_string()),
+        card("RA", "'abc'"),
+        card("DEC", "95"),
+        format!("{:<80}", "END"),
+    ]
+    .concat()
+    .into_bytes();
+    header.resize(2880, b' ');
+    header.resize(2880 + (side * side).div_ceil(2880) * 2880, 10);
+    std::fs::write(dir.path().join("f.fits"), header).unwrap();
+    let out = dir.path().join("out.jsonl");
+    let (d, o) = (dir.path().to_str().unwrap(), out.to_str().unwrap());
+    common::run_ok(&[
+        "batch",
+        d,
+        "--fov-deg",
+        "10",
+        "--backend",
+        "cpu",
+        "-q",
+        "--hint",
+        "header",
+        "-o",
+        o,
+    ]);
+    let r: serde_json::Value =
+        serde_json::from_str(std::fs::read_to_string(&out).unwrap().trim()).unwrap();
+    let warnings = r["warnings"].to_string();
+    assert!(
+        warnings.contains("--hint header: RA = abc not used: not a right ascension"),
+        "{r}"
+    );
+    assert!(
+        warnings.contains("--hint header: DEC = 95 not used: not a declination"),
+        "{r}"
+    );
+    assert!(r.get("hint").is_none(), "{r}");
+}

@@ -203,7 +203,12 @@ fn value(row: &[u8], c: &Column) -> Option<f64> {
 
 /// The stars of an index file, with magnitudes at or brighter than `keep`. `source` names
 /// it in messages.
-pub fn read(bytes: &[u8], source: &str, keep: impl Fn(f64) -> bool) -> Result<Vec<Star>> {
+pub(crate) fn read(
+    bytes: &[u8],
+    source: &str,
+    keep: impl Fn(f64) -> bool,
+    rows: &mut super::Rows,
+) -> Result<()> {
     let hdus = hdus(bytes, source)?;
     let index_id = hdus
         .first()
@@ -351,7 +356,6 @@ pub fn read(bytes: &[u8], source: &str, keep: impl Fn(f64) -> bool) -> Result<Ve
             "{source}: the tag-along table has {tag_rows} rows for {n} stars"
         );
     }
-    let mut stars = Vec::with_capacity(n);
     for i in 0..n {
         let original = perm.as_ref().map_or(i, |p| p[i]);
         let row = tag
@@ -375,7 +379,7 @@ pub fn read(bytes: &[u8], source: &str, keep: impl Fn(f64) -> bool) -> Result<Ve
         }
         let v = v / norm;
         let extra = |c: Option<&Column>| c.and_then(|c| value(row, c)).filter(|x| x.is_finite());
-        stars.push(Star {
+        let star = Star {
             id: StarId::AnIndex {
                 index: index_id,
                 star: i as u32,
@@ -387,9 +391,10 @@ pub fn read(bytes: &[u8], source: &str, keep: impl Fn(f64) -> bool) -> Result<Ve
             pmdec_mas_yr: extra(pmdec_col).unwrap_or(0.0),
             mag,
             epoch: extra(epoch_col).unwrap_or(DEFAULT_EPOCH),
-        });
+        };
+        rows.push(star, i);
     }
-    Ok(stars)
+    Ok(())
 }
 
 #[cfg(test)]
@@ -483,6 +488,13 @@ mod tests {
         }
         f.extend(data(m));
         f
+    }
+
+    /// The stars [`super::read`] keeps.
+    fn read(bytes: &[u8], source: &str, keep: impl Fn(f64) -> bool) -> Result<Vec<Star>> {
+        let mut rows = crate::catalog::formats::Rows::new(crate::catalog::formats::Format::AnIndex);
+        super::read(bytes, source, keep, &mut rows)?;
+        Ok(rows.finish(source).0)
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! A user's catalog: `id`, `ra_deg`, `dec_deg`, `mag`, optional `pmra_mas_yr` (μα·cos δ),
 //! `pmdec_mas_yr`, `epoch` (Julian year of the position, default [`USER_EPOCH`]) and `hip`.
 
-use super::{number, number_or};
+use super::{Rows, number, number_or};
 use crate::catalog::{Star, StarId};
 use crate::error::{Result, fail};
 
@@ -104,7 +104,8 @@ pub(super) fn read(
     text: &str,
     source: &str,
     keep: impl Fn(f64) -> bool,
-) -> Result<(Vec<Star>, Vec<String>)> {
+    rows_kept: &mut Rows,
+) -> Result<()> {
     let mut it = rows(text);
     let Some((_, head)) = it.next() else {
         fail!(Catalog, "{source}: empty");
@@ -122,7 +123,6 @@ pub(super) fn read(
         h.find("epoch"),
         h.find("hip"),
     );
-    let (mut stars, mut names) = (Vec::new(), Vec::new());
     for (n, line) in it {
         let f = fields(line, &h, source, n)?;
         let m = number(&f[mag], "mag", source, n)?;
@@ -142,11 +142,9 @@ pub(super) fn read(
         if f[id].is_empty() {
             fail!(Catalog, "{source}: line {n}: empty id");
         }
-        let Ok(index) = u32::try_from(names.len()) else {
-            fail!(Catalog, "{source}: more than 2^32 stars");
-        };
-        stars.push(Star {
-            id: StarId::Name(index),
+        let star = Star {
+            // Set by push_named.
+            id: StarId::Name(0),
             hip,
             ra_rad: number(&f[ra], "ra_deg", source, n)?.to_radians(),
             dec_rad: number(&f[dec], "dec_deg", source, n)?.to_radians(),
@@ -154,10 +152,12 @@ pub(super) fn read(
             pmdec_mas_yr: opt(pmdec, 0.0, "pmdec_mas_yr")?,
             mag: m,
             epoch: opt(epoch, USER_EPOCH, "epoch")?,
-        });
-        names.push(f[id].clone());
+        };
+        rows_kept
+            .push_named(star, &f[id], n)
+            .map_err(|e| e.context(source))?;
     }
-    Ok((stars, names))
+    Ok(())
 }
 
 #[cfg(test)]

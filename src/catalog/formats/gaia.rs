@@ -10,7 +10,7 @@
 //! of the built-in Hipparcos-2 catalog, which holds every one of them.
 
 use super::csv::{Header, fields, rows};
-use super::{number, number_or};
+use super::{Rows, number, number_or};
 use crate::catalog::{Star, StarId};
 use crate::error::{Result, fail};
 
@@ -39,7 +39,8 @@ pub(super) fn read_bin(
     bytes: &[u8],
     source: &str,
     keep: impl Fn(f64) -> bool,
-) -> Result<Vec<Star>> {
+    rows: &mut Rows,
+) -> Result<()> {
     if bytes.len() < BIN_HEADER || !bytes.starts_with(BIN_MAGIC) {
         fail!(
             Catalog,
@@ -66,8 +67,7 @@ pub(super) fn read_bin(
             bytes.len()
         );
     }
-    let mut stars = Vec::with_capacity(count as usize);
-    for r in bytes[BIN_HEADER..].chunks_exact(BIN_RECORD) {
+    for (k, r) in bytes[BIN_HEADER..].chunks_exact(BIN_RECORD).enumerate() {
         let f64_at = |o: usize| f64::from_le_bytes(r[o..o + 8].try_into().expect("8 bytes"));
         let f32_at = |o: usize| f32::from_le_bytes(r[o..o + 4].try_into().expect("4 bytes"));
         let mag = f32_at(24) as f64;
@@ -77,13 +77,7 @@ pub(super) fn read_bin(
         let (id, hip) = identity(i64::from_le_bytes(r[0..8].try_into().expect("8 bytes")));
         let (ra, dec) = (f64_at(8), f64_at(16));
         let (pmra, pmdec) = (f32_at(28) as f64, f32_at(32) as f64);
-        if ![ra, dec, mag].iter().all(|v| v.is_finite()) || dec.abs() > 90.0 {
-            fail!(
-                Catalog,
-                "{source}: star {id:?}: position or magnitude not a number"
-            );
-        }
-        stars.push(Star {
+        let star = Star {
             id,
             hip,
             ra_rad: ra.to_radians(),
@@ -93,15 +87,16 @@ pub(super) fn read_bin(
             pmdec_mas_yr: if pmdec.is_finite() { pmdec } else { 0.0 },
             mag,
             epoch: GAIA_DR3_EPOCH,
-        });
+        };
+        // Non-finite or out-of-range positions and magnitudes are counted and left out there.
+        rows.push(star, k + 1);
     }
-    with_hipparcos_motion(&mut stars);
-    Ok(stars)
+    Ok(())
 }
 
 /// The merged Hipparcos entries (−HIP ids, no proper motion) take the position, proper motion
 /// and epoch of the built-in Hipparcos-2 catalog where it has the star; magnitudes stay G.
-fn with_hipparcos_motion(stars: &mut [Star]) {
+pub(super) fn with_hipparcos_motion(stars: &mut [Star]) {
     if !stars.iter().any(|s| matches!(s.id, StarId::Hip(_))) {
         return;
     }
@@ -133,7 +128,12 @@ pub(super) fn csv_looks_like(line: &str) -> bool {
 /// The Gaia archive's CSV: source_id, ra, dec, phot_g_mean_mag, pmra, pmdec in any order
 /// (other columns ignored); an empty (or null, NaN) proper motion is 0; a star without G is
 /// left out.
-pub(super) fn read_csv(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> Result<Vec<Star>> {
+pub(super) fn read_csv(
+    text: &str,
+    source: &str,
+    keep: impl Fn(f64) -> bool,
+    rows_kept: &mut Rows,
+) -> Result<()> {
     let mut it = rows(text);
     let Some((_, head)) = it.next() else {
         fail!(Catalog, "{source}: empty");
@@ -154,7 +154,6 @@ pub(super) fn read_csv(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> 
             s.to_string()
         }
     };
-    let mut stars = Vec::new();
     for (n, line) in it {
         let f: Vec<String> = fields(line, &h, source, n)?
             .iter()
@@ -174,7 +173,7 @@ pub(super) fn read_csv(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> 
         let pm = |c: Option<usize>, what: &str| {
             c.map_or(Ok(0.0), |c| number_or(&f[c], 0.0, what, source, n))
         };
-        stars.push(Star {
+        let star = Star {
             id: star_id,
             hip,
             ra_rad: number(&f[ra], "ra", source, n)?.to_radians(),
@@ -183,9 +182,10 @@ pub(super) fn read_csv(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> 
             pmdec_mas_yr: pm(pmdec, "pmdec")?,
             mag: m,
             epoch: GAIA_DR3_EPOCH,
-        });
+        };
+        rows_kept.push(star, n);
     }
-    Ok(stars)
+    Ok(())
 }
 
 #[cfg(test)]

@@ -1,6 +1,6 @@
 //! Hipparcos-2 `hip2.dat` (CDS I/311): whitespace-separated, positions ICRS at J1991.25.
 
-use super::number;
+use super::{Rows, number};
 use crate::catalog::{HIPPARCOS_EPOCH, Star, StarId};
 use crate::error::{Result, fail};
 
@@ -15,8 +15,12 @@ pub(super) fn looks_like(line: &str) -> bool {
 }
 
 /// Columns used (1-based, I/311 ReadMe): 1 HIP, 5 RArad, 6 DErad, 8 pmRA, 9 pmDE, 20 Hpmag.
-pub(super) fn read(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> Result<Vec<Star>> {
-    let mut stars = Vec::new();
+pub(super) fn read(
+    text: &str,
+    source: &str,
+    keep: impl Fn(f64) -> bool,
+    rows: &mut Rows,
+) -> Result<()> {
     for (n, line) in text.lines().enumerate() {
         if line.trim().is_empty() {
             continue;
@@ -38,7 +42,7 @@ pub(super) fn read(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> Resu
         let Ok(hip) = f[0].parse::<u32>() else {
             fail!(Catalog, "{source}: line {}: bad HIP {:?}", n + 1, f[0]);
         };
-        stars.push(Star {
+        let star = Star {
             id: StarId::Hip(hip),
             hip: Some(hip),
             ra_rad: number(f[4], "RArad", source, n + 1)?,
@@ -47,9 +51,10 @@ pub(super) fn read(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> Resu
             pmdec_mas_yr: number(f[8], "pmDE", source, n + 1)?,
             mag,
             epoch: HIPPARCOS_EPOCH,
-        });
+        };
+        rows.push(star, n + 1);
     }
-    Ok(stars)
+    Ok(())
 }
 
 /// Two lines of the real hip2.dat (HIP 1, Hp 9.2; HIP 3, Hp 6.6), for tests.

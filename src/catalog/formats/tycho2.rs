@@ -3,7 +3,7 @@
 //! position, at its own epoch (1990 + epRA), and no proper motion.
 //! Magnitude: Johnson V ≈ VT − 0.090 (BT − VT) (I/259 ReadMe, note 7), else VT or BT.
 
-use super::{number, number_or};
+use super::{Rows, number, number_or};
 use crate::catalog::{Star, StarId};
 use crate::error::{Result, fail};
 
@@ -38,8 +38,12 @@ fn tyc(field: &str) -> Option<StarId> {
     it.next().is_none().then_some(id)
 }
 
-pub(super) fn read(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> Result<Vec<Star>> {
-    let mut stars = Vec::new();
+pub(super) fn read(
+    text: &str,
+    source: &str,
+    keep: impl Fn(f64) -> bool,
+    rows: &mut Rows,
+) -> Result<()> {
     for (n, line) in text.lines().enumerate() {
         let n = n + 1;
         if line.trim().is_empty() {
@@ -104,9 +108,9 @@ pub(super) fn read(text: &str, source: &str, keep: impl Fn(f64) -> bool) -> Resu
                 epoch: 2000.0,
             }
         };
-        stars.push(star);
+        rows.push(star, n);
     }
-    Ok(stars)
+    Ok(())
 }
 
 #[cfg(test)]
