@@ -40,7 +40,9 @@ Examples:
 Exit status: 0 when every input got a record and none is an error record (with --resume: none
 in the whole file); 1 when some input has an error record; 2 when the run could not start (bad
 options, unreadable camera or catalog, GPU asked for but absent, an --output that is not
-gpustar's or that another gpustar is writing) or merge found inputs missing, repeated or torn;
+gpustar's or that another gpustar is writing, an output on an input or on another output, a file
+gpustar did not write at an output path without --overwrite, a folder that cannot be read or
+holds no image files) or merge found inputs missing, repeated or torn;
 3 when the records could not be written (a full disk: those written are whole; --resume
 continues); 130 when interrupted (Ctrl-C, SIGTERM: the records written so far are complete;
 --resume continues).";

@@ -100,11 +100,11 @@ impl Frame<'static> {
                 error: e,
             },
         })?;
-        if meta.is_dir() {
-            // Listed because it could not be read (io::inputs::list): its frames are unknown.
-            let why = std::fs::read_dir(path)
-                .err()
-                .map_or("unreadable".into(), |e| e.to_string());
+        // A directory listed because it could not be read (io::inputs::list): its frames
+        // are unknown.
+        if meta.is_dir()
+            && let Err(why) = std::fs::read_dir(path)
+        {
             fail!(
                 Input,
                 "cannot read the directory {shown} ({why}): the frames in it have no record; make \
