@@ -387,6 +387,27 @@ def test_batch_writes_the_clis_files(tmp_path):
         gpustar.batch(d, camera=d / "camera.toml", format="csv")
 
 
+def test_batch_refuses_outputs_that_are_not_its_own(tmp_path, frames):
+    """batch() claims its outputs before any work, as the command line does (issue 45): a
+    file that is not gpustar's records, an annotation folder where the frames are read, two
+    outputs on one path; each refused with the file as it was."""
+    d = tmp_path / "frames"
+    d.mkdir()
+    write_fits(d / "a.fits", frames[0][0])
+    pretty = tmp_path / "settings.json"
+    pretty.write_text('{\n  "file": "mine"\n}\n')
+    with pytest.raises(gpustar.Error, match="does not hold gpustar results"):
+        gpustar.batch(d, fov_deg=FOV, backend="cpu", output=pretty)
+    assert pretty.read_text() == '{\n  "file": "mine"\n}\n'
+    with pytest.raises(gpustar.Error, match="where the frames are read"):
+        gpustar.batch(d, fov_deg=FOV, backend="cpu", annotate_dir=d)
+    assert sorted(os.listdir(d)) == ["a.fits"]
+    out = tmp_path / "r.jsonl"
+    with pytest.raises(gpustar.Error, match="is also -o"):
+        gpustar.batch(d, fov_deg=FOV, backend="cpu", output=out, streaks=True, tdm=out)
+    assert not out.exists()
+
+
 def test_sequence_tracks_frames(cpu_solver, frames):
     seq = gpustar.Sequence(cpu_solver, frame_interval_s=1.0)
     image = frames[0][0]
