@@ -96,6 +96,13 @@ const NASTY: &[&str] = &[
     "1.5",
     "   ",
     "'unterminated",
+    // A declination beyond a pole, a scale of nothing, a day's exposure and a start that
+    // with it ends past 2100 (issue 45, items 8 and 9).
+    "95",
+    "-90.5",
+    "1E-300",
+    "86400",
+    "'2099-12-31T18:00:00'",
 ];
 
 fn card(key: &str, value: &str) -> String {
@@ -153,7 +160,7 @@ fn fits_headers() {
 }
 
 /// Header keywords as the streak and sequence code read them (times, station, WCS with SIP
-/// orders), any value: no panic, no stall.
+/// orders), any value, and Az/El at the exposure's times: no panic, no stall.
 #[test]
 fn header_keywords() {
     const KEYS: &[&str] = &[
@@ -161,7 +168,8 @@ fn header_keywords() {
         "TELAPSE", "TIMESYS", "TIME-OBS", "UT", "OBSGEO-B", "OBSGEO-L", "OBSGEO-H", "OBSGEO-X",
         "OBSGEO-Y", "OBSGEO-Z", "SITELAT", "SITELONG", "SITEELEV", "A_ORDER", "B_ORDER", "A_2_0",
         "B_0_2", "A_1_1", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "CD1_1", "CD1_2", "CD2_1",
-        "CD2_2", "CDELT1", "CDELT2", "CROTA2", "PC1_1", "CTYPE1", "CTYPE2",
+        "CD2_2", "CDELT1", "CDELT2", "CROTA2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "A_0_2",
+        "B_2_0", "CTYPE1", "CTYPE2",
     ];
     let strategy = proptest::collection::vec((0..KEYS.len(), 0usize..64), 0..12);
     fuzz("header_keywords", 3000, strategy, |pairs| {
@@ -184,9 +192,25 @@ fn header_keywords() {
         }
         let get = |key: &str| k.get(key).cloned();
         Ok(within_limit("header keywords", || {
-            let wcs = crate::io::wcs::HeaderWcs::from_keywords(&k);
+            let wcs = crate::io::wcs::HeaderWcs::from_keywords(&k, (512, 512));
             let (exposure, _) = crate::sky::exposure_from_header(&get);
-            let _ = crate::sky::station_from_header(&get);
+            let (station, _) = crate::sky::station_from_header(&get);
+            // Every time the streak code takes Az/El at (sofars panicked past 2100).
+            if let Some(e) = &exposure {
+                let radec = match &wcs {
+                    Ok(Some(w)) => w.pixel_to_radec(256.0, 256.0),
+                    _ => None,
+                };
+                let (ra, dec) = radec.unwrap_or((10.0, 20.0));
+                let st = station.unwrap_or(crate::sky::Station {
+                    lat_deg: 35.7,
+                    lon_deg: 51.4,
+                    height_m: 1200.0,
+                });
+                for t in [e.start, e.mid(), e.end] {
+                    let _ = crate::sky::az_el(ra, dec, &t, &st, 0.0, 0.0, 0.0);
+                }
+            }
             match (wcs, exposure) {
                 (Ok(Some(_)), Some(_)) => "wcs and exposure",
                 (Ok(Some(_)), None) => "wcs only",

@@ -47,6 +47,19 @@ const SIP_MAX_ORDER: usize = 9;
 const SIP_READ_MAX_ORDER: i32 = 9;
 /// Within this distance (radians) of a celestial pole the RA of the boresight is undefined.
 const POLE_EPS: f64 = 1e-9;
+/// Pixel scales (arcsec per pixel, each axis) a header WCS may have. Wide on both sides of
+/// every real telescope: adaptive-optics imagers reach 1.5 mas/px (ELT MICADO), all-sky
+/// cameras a fraction of a degree. Beyond them the linear terms are a typo or a placeholder
+/// (1e10, 1e-300) and the RA/Dec they give mean nothing.
+const WCS_SCALE_ARCSEC: (f64, f64) = (1e-4, 36_000.0);
+/// Largest ratio of a header WCS's two axis scales: pixels are near square (binning 1x2
+/// gives 2); rows of the linear terms this close to parallel make them singular in effect.
+const WCS_MAX_ASPECT: f64 = 1000.0;
+/// Largest |CRPIX| (pixels): a mosaic's chip may have its reference pixel several frames
+/// away, not a million pixels.
+const WCS_MAX_CRPIX: f64 = 1e6;
+/// CRVAL1 beyond ±2 turns is a placeholder, whatever its value modulo 360.
+const WCS_MAX_CRVAL1: f64 = 720.0;
 
 /// The FITS WCS header of a frame seen by `camera` with attitude `r` (ICRS → camera).
 ///
@@ -454,17 +467,21 @@ pub struct HeaderWcs {
 }
 
 impl HeaderWcs {
-    /// The WCS of these keywords; None when they hold no celestial WCS, an error when they
-    /// hold one gpustar does not read (another projection, missing or singular terms).
+    /// The WCS of these keywords for a frame of `size` (width, height); None when they hold
+    /// no celestial WCS, an error naming the keyword and its value when they hold one gpustar
+    /// does not read (another projection, missing terms) or one no telescope has (a
+    /// declination beyond a pole, a scale or distortion out of any range, singular terms).
     pub fn from_keywords(
         k: &std::collections::BTreeMap<String, String>,
+        size: (u32, u32),
     ) -> Result<Option<HeaderWcs>> {
-        Self::read(k).map_err(crate::Error::Input)
+        Self::read(k, size).map_err(crate::Error::Input)
     }
 
     /// [`HeaderWcs::from_keywords`], its messages as text.
     fn read(
         k: &std::collections::BTreeMap<String, String>,
+        size: (u32, u32),
     ) -> std::result::Result<Option<HeaderWcs>, String> {
         let (Some(c1), Some(c2)) = (k.get("CTYPE1"), k.get("CTYPE2")) else {
             return Ok(None);
@@ -490,8 +507,31 @@ impl HeaderWcs {
             }
         };
         let need = |key: &str| num(key)?.ok_or_else(|| format!("{key} is missing"));
+        // "KEY = value" as the header wrote it, for messages.
+        let said = |key: &str| format!("{key} = {}", k.get(key).map_or("", |v| v.trim()));
         let crpix = (need("CRPIX1")?, need("CRPIX2")?);
-        let crval = (need("CRVAL1")?.to_radians(), need("CRVAL2")?.to_radians());
+        for (key, v) in [("CRPIX1", crpix.0), ("CRPIX2", crpix.1)] {
+            if v.abs() > WCS_MAX_CRPIX {
+                return Err(format!(
+                    "{}: reference pixels within {WCS_MAX_CRPIX:e} px of the frame are read",
+                    said(key)
+                ));
+            }
+        }
+        let (ra, dec) = (need("CRVAL1")?, need("CRVAL2")?);
+        if ra.abs() > WCS_MAX_CRVAL1 {
+            return Err(format!(
+                "{}: right ascensions from -{WCS_MAX_CRVAL1} to {WCS_MAX_CRVAL1} deg are read",
+                said("CRVAL1")
+            ));
+        }
+        if dec.abs() > 90.0 {
+            return Err(format!(
+                "{}: declinations from -90 to 90 deg are read",
+                said("CRVAL2")
+            ));
+        }
+        let crval = (ra.rem_euclid(360.0).to_radians(), dec.to_radians());
         let cd = if num("CD1_1")?.is_some() || num("CD2_2")?.is_some() {
             let at = |i, j| num(&format!("CD{i}_{j}")).map(|v| v.unwrap_or(0.0));
             [[at(1, 1)?, at(1, 2)?], [at(2, 1)?, at(2, 2)?]]
@@ -511,10 +551,17 @@ impl HeaderWcs {
             };
             [[d1 * m[0][0], d1 * m[0][1]], [d2 * m[1][0], d2 * m[1][1]]]
         };
-        let det = cd[0][0] * cd[1][1] - cd[0][1] * cd[1][0];
-        if det.abs() < 1e-20 {
-            return Err("the WCS's linear terms are singular".into());
-        }
+        check_scales(&cd, || {
+            let keys = ["CD1_1", "CD1_2", "CD2_1", "CD2_2", "CDELT1", "CDELT2"];
+            let keys = keys
+                .iter()
+                .chain(&["PC1_1", "PC1_2", "PC2_1", "PC2_2", "CROTA2"]);
+            let given: Vec<String> = keys
+                .filter(|key| k.contains_key(**key))
+                .map(|key| said(key))
+                .collect();
+            given.join(", ")
+        })?;
         let terms = |name: &str| -> std::result::Result<Vec<(i32, i32, f64)>, String> {
             if !sip {
                 return Ok(Vec::new());
@@ -538,12 +585,14 @@ impl HeaderWcs {
             }
             Ok(t)
         };
+        let (sip_a, sip_b) = (terms("A")?, terms("B")?);
+        check_distortion(crpix, size, &sip_a, &sip_b, &said)?;
         Ok(Some(HeaderWcs {
             crpix,
             crval,
             cd,
-            sip_a: terms("A")?,
-            sip_b: terms("B")?,
+            sip_a,
+            sip_b,
         }))
     }
 
@@ -563,6 +612,89 @@ impl HeaderWcs {
         let dec = (d0.sin() + eta * d0.cos()).atan2((xi * xi + den * den).sqrt());
         dec.is_finite()
             .then(|| (ra.to_degrees().rem_euclid(360.0), dec.to_degrees()))
+    }
+}
+
+/// The linear terms' two axis scales (singular values of CD, degrees per pixel) within
+/// [`WCS_SCALE_ARCSEC`] and [`WCS_MAX_ASPECT`] of each other; `given` names the keywords.
+fn check_scales(cd: &[[f64; 2]; 2], given: impl Fn() -> String) -> std::result::Result<(), String> {
+    // Singular values of a 2x2 matrix through hypot: no overflow for any finite entries.
+    let [[a, b], [c, d]] = *cd;
+    let q = (0.5 * (a + d)).hypot(0.5 * (c - b));
+    let r = (0.5 * (a - d)).hypot(0.5 * (c + b));
+    let (big, small) = ((q + r) * 3600.0, (q - r).abs() * 3600.0);
+    let (lo, hi) = WCS_SCALE_ARCSEC;
+    let range = || format!("pixel scales from {lo:e} to {hi} arcsec are read");
+    // Entries near f64::MAX overflow the sums to inf; with `big` finite, `small` is too.
+    let problem = if !big.is_finite() || big > hi {
+        range()
+    } else if small * WCS_MAX_ASPECT < big {
+        "singular or nearly so".to_string()
+    } else if small < lo {
+        range()
+    } else {
+        return Ok(());
+    };
+    Err(format!(
+        "{}: axis scales {} and {} arcsec per pixel, {problem}",
+        given(),
+        short(big),
+        short(small)
+    ))
+}
+
+/// The SIP distortion at the frame's corners under the frame's diagonal: a real camera's is
+/// a few pixels, and 1e300 coefficients (or a high order's corner powers) would move a
+/// streak's ends anywhere on the sky.
+fn check_distortion(
+    crpix: (f64, f64),
+    (w, h): (u32, u32),
+    sip_a: &[(i32, i32, f64)],
+    sip_b: &[(i32, i32, f64)],
+    said: &dyn Fn(&str) -> String,
+) -> std::result::Result<(), String> {
+    let diagonal = f64::from(w).hypot(f64::from(h));
+    // FITS pixel edges: the frame spans 0.5 .. w + 0.5.
+    let corners = [(0.5, 0.5), (w as f64 + 0.5, 0.5), (0.5, h as f64 + 0.5)];
+    let corners = corners
+        .into_iter()
+        .chain([(w as f64 + 0.5, h as f64 + 0.5)]);
+    for (x, y) in corners {
+        let (u, v) = (x - crpix.0, y - crpix.1);
+        let term = |&(p, q, c): &(i32, i32, f64)| c * u.powi(p) * v.powi(q);
+        let (du, dv) = (
+            sip_a.iter().map(term).sum::<f64>(),
+            sip_b.iter().map(term).sum::<f64>(),
+        );
+        let shift = du.hypot(dv);
+        if shift <= diagonal {
+            continue;
+        }
+        // Name the term that moves this corner most.
+        let sets = [("A", sip_a), ("B", sip_b)];
+        let terms = sets
+            .iter()
+            .flat_map(|(name, t)| t.iter().map(move |x| (*name, x)));
+        let worst = terms
+            .max_by(|a, b| term(a.1).abs().total_cmp(&term(b.1).abs()))
+            .map_or(String::new(), |(name, x)| {
+                said(&format!("{name}_{}_{}", x.0, x.1))
+            });
+        return Err(format!(
+            "{worst}: the SIP distortion at the frame's corner ({x}, {y}) is {} px, more than \
+             the frame's diagonal ({diagonal:.0} px)",
+            short(shift)
+        ));
+    }
+    Ok(())
+}
+
+/// A number for a message: 4 significant digits, in exponent form when far from 1.
+fn short(v: f64) -> String {
+    if v != 0.0 && !(1e-3..1e6).contains(&v.abs()) {
+        format!("{v:.3e}")
+    } else {
+        format!("{}", (v * 1e4).round() / 1e4)
     }
 }
 
@@ -595,7 +727,7 @@ mod header_tests {
     fn sip_orders_are_bounded() {
         for bad in ["2147483647", "10", "-1", "2.5", "1e300"] {
             let t = std::time::Instant::now();
-            let e = HeaderWcs::from_keywords(&keywords(bad)).unwrap_err();
+            let e = HeaderWcs::from_keywords(&keywords(bad), (1024, 1024)).unwrap_err();
             assert!(e.to_string().contains("A_ORDER"), "{bad}: {e}");
             assert!(
                 t.elapsed().as_secs_f64() < 1.0,
@@ -603,8 +735,91 @@ mod header_tests {
                 t.elapsed()
             );
         }
-        let w = HeaderWcs::from_keywords(&keywords("2")).unwrap().unwrap();
+        let w = HeaderWcs::from_keywords(&keywords("2"), (1024, 1024))
+            .unwrap()
+            .unwrap();
         assert_eq!(w.sip_a, vec![(2, 0, 1e-6)]);
+    }
+
+    /// The keywords of [`keywords`] (order 2) with `changes`; an empty value removes the key.
+    fn changed(changes: &[(&str, &str)]) -> std::collections::BTreeMap<String, String> {
+        let mut k = keywords("2");
+        for (key, v) in changes {
+            match *v {
+                "" => k.remove(*key),
+                v => k.insert(key.to_string(), v.to_string()),
+            };
+        }
+        k
+    }
+
+    /// Issue 45, item 8: a header WCS no telescope has (a declination beyond a pole, a scale
+    /// of 1e10 deg/px or 1e-300, singular terms, 1e300 anywhere, a distortion that moves the
+    /// corners off the frame) is refused, naming the keyword and the value written; the
+    /// extremes of real telescopes are read.
+    #[test]
+    fn nonsensical_wcs_is_refused_naming_the_keyword() {
+        let size = (1024, 1024);
+        let cd = |v: &'static str| [("CD1_1", v), ("CD1_2", v), ("CD2_1", v), ("CD2_2", v)];
+        let cdelt = [
+            ("CD1_1", ""),
+            ("CD2_2", ""),
+            ("CDELT1", "1e10"),
+            ("CDELT2", "0.001"),
+        ];
+        let bad: Vec<(Vec<(&str, &str)>, &str)> = vec![
+            (
+                vec![("CRVAL2", "95")],
+                "CRVAL2 = 95: declinations from -90 to 90",
+            ),
+            (vec![("CRVAL2", "-90.5")], "CRVAL2 = -90.5"),
+            (vec![("CRVAL1", "1e300")], "CRVAL1 = 1e300"),
+            (vec![("CRPIX1", "1e300")], "CRPIX1 = 1e300"),
+            (vec![("CRPIX2", "-2e6")], "CRPIX2 = -2e6"),
+            (vec![("CD1_1", "1e10")], "CD1_1 = 1e10"),
+            (
+                vec![("CD1_1", "1e300"), ("CD2_2", "1e300")],
+                "CD2_2 = 1e300",
+            ),
+            (
+                vec![("CD1_1", "1e-300"), ("CD2_2", "1e-300")],
+                "pixel scales from",
+            ),
+            (cd("0.001").to_vec(), "singular"),
+            (
+                vec![("CD1_2", "0.001"), ("CD2_1", "0.0009999999")],
+                "singular",
+            ),
+            (cdelt.to_vec(), "CDELT1 = 1e10"),
+            (vec![("A_2_0", "1e300")], "A_2_0 = 1e300"),
+            (vec![("B_0_2", "1e300")], "B_0_2 = 1e300"),
+            // 2616 px at a corner, the diagonal 1448 px.
+            (vec![("A_2_0", "0.01")], "A_2_0 = 0.01: the SIP distortion"),
+        ];
+        for (changes, want) in bad {
+            match HeaderWcs::from_keywords(&changed(&changes), size) {
+                Err(e) => assert!(e.to_string().contains(want), "{changes:?}: {e}"),
+                Ok(w) => panic!("{changes:?} read as {w:?}"),
+            }
+        }
+        let read = |changes: &[(&str, &str)]| {
+            HeaderWcs::from_keywords(&changed(changes), size)
+                .unwrap_or_else(|e| panic!("{changes:?}: {e}"))
+                .unwrap()
+        };
+        // 0.01"/px (adaptive optics) to 10 deg/px, poles, a chip's reference pixel far off
+        // the frame, a distortion of 26 px at the corners.
+        read(&[("CD1_1", "2.8e-6"), ("CD2_2", "-2.8e-6")]);
+        read(&[("CD1_1", "10"), ("CD2_2", "10"), ("A_2_0", "")]);
+        read(&[("CRVAL2", "90")]);
+        read(&[("CRVAL2", "-90")]);
+        read(&[("CRPIX1", "-5000"), ("A_2_0", "")]);
+        read(&[("A_2_0", "1e-4")]);
+        // RA wrapped into [0, 360).
+        let (w, east) = (read(&[("CRVAL1", "-10")]), read(&[("CRVAL1", "350")]));
+        assert_eq!(w, east);
+        let ra = w.pixel_to_radec(511.0, 511.0).unwrap().0;
+        assert!((ra - 350.0).abs() < 1e-9, "{ra}");
     }
 }
 

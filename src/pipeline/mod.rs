@@ -244,7 +244,7 @@ impl Solvers {
         // A solved frame's catalog says which tracks are chains of its stars.
         let found = found.map(|f| streaks::catalog_chain::off_catalog_chains(f, sol));
         let found = found.as_deref();
-        self.add_streaks(&mut r, d, sol, found);
+        self.add_streaks(&mut r, d, (frame.width, frame.height), sol, found);
         let drawn = found.unwrap_or_default();
         if let Err(e) = self.products.write(&d.name, frame, sol, drawn) {
             // The solution stands; the user learns which file is missing and why.
@@ -259,11 +259,12 @@ impl Solvers {
         &self,
         r: &mut Record,
         d: &Decoded,
+        size: (u32, u32),
         sol: &Solution,
         found: Option<&[StreakFit]>,
     ) {
         if let (Some(opts), Some(found)) = (&self.streaks, found) {
-            let (records, warnings) = streaks::reduce::records(found, sol, &d.keywords, opts);
+            let (records, warnings) = streaks::reduce::records(found, sol, &d.keywords, size, opts);
             for w in &warnings {
                 tracing::warn!("{}: {w}", d.name);
             }

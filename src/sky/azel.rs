@@ -22,6 +22,7 @@ pub fn az_el(
             "no such direction: RA {ra_deg} deg, Dec {dec_deg} deg"
         )));
     }
+    t.plausible().map_err(crate::Error::Input)?;
     let Station {
         lat_deg,
         lon_deg,

@@ -125,14 +125,14 @@ impl Reader<'_> {
         }
     }
 
-    /// An exposure length in seconds from the first usable one of LENGTH_KEYS.
-    fn length(&mut self) -> Option<f64> {
+    /// An exposure length in seconds from the first usable one of LENGTH_KEYS, and its key.
+    fn length(&mut self) -> Option<(f64, &'static str)> {
         for key in LENGTH_KEYS {
             let Some(v) = value(self.get, key) else {
                 continue;
             };
             match parse_number(&v) {
-                Some(s) if s > 0.0 && s <= MAX_EXPOSURE_S => return Some(s),
+                Some(s) if s > 0.0 && s <= MAX_EXPOSURE_S => return Some((s, key)),
                 Some(_) => self.warn.push(format!(
                     "{key} = '{v}' is not a plausible exposure length (more than 0 s, at most \
                      {MAX_EXPOSURE_S} s); not used"
@@ -229,13 +229,21 @@ pub fn exposure_from_header(
         return (None, r.warn);
     }
     match r.length() {
-        Some(s) => (
-            Some(Exposure {
-                start,
-                end: start.add_seconds(s),
-            }),
-            r.warn,
-        ),
+        Some((s, key)) => {
+            let end = start.add_seconds(s);
+            // A start within 1960-2100 may end past 2100, where SOFA's ephemeris ends.
+            if end.plausible().is_err() {
+                let v = value(get, key).unwrap_or_default();
+                r.warn.push(format!(
+                    "{start_key} = '{start_v}' + {key} = '{v}' ends at {}, outside 1960-2100 \
+                     (the times gpustar reduces: SOFA's Earth ephemeris ends in 2100); no \
+                     exposure time",
+                    end.iso()
+                ));
+                return (None, r.warn);
+            }
+            (Some(Exposure { start, end }), r.warn)
+        }
         None => {
             r.warn.push(format!(
                 "{start_key} = '{start_v}' gives the start only: the exposure length is missing \

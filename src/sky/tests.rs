@@ -734,6 +734,42 @@ fn az_el_rejects_bad_input() {
     assert!((0.0..360.0).contains(&az) && el < 0.0);
 }
 
+/// Issue 45, item 9: an exposure that starts in 2099 and ends in 2100 gives no exposure time,
+/// with a warning saying when it ends; Az/El after 2100 (where SOFA's Earth ephemeris ends
+/// and sofars panicked) is an error.
+#[test]
+fn exposures_and_az_el_past_2100() {
+    for length in ["43200", "72000"] {
+        assert_warned(
+            &[("DATE-OBS", "2099-12-31T18:00:00"), ("EXPTIME", length)],
+            &[
+                &format!(
+                    "DATE-OBS = '2099-12-31T18:00:00' + EXPTIME = '{length}' ends at 2100-01-01"
+                ),
+                "outside 1960-2100",
+            ],
+        );
+    }
+    let (e, w) = exposure(&[("DATE-OBS", "2099-12-30T23:00:00"), ("EXPTIME", "86400")]);
+    assert_eq!(isos(&e.unwrap()).1, "2099-12-31T23:00:00.000");
+    assert!(w.is_empty(), "{w:?}");
+    let st = Station {
+        lat_deg: 35.7,
+        lon_deg: 51.4,
+        height_m: 1200.0,
+    };
+    for late in [
+        "2100-01-01T06:00:00",
+        "2100-01-01T14:00:00",
+        "2150-06-01T00:00:00",
+    ] {
+        let e = az_el(10.0, 20.0, &parse_utc(late), &st, 0.0, 0.0, 0.0).unwrap_err();
+        assert!(e.to_string().contains("outside 1960-2100"), "{late}: {e}");
+    }
+    let last = parse_utc("2099-12-31T23:59:59");
+    assert!(az_el(10.0, 20.0, &last, &st, 0.0, 0.0, 0.0).is_ok());
+}
+
 /// The seed-004 paper's streak ends (no station given there; Tehran here), against
 /// astropy (`scripts/make_eop.py --astropy-cases`), with the bundled table.
 #[test]

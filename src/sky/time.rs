@@ -85,6 +85,21 @@ impl Utc {
     pub(crate) fn mjd(&self) -> f64 {
         (self.jd1 - DJM0) + self.jd2
     }
+
+    /// `Err` naming this time unless [`plausible_mjd`] holds: the guard before SOFA's ICRS <->
+    /// observed chain (atco13, atoc13), whose Earth ephemeris (epv00) ends at
+    /// 2100-01-01T12:00 TT, where sofars panics.
+    pub(crate) fn plausible(&self) -> Result<(), String> {
+        let mjd = self.mjd();
+        if plausible_mjd(mjd) {
+            Ok(())
+        } else {
+            Err(format!(
+                "{} (MJD {mjd:.3}) is outside 1960-2100, the times gpustar reduces",
+                self.iso()
+            ))
+        }
+    }
 }
 
 /// UTC from a two-part TAI JD, with whole days moved into jd1 (keeps jd1 at 0h of the day).

@@ -105,6 +105,8 @@ impl FrameSky<'_> {
 
     /// The astrometric ICRS direction a star would have where `sat` is seen at `t`.
     fn predicted(&self, sat: &Satellite, t: &Utc, topo: &Topocentre) -> Option<[f64; 3]> {
+        // atoc13 panics past its ephemeris' end (2100).
+        t.plausible().ok()?;
         let (az, el) = az_el_of(&seen(sat, t, topo)?);
         let s = &self.station;
         let (ra, dec) = sofars::astro::atoc13(

@@ -26,11 +26,13 @@ pub enum Astrometry {
 const FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
 
 /// The records of a frame's streaks, and the warnings a person should see (no plate
-/// solution, no time, no station), each said once per frame.
+/// solution, no time, no station), each said once per frame. `size` is the frame's (width,
+/// height), which a header WCS is checked against.
 pub fn records(
     found: &[StreakFit],
     sol: &Solution,
     keywords: &BTreeMap<String, String>,
+    size: (u32, u32),
     opts: &StreakOptions,
 ) -> (Vec<StreakRecord>, Vec<String>) {
     let mut warnings = Vec::new();
@@ -38,7 +40,7 @@ pub fn records(
         return (Vec::new(), warnings);
     }
     let get = |k: &str| keywords.get(k).cloned();
-    let plate = plate(sol, keywords, opts.astrometry, &mut warnings);
+    let plate = plate(sol, keywords, size, opts.astrometry, &mut warnings);
     let (exposure, w) = sky::exposure_from_header(&get);
     warnings.extend(w);
     let station = match opts.station {
@@ -198,6 +200,7 @@ impl Plate<'_> {
 fn plate<'a>(
     sol: &'a Solution,
     keywords: &BTreeMap<String, String>,
+    size: (u32, u32),
     mode: Astrometry,
     warnings: &mut Vec<String>,
 ) -> Option<Plate<'a>> {
@@ -210,7 +213,7 @@ fn plate<'a>(
         warnings.push("the frame is not solved: streak ends have no RA/Dec, Az or El".into());
         return None;
     }
-    match crate::io::wcs::HeaderWcs::from_keywords(keywords) {
+    match crate::io::wcs::HeaderWcs::from_keywords(keywords, size) {
         Ok(Some(w)) => Some(Plate::Header(w)),
         Ok(None) => {
             warnings.push(

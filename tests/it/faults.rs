@@ -534,6 +534,129 @@ fn absurd_times_and_sip_orders_cost_only_their_own_frame() {
     }
 }
 
+/// Issue 45, items 8 and 9: a header WCS no telescope has (CRVAL2 = 95) gives its frame's
+/// streaks no RA/Dec and a warning naming it, and nothing of that frame reaches the TDM or
+/// IOD; an exposure from 2099-12-31T18:00 ending in 2100 (past SOFA's Earth ephemeris, where
+/// sofars panicked and the frame's record became an internal error) gives its streak ends no
+/// time, with a warning, and keeps the star solution.
+#[test]
+fn nonsensical_header_wcs_and_exposures_past_2100_cost_only_their_own_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sim");
+    streak_set(&dir, 4);
+    let card = gpustar::io::fits::card;
+    let q = |v: &str| format!("'{v}'");
+    // Frame: (DATE-OBS, EXPTIME, CRVAL2).
+    let frames = [
+        ("2024-03-15T20:00:00", "4", "20"),
+        ("2024-03-15T20:01:00", "4", "95"),
+        ("2099-12-31T18:00:00", "43200", "20"),
+        ("2099-12-31T18:00:00", "72000", "20"),
+    ];
+    for (k, (date, exptime, crval2)) in frames.into_iter().enumerate() {
+        let path = dir.join(format!("sim_{k:05}.fits"));
+        let f = gpustar::io::frame::Frame::read(&path).unwrap();
+        let mut cards = vec![
+            card("DATE-OBS", &q(date)),
+            card("EXPTIME", exptime),
+            card("OBSGEO-B", "35.7"),
+            card("OBSGEO-L", "51.4"),
+            card("OBSGEO-H", "1200"),
+        ];
+        for (key, v) in [
+            ("CTYPE1", q("RA---TAN")),
+            ("CTYPE2", q("DEC--TAN")),
+            ("CRPIX1", "256".into()),
+            ("CRPIX2", "256".into()),
+            ("CRVAL1", "10".into()),
+            ("CRVAL2", crval2.into()),
+            ("CD1_1", "0.0234".into()),
+            ("CD2_2", "0.0234".into()),
+        ] {
+            cards.push(card(key, &v));
+        }
+        std::fs::write(
+            &path,
+            gpustar::io::fits::encode_u16(f.width, f.height, &f.pixels, &cards),
+        )
+        .unwrap();
+    }
+    let (tdm, iod) = (tmp.path().join("obs.tdm"), tmp.path().join("obs.iod"));
+    let camera = dir.join("camera.toml");
+    for astrometry in ["solve", "header"] {
+        let out = tmp.path().join(format!("{astrometry}.jsonl"));
+        let c = cpu_batch(
+            &dir,
+            &out,
+            &[
+                "--streaks",
+                "--astrometry",
+                astrometry,
+                "--camera",
+                camera.to_str().unwrap(),
+                "--tdm",
+                tdm.to_str().unwrap(),
+                "--iod",
+                iod.to_str().unwrap(),
+            ],
+        );
+        let o = run(c, 120);
+        assert!(o.status.success(), "{astrometry}: {}", stderr(&o));
+        let r = records(&out);
+        assert_eq!(r.len(), 4, "{}", stderr(&o));
+        assert!(r.iter().all(|r| r["status"] == "solved"), "{r:?}");
+        let text = std::fs::read_to_string(&tdm).unwrap();
+        let iod_text = std::fs::read_to_string(&iod).unwrap();
+        assert!(text.contains("sim_00000.fits"), "{astrometry}: {text}");
+        assert!(!iod_text.is_empty());
+        // Ends, midpoints and the reversed ends of every streak of a record.
+        let ends = |rec: &Value| -> Vec<Value> {
+            let mut v = Vec::new();
+            for s in rec["streaks"].as_array().unwrap() {
+                v.extend(s["ends"].as_array().unwrap().iter().cloned());
+                v.extend(s["reversed"].as_array().into_iter().flatten().cloned());
+                v.extend(Some(s["mid"].clone()).filter(|m| !m.is_null()));
+            }
+            v
+        };
+        for late in &r[2..] {
+            let w = late["warnings"].to_string();
+            assert!(
+                w.contains("ends at 2100-01-01") && w.contains("EXPTIME"),
+                "{w}"
+            );
+            assert!(!ends(late).is_empty());
+            for end in ends(late) {
+                assert!(
+                    end["time_utc"].is_null() && end["az_deg"].is_null(),
+                    "{end}"
+                );
+            }
+            let name = late["file"].as_str().unwrap();
+            assert!(!text.contains(name), "{name} in the TDM");
+        }
+        // By time too (a tracklet is named for its first frame).
+        assert!(
+            !text.contains("2099-12-31") && !text.contains("2100-01-01"),
+            "{text}"
+        );
+        assert!(!iod_text.contains("20991231") && !iod_text.contains("21000101"));
+        if astrometry == "header" {
+            let bad = &r[1];
+            let w = bad["warnings"].to_string();
+            assert!(w.contains("CRVAL2 = 95"), "{w}");
+            assert!(!ends(bad).is_empty());
+            for end in ends(bad) {
+                assert!(end["ra_deg"].is_null() && end["dec_deg"].is_null(), "{end}");
+            }
+            assert!(!text.contains("sim_00001.fits"), "{text}");
+            assert!(!text.contains("2024-03-15T20:01:0"), "{text}");
+            assert!(!iod_text.contains("2024031520010"), "{iod_text}");
+            assert!(ends(&r[0]).iter().all(|e| e["ra_deg"].is_number()));
+        }
+    }
+}
+
 /// Item 10: a `--sequence` run resumed in the middle of a sequence gives the records of an
 /// uninterrupted run (tracking once started cold at the first frame without a record).
 #[test]
