@@ -357,6 +357,25 @@ fn check_size(w: u32, h: u32, expect: Option<(u32, u32)>) -> Result<()> {
 /// Decode with limits: the header is read first, and an image larger than gpustar reads, or
 /// one whose pixels do not fit in memory, is refused before its buffer is allocated.
 fn decode<R: BufRead + Seek>(
+    reader: ImageReader<R>,
+    shown: &str,
+    expect: Option<(u32, u32)>,
+) -> Result<DynamicImage> {
+    // The decoders are other crates' code: one that panics on a malformed file (tiff 0.10.3
+    // indexes an empty SampleFormat tag, found by the fuzz suite) costs this file, with a
+    // decoding error, not an internal one.
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        decode_checked(reader, shown, expect)
+    }))
+    .unwrap_or_else(|_| {
+        Err(error!(
+            Input,
+            "cannot decode {shown}: the image decoder failed on a malformed file"
+        ))
+    })
+}
+
+fn decode_checked<R: BufRead + Seek>(
     mut reader: ImageReader<R>,
     shown: &str,
     expect: Option<(u32, u32)>,
@@ -449,4 +468,49 @@ fn jpeg_reaches_end(b: &[u8]) -> bool {
         }
     }
     false // the headers themselves are cut short
+}
+
+#[cfg(test)]
+mod decoder_panic_tests {
+    /// A TIFF whose SampleFormat tag holds no value: the tiff crate (0.10.3) indexes it and
+    /// panics; the file gets a decoding error instead.
+    #[test]
+    fn a_tiff_that_panics_its_decoder_is_a_decoding_error() {
+        let entry = |tag: u16, kind: u16, count: u32, value: u32| {
+            let mut e = Vec::new();
+            e.extend(tag.to_le_bytes());
+            e.extend(kind.to_le_bytes());
+            e.extend(count.to_le_bytes());
+            e.extend(value.to_le_bytes());
+            e
+        };
+        let entries = [
+            entry(256, 3, 1, 1),
+            entry(257, 3, 1, 1),
+            entry(258, 3, 1, 8),
+            entry(259, 3, 1, 1),
+            entry(262, 3, 1, 1),
+            entry(273, 4, 1, 8),
+            entry(278, 3, 1, 1),
+            entry(279, 4, 1, 1),
+            entry(339, 3, 0, 0),
+        ];
+        let ifd = 8 + 4;
+        let mut b = b"II*\0".to_vec();
+        b.extend((ifd as u32).to_le_bytes());
+        b.extend([0u8; 4]); // the pixel at offset 8, and padding
+        b.extend((entries.len() as u16).to_le_bytes());
+        for e in &entries {
+            b.extend(e);
+        }
+        b.extend([0u8; 4]);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.tif");
+        std::fs::write(&path, b).unwrap();
+        let e = super::Frame::read(&path)
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bad.tif") && e.contains("malformed"), "{e}");
+    }
 }
