@@ -355,6 +355,10 @@ pub struct SolveOpts {
     /// nothing matched as cyan crosses), at the input's relative path with the extension .png.
     #[arg(long, value_name = "DIR")]
     pub annotate_dir: Option<PathBuf>,
+    /// Refuse frames of more pixels than this, from their headers (a small compressed file can
+    /// decode to gigabytes); raise it for larger plate scans.
+    #[arg(long, value_name = "MP", default_value_t = 300.0)]
+    pub max_megapixels: f64,
     /// Replace files at the --tdm, --iod, --wcs-dir and --annotate-dir paths that gpustar did
     /// not write (astrometry.net's .wcs files; IOD lines, which carry no mark of their
     /// writer). Never an input, and never the records of -o.

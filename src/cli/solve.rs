@@ -234,7 +234,11 @@ pub(crate) fn run_solve(
         CameraSource::Fixed(c) => Some((c.width, c.height)),
         _ => None,
     };
+    if !(o.max_megapixels > 0.0 && o.max_megapixels <= 4300.0) {
+        bail!("--max-megapixels must be above 0 and at most 4300 (2^32 pixels)");
+    }
     let mut solvers = Solvers::new(catalog, s, camera);
+    solvers.max_pixels = (o.max_megapixels * 1e6) as u64;
     if let Some(h) = o.hint {
         solvers = solvers.with_hints(h);
     }

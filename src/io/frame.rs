@@ -87,6 +87,18 @@ impl Frame<'static> {
         path: &Path,
         expect: Option<(u32, u32)>,
     ) -> Result<(Frame<'static>, FileInfo)> {
+        Frame::read_info_within(path, expect, u64::MAX)
+    }
+
+    /// [`Frame::read_info_sized`] for frames of at most `max_pixels` pixels (`--max-megapixels`):
+    /// a larger one is refused from its header, before its pixels take memory (a 0.9 MB PNG
+    /// can hold 30000² pixels, 2.6 GB while decoded).
+    pub fn read_info_within(
+        path: &Path,
+        size: Option<(u32, u32)>,
+        max_pixels: u64,
+    ) -> Result<(Frame<'static>, FileInfo)> {
+        let expect = Expect { size, max_pixels };
         let shown = path.display().to_string();
         // Follows links: a dangling or looping one fails here, with where it leads.
         let meta = std::fs::metadata(path).map_err(|e| match std::fs::read_link(path) {
@@ -122,7 +134,7 @@ impl Frame<'static> {
             fail!(Input, "cannot decode {shown}: the file is empty (0 bytes)");
         }
         if is_fits(path)? {
-            return read_fits(path, &shown, meta.len());
+            return read_fits(path, &shown, meta.len(), max_pixels);
         }
         let fits_name = path
             .extension()
@@ -222,14 +234,21 @@ fn read_camera_fits(path: &Path, file_len: u64, max_pixels: u64) -> Option<FitsF
 const HEAD_BYTES: usize = 64 << 10;
 
 /// A FITS file's primary image (or first image extension), with its DATE-OBS.
-fn read_fits(path: &Path, shown: &str, file_len: u64) -> Result<(Frame<'static>, FileInfo)> {
+fn read_fits(
+    path: &Path,
+    shown: &str,
+    file_len: u64,
+    max_pixels: u64,
+) -> Result<(Frame<'static>, FileInfo)> {
     if file_len > MAX_ALLOC {
         fail!(
             Input,
             "cannot decode {shown}: the FITS file is larger than gpustar reads (2 GiB)"
         );
     }
-    let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64).min(MAX_ALLOC / 2);
+    let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64)
+        .min(MAX_ALLOC / 2)
+        .min(max_pixels);
     let f = match read_camera_fits(path, file_len, max_pixels) {
         Some(f) => f,
         None => {
@@ -260,7 +279,7 @@ fn read_grey_png(
     path: &Path,
     shown: &str,
     file_len: u64,
-    expect: Option<(u32, u32)>,
+    expect: Expect,
 ) -> Result<Option<Frame<'static>>> {
     // Read whole (one system call; a fifth faster than through a BufReader) unless huge.
     if file_len > 256 << 20 {
@@ -279,7 +298,7 @@ fn read_grey_png(
     };
     let info = reader.info();
     let (w, h) = (info.width, info.height);
-    check_size(w, h, expect)?;
+    check_size(shown, w, h, expect)?;
     let grey = info.color_type == png::ColorType::Grayscale;
     let depth = info.bit_depth;
     if !grey
@@ -347,11 +366,27 @@ pub fn wrong_size(width: u32, height: u32, expect: (u32, u32)) -> String {
 
 /// Refuse a header's size that is not `expect` (one beyond the decoders' limits is left to
 /// their own refusal, which says more).
-fn check_size(w: u32, h: u32, expect: Option<(u32, u32)>) -> Result<()> {
-    match expect {
+fn check_size(shown: &str, w: u32, h: u32, expect: Expect) -> Result<()> {
+    match expect.size {
         Some(e) if (w, h) != e && w.max(h) <= MAX_SIDE => fail!(Input, "{}", wrong_size(w, h, e)),
+        _ if u64::from(w) * u64::from(h) > expect.max_pixels => fail!(
+            Input,
+            "cannot decode {shown}: the image is {w}x{h} ({:.0} megapixels), more than \
+             --max-megapixels {:.0}: raise \
+             it to read such frames (each takes 2 to 3 bytes a pixel while it is decoded)",
+            (u64::from(w) * u64::from(h)) as f64 / 1e6,
+            expect.max_pixels as f64 / 1e6
+        ),
         _ => Ok(()),
     }
+}
+
+/// What a frame's header must say before its pixels are decoded: its size (a camera file's),
+/// and at most how many pixels it has.
+#[derive(Clone, Copy, Debug)]
+struct Expect {
+    size: Option<(u32, u32)>,
+    max_pixels: u64,
 }
 
 /// Decode with limits: the header is read first, and an image larger than gpustar reads, or
@@ -359,7 +394,7 @@ fn check_size(w: u32, h: u32, expect: Option<(u32, u32)>) -> Result<()> {
 fn decode<R: BufRead + Seek>(
     reader: ImageReader<R>,
     shown: &str,
-    expect: Option<(u32, u32)>,
+    expect: Expect,
 ) -> Result<DynamicImage> {
     // The decoders are other crates' code: one that panics on a malformed file (tiff 0.10.3
     // indexes an empty SampleFormat tag, found by the fuzz suite) costs this file, with a
@@ -378,7 +413,7 @@ fn decode<R: BufRead + Seek>(
 fn decode_checked<R: BufRead + Seek>(
     mut reader: ImageReader<R>,
     shown: &str,
-    expect: Option<(u32, u32)>,
+    expect: Expect,
 ) -> Result<DynamicImage> {
     // No side limit here: the header is read, so the refusal below can give the size.
     let mut limits = Limits::default();
@@ -396,7 +431,7 @@ fn decode_checked<R: BufRead + Seek>(
             MAX_ALLOC >> 20
         );
     }
-    check_size(w, h, expect)?;
+    check_size(shown, w, h, expect)?;
     // The decoder allocates its buffer with no way to fail but aborting the process: ask
     // first whether the memory is there, with room for the frame of u16 pixels, so that a
     // shortage is this file's error and the run goes on.

@@ -76,6 +76,10 @@ type SizeGroup<'a> = (DetectKey, Vec<(usize, Decoded<'a>)>);
 /// parameters.
 type DetectKey = (u32, u32, u16);
 
+/// The default of `--max-megapixels`, in pixels: 300 megapixels (a 17 000² plate scan; the
+/// largest astronomy sensors have 150), under 1 GB while decoded.
+pub const DEFAULT_MAX_PIXELS: u64 = 300_000_000;
+
 /// Solvers per frame size, built on first use (one distance table per camera) and shared by
 /// every worker thread.
 pub struct Solvers {
@@ -90,6 +94,9 @@ pub struct Solvers {
     pub streaks: Option<StreakOptions>,
     /// `--hint`: solve each frame within its pointing hint's region first.
     pub hint: Option<crate::sky::hint::HintSource>,
+    /// Frames with more pixels are refused from their headers (`--max-megapixels`): without
+    /// a camera file's size to compare with, a small file can decode to gigabytes.
+    pub max_pixels: u64,
     map: Mutex<HashMap<(u32, u32), SharedSolver>>,
 }
 
@@ -165,6 +172,7 @@ impl Solvers {
             products: Products::default(),
             streaks: None,
             hint: None,
+            max_pixels: DEFAULT_MAX_PIXELS,
             map: Mutex::new(HashMap::new()),
         }
     }
@@ -196,7 +204,7 @@ impl Solvers {
             CameraSource::Fixed(c) => Some((c.width, c.height)),
             _ => None,
         };
-        let (frame, info) = match Frame::read_info_sized(path, expect) {
+        let (frame, info) = match Frame::read_info_within(path, expect, self.max_pixels) {
             Ok((f, info)) => (self.darks.apply(path, f).map_err(|e| e.to_string()), info),
             Err(e) => (Err(format!("{e:#}")), Default::default()),
         };

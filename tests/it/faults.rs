@@ -793,6 +793,16 @@ fn frames_of_another_size_are_refused_before_decoding() {
         "{}",
         r[0]
     );
+    // With --fov-deg there is no camera size to compare with: 400 megapixels are over
+    // --max-megapixels' 300 (issue 45: a 0.9 MB PNG took 2.65 GB).
+    let o = run(cpu_batch(&big, &out, &["--fov-deg", "2"]), 60);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let r = records(&out);
+    let e = r[0]["error"].as_str().unwrap();
+    assert!(
+        e.contains("20000x20000") && e.contains("--max-megapixels"),
+        "{e}"
+    );
     // The largest child this test process has waited for (all of them small but gpustar's
     // run here, which decoding would have taken past 1 GB).
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
