@@ -9,7 +9,7 @@ import sys
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src")
 LAYERS = [
-    ["error", "camera", "record", "simd"],
+    ["error", "files", "camera", "record", "simd"],
     ["catalog"],
     ["cpu"],
     ["sky"],

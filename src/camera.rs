@@ -84,7 +84,7 @@ impl Camera {
 
     /// Read a camera TOML file; returns the camera and its optional `mag_limit`.
     pub fn from_toml_file(path: &Path) -> Result<(Camera, Option<f64>)> {
-        let text = crate::io::read_regular_text(path, "camera file")?;
+        let text = crate::files::read_regular_text(path, "camera file")?;
         Camera::from_toml(&text).with_context(|| format!("camera file {}", path.display()))
     }
 

@@ -18,6 +18,7 @@ pub mod camera;
 pub mod catalog;
 pub mod cpu;
 pub mod error;
+pub mod files;
 pub mod gpu;
 pub mod io;
 pub mod pipeline;

@@ -175,7 +175,7 @@ impl Catalog {
             None => Ok(Catalog::builtin()),
             Some(p) => {
                 let start = std::time::Instant::now();
-                let bytes = crate::io::read_regular_file(p, "catalog")?;
+                let bytes = crate::files::read_regular_file(p, "catalog")?;
                 let source = p.display().to_string();
                 if store::is_store(&bytes) {
                     let c = store::read(&bytes, &source)?;

@@ -26,7 +26,7 @@ pub(crate) fn import_cmd(
         check_output(out, inputs, csv_out)?;
     }
     let read = |input: &PathBuf| -> Result<Vec<u8>> {
-        Ok(gpustar::io::read_regular_file(input, "catalog")?)
+        Ok(gpustar::files::read_regular_file(input, "catalog")?)
     };
     let out = if csv_out {
         let [input] = inputs else {

@@ -127,7 +127,7 @@ impl Frame<'static> {
             fail!(
                 Input,
                 "cannot read {shown}: not a regular file but {}",
-                super::file_kind(&meta.file_type())
+                crate::files::file_kind(&meta.file_type())
             );
         }
         if meta.len() == 0 {

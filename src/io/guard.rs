@@ -4,7 +4,7 @@
 //! gpustar did not write are refused. Files are then written whole, through a new file
 //! renamed over the old, so that a stop or a full disk leaves the old file.
 //!
-//! Records (`-o`) are opened by [`crate::io::output::open_output`], which also resumes them;
+//! Records (`-o`) are opened by `io::output::open_output`, which also resumes them;
 //! the whole files (TDM, IOD, WCS headers, annotations, catalogs, camera files) go through
 //! [`check_replaceable`] before the run and [`write_atomically`] after it.
 
@@ -116,7 +116,7 @@ pub fn existing_head(path: &Path) -> Result<Option<Vec<u8>>> {
             Output,
             "cannot write {shown}: it is {}, not a regular file (gpustar writes the file whole, \
              through a new file renamed over the old)",
-            file_type_name(&meta)
+            crate::files::file_kind(&meta.file_type())
         );
     }
     let mut head = Vec::new();
@@ -124,29 +124,6 @@ pub fn existing_head(path: &Path) -> Result<Option<Vec<u8>>> {
         .and_then(|f| f.take(HEAD_BYTES).read_to_end(&mut head))
         .with_context(|| format!("cannot read {shown}"))?;
     Ok(Some(head))
-}
-
-/// "a directory", "a FIFO", …: what a path that is not a regular file is, for messages.
-pub fn file_type_name(meta: &std::fs::Metadata) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        let t = meta.file_type();
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    if meta.is_dir() {
-        "a directory"
-    } else {
-        "not a regular file"
-    }
 }
 
 /// The directory a new file at `path` goes in.

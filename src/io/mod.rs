@@ -1,7 +1,7 @@
 //! Files in and out: images and FITS ([`frame`], [`fits`], [`dark`]; raw colour mosaics
 //! detected on their luminance, [`bayer`]), pixels already in memory
 //! ([`array`](mod@array)), the inputs of a run ([`inputs`]), world coordinate systems ([`wcs`]), and the
-//! record file ([`output`]).
+//! record file ([`output`]), and the guard every file gpustar writes passes ([`guard`]).
 
 pub mod array;
 pub mod bayer;
@@ -12,74 +12,3 @@ pub mod guard;
 pub mod inputs;
 pub mod output;
 pub mod wcs;
-
-use crate::error::{Context, Result, fail};
-use std::path::Path;
-
-/// The whole of a regular file, for the files a run reads whole (catalogs, `--tle`,
-/// `--camera`): refused before opening when `path` is not a regular file (a FIFO would block
-/// the read forever, `/dev/zero` never ends), and read no further than the size its metadata
-/// gave, so that a file growing meanwhile cannot make the read unbounded either. `what` names
-/// the file in messages ("catalog", "--tle").
-pub fn read_regular_file(path: &Path, what: &str) -> Result<Vec<u8>> {
-    use std::io::Read;
-    let shown = path.display();
-    let meta = std::fs::metadata(path).with_context(|| format!("cannot read {what} {shown}"))?;
-    if !meta.is_file() {
-        fail!(
-            Input,
-            "cannot read {what} {shown}: not a regular file but {}",
-            file_kind(&meta.file_type())
-        );
-    }
-    let file = std::fs::File::open(path).with_context(|| format!("cannot read {what} {shown}"))?;
-    let mut bytes = Vec::new();
-    if bytes
-        .try_reserve_exact(usize::try_from(meta.len()).unwrap_or(usize::MAX))
-        .is_err()
-    {
-        fail!(
-            Input,
-            "cannot read {what} {shown}: {} bytes do not fit in memory",
-            meta.len()
-        );
-    }
-    file.take(meta.len())
-        .read_to_end(&mut bytes)
-        .with_context(|| format!("cannot read {what} {shown}"))?;
-    Ok(bytes)
-}
-
-/// [`read_regular_file`] of a text file: refused when it is not UTF-8.
-pub fn read_regular_text(path: &Path, what: &str) -> Result<String> {
-    String::from_utf8(read_regular_file(path, what)?).map_err(|e| {
-        crate::error::error!(
-            Input,
-            "cannot read {what} {}: not UTF-8 text ({})",
-            path.display(),
-            e.utf8_error()
-        )
-    })
-}
-
-/// What a path that is not a regular file is, for messages.
-pub(crate) fn file_kind(t: &std::fs::FileType) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if t.is_fifo() {
-            return "a FIFO (named pipe)";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-    }
-    if t.is_dir() {
-        "a directory"
-    } else {
-        "something else"
-    }
-}

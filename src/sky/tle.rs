@@ -160,7 +160,7 @@ impl TleCatalog {
     /// file. Objects whose elements SGP4 refuses are skipped with a warning; a file with no
     /// usable object is an error.
     pub fn load(path: &std::path::Path) -> Result<TleCatalog> {
-        let text = crate::io::read_regular_text(path, "--tle")?;
+        let text = crate::files::read_regular_text(path, "--tle")?;
         TleCatalog::from_text(&text, &format!("--tle {}", path.display()))
     }
 

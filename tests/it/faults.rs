@@ -8,10 +8,10 @@
 
 use crate::common;
 
-use common::{gpustar, kill_until_done, simulate};
+use common::{gpustar, kill_until_done, run_within as run, simulate, stderr};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// `batch DIR` on the CPU into `out`, with `args`.
@@ -28,30 +28,6 @@ fn batch(dir: &Path, out: &Path, more: &[&str]) -> Command {
     let mut c = gpustar();
     c.args(common::batch18_args(dir, out)).args(more);
     c
-}
-
-/// Run with a time limit: a hang fails the test instead of stalling CI.
-fn run(mut c: Command, limit_s: u64) -> Output {
-    let child = c
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let id = child.id();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || tx.send(child.wait_with_output().unwrap()));
-    match rx.recv_timeout(Duration::from_secs(limit_s)) {
-        Ok(out) => out,
-        Err(_) => {
-            let _ = Command::new("kill").args(["-9", &id.to_string()]).status();
-            panic!("the run took more than {limit_s} s");
-        }
-    }
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// The JSON records of a file, in file order.
@@ -879,13 +855,7 @@ fn a_dark_of_another_size_is_refused_before_decoding() {
 fn option_files_that_are_not_regular_files_are_refused_before_reading() {
     let s = set(1);
     let fifo = s.root.join("pipe");
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    common::mkfifo(&fifo);
     let camera = s.dir.join("camera.toml");
     let camera = camera.to_str().unwrap();
     let empty = s.root.join("empty-dir");

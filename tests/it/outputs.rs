@@ -5,34 +5,10 @@
 
 use crate::common;
 
-use common::gpustar;
+use common::{gpustar, run_within as run, stderr};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Output};
 use std::time::{Duration, Instant};
-
-/// Run with a time limit (a FIFO or a device at an output path once hung a run).
-fn run(mut c: Command, limit_s: u64) -> Output {
-    let child = c
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let id = child.id();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || tx.send(child.wait_with_output().unwrap()));
-    match rx.recv_timeout(Duration::from_secs(limit_s)) {
-        Ok(out) => out,
-        Err(_) => {
-            let _ = Command::new("kill").args(["-9", &id.to_string()]).status();
-            panic!("the run took more than {limit_s} s");
-        }
-    }
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// `batch DIR` of 18° frames on the CPU, with `more`.
 fn batch(dir: &Path, more: &[&str]) -> Command {
@@ -195,13 +171,7 @@ fn outputs_on_one_path_inputs_fifos_and_devices_are_refused_at_once() {
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let tdm = tmp.path().join("t.tdm");
     let fifo = tmp.path().join("f.tdm");
-    assert!(
-        Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    common::mkfifo(&fifo);
     let x_png = dir.join("x.png");
     let cases: Vec<(Vec<String>, &str)> = vec![
         (
@@ -275,21 +245,7 @@ fn outputs_on_one_path_inputs_fifos_and_devices_are_refused_at_once() {
 fn iod_files_other_programs_wrote_are_kept() {
     let tmp = tempfile::tempdir().unwrap();
     // Streak frames (FITS with times and a station), so that gpustar's IOD file has lines.
-    let dir = tmp.path().join("streaks");
-    common::simulate(
-        &dir,
-        &[
-            "--streaks",
-            "-n",
-            "2",
-            "--size",
-            "512x512",
-            "--fov-deg",
-            "12",
-            "--mag-limit",
-            "7.5",
-        ],
-    );
+    let dir = common::simulated_streaks(tmp.path(), 2);
     let iod = tmp.path().join("obs.iod");
     let theirs = "25544 98 067A   4353 G 20260101000000000 17 25 0000000+000000 37\n";
     std::fs::write(&iod, theirs).unwrap();
