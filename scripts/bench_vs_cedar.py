@@ -188,8 +188,8 @@ def gpu_adapter(args):
     """(name, None) for the adapter `gpustar info` would use, or (None, why not)."""
     rc, out, err, _ = run([args.gpustar, "info"])
     for line in (out + err).splitlines():
-        if line.startswith("chosen:"):
-            chosen = line[len("chosen:"):].strip()
+        if line.startswith("--backend gpu:"):
+            chosen = line[len("--backend gpu:"):].strip()
             return (None, chosen) if chosen.startswith("none") else (chosen, None)
     return None, f"`gpustar info` exited {rc} without naming an adapter: {tail(err, 3)}"
 

@@ -10,6 +10,10 @@ cd "$(dirname "$0")/.."
 root=$(pwd)
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$root/target}"
 venv="${GPUSTAR_VENV:-$CARGO_TARGET_DIR/python-venv}"
+# What the tests write stays in the target directory, as `cargo test`'s does
+# (.cargo/config.toml): gpustar's table caches and pip's downloads.
+export GPUSTAR_CACHE_DIR="${GPUSTAR_CACHE_DIR:-$CARGO_TARGET_DIR/gpustar-cache}"
+export PIP_CACHE_DIR="${PIP_CACHE_DIR:-$CARGO_TARGET_DIR/pip-cache}" PIP_DISABLE_PIP_VERSION_CHECK=1
 python3 -m venv "$venv"
 start=$(date +%s)
 MATURIN_PEP517_ARGS="--profile dev" "$venv/bin/pip" install -q "./python[test]"

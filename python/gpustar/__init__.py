@@ -23,8 +23,29 @@ from typing import Any, Callable, Iterable, Iterator, Optional, Sequence as _Seq
 
 import numpy as np
 
-from . import _gpustar
-from ._gpustar import (
+
+def _give_the_driver_a_runtime_dir() -> None:
+    """Mesa's Vulkan drivers print "error: XDG_RUNTIME_DIR is invalid or not set in the
+    environment." on stderr where the environment has no runtime directory (containers, batch
+    jobs, cron): give them one of gpustar's own in the temp directory, as the command line
+    does. Done at import, before the extension makes a GPU instance."""
+    current = os.environ.get("XDG_RUNTIME_DIR")
+    if current and os.path.isdir(current):
+        return
+    import tempfile
+
+    path = os.path.join(tempfile.gettempdir(), "gpustar-runtime")
+    try:
+        os.makedirs(path, mode=0o700, exist_ok=True)
+    except OSError:
+        return
+    os.environ["XDG_RUNTIME_DIR"] = path
+
+
+_give_the_driver_a_runtime_dir()
+
+from . import _gpustar  # noqa: E402
+from ._gpustar import (  # noqa: E402
     CatalogError,
     ConfigError,
     Error,

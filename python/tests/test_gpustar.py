@@ -438,3 +438,18 @@ def test_example_solves_the_real_frames():
                        capture_output=True, text=True)
     assert p.returncode == 0, p.stdout + p.stderr
     assert "8 of 8 frames solved" in p.stdout, p.stdout
+
+
+def test_readme_quickstart_runs_as_written(tmp_path, monkeypatch, capsys):
+    """The README's Python example, verbatim, in an empty folder (issue 50: it named
+    undefined variables)."""
+    readme = (REPO / "README.md").read_text()
+    section = readme[readme.index("## Python\n"):]
+    code = section[section.index("```python\n") + len("```python\n"):]
+    code = code[:code.index("```")]
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code, "README.md", "exec"), {})
+    out = capsys.readouterr().out
+    assert "8/8" in out, out
+    records = [json.loads(line) for line in (tmp_path / "out.jsonl").read_text().splitlines()]
+    assert [r["file"] for r in records] == ["frame.png"] and records[0]["status"] == "solved"

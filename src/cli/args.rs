@@ -14,25 +14,36 @@ use std::path::PathBuf;
 #[derive(Args, Debug, Clone)]
 pub struct RunArgs {
     /// Also solve images in subdirectories (links to directories are not followed).
-    #[arg(short, long)]
+    #[arg(short, long, help_heading = "Run")]
     pub recursive: bool,
+    /// With -o: skip the inputs that already have a record there and append the rest.
+    ///
     /// Skip inputs that already have a complete record in --output and append the rest (an
     /// incomplete last line, left by a crash, is cut off first). A file that is not gpustar
     /// output of this --format is refused untouched. Error records already there count in the
     /// exit status. An unfinished --sequence is tracked again from its first frame (its records
     /// not written twice), so the records that follow are an uninterrupted run's.
-    #[arg(long, requires = "output")]
+    #[arg(long, requires = "output", help_heading = "Run")]
     pub resume: bool,
     /// With --resume: take the error records out of --output and try their inputs again.
-    #[arg(long, requires = "resume")]
+    #[arg(
+        long,
+        requires = "resume",
+        help_heading = "Run",
+        hide_short_help = true
+    )]
     pub retry_errors: bool,
+    /// Only shard K of N of the inputs (a job array; `gpustar merge` joins the outputs).
+    ///
     /// Only the inputs whose stable hash of the relative path falls in shard K of N (0-based),
     /// e.g. 3/16: run N processes (a job array) and `gpustar merge` their outputs.
-    #[arg(long, value_name = "K/N")]
+    #[arg(long, value_name = "K/N", help_heading = "Run")]
     pub shard: Option<Shard>,
     /// Worker threads for decoding (and solving on the CPU) [default: all cores].
-    #[arg(short = 'j', long, value_parser = count_within(1, 4096))]
+    #[arg(short = 'j', long, value_parser = count_within(1, 4096), help_heading = "Run")]
     pub threads: Option<usize>,
+    /// Each directory is one sequence of a camera head: particles rejected, attitude tracked.
+    ///
     /// Each directory's frames (with -r, each subdirectory's) are one sequence of a camera
     /// head, in name order: detections moving against the stars are judged particles (they
     /// never vote or match), and frames are identified from the attitude the previous ones
@@ -41,8 +52,8 @@ pub struct RunArgs {
     #[arg(long, help_heading = "Sequences")]
     pub sequence: bool,
     /// Seconds between frames, for frames without a time in their header (FITS DATE-OBS).
-    #[arg(long, value_name = "SECONDS", requires = "sequence", help_heading = "Sequences",
-          value_parser = parse_positive)]
+    #[arg(long, value_name = "SECONDS", requires = "sequence",
+          value_parser = parse_positive, help_heading = "Sequences", hide_short_help = true)]
     pub frame_interval: Option<f64>,
 }
 
@@ -136,37 +147,46 @@ Examples:
 
 #[derive(Args, Debug, Clone)]
 pub struct CameraOpts {
+    /// Camera model, TOML (width, height, fov_x_deg or fx_px, ...; see README).
+    ///
     /// Camera model (TOML: width, height, fov_x_deg or fx_px, fy_px, cx_px, cy_px, k1, k2,
     /// mirrored, mag_limit).
-    #[arg(long, conflicts_with = "fov_deg")]
+    #[arg(long, conflicts_with = "fov_deg", help_heading = "Camera and sky")]
     pub camera: Option<PathBuf>,
+    /// Instead of --camera: horizontal field of view in degrees, or a range LOW..HIGH to search.
+    ///
     /// Horizontal field of view in degrees: square pixels (or --pixel-aspect), centred, no
     /// distortion. A range (e.g. 8..20) searches the scale; the records give the fitted FOV.
-    #[arg(long, value_parser = parse_fov)]
+    #[arg(long, value_parser = parse_fov, help_heading = "Camera and sky")]
     pub fov_deg: Option<FovArg>,
     /// With --fov-deg: a pixel's height over its width, for sensors of non-square pixels (a
     /// Lodestar's 8.3 µm × 8.6 µm: 8.3/8.6); a number or a ratio A/B. --fov-deg is the width's.
-    #[arg(long, requires = "fov_deg", value_parser = parse_pixel_aspect)]
+    #[arg(long, requires = "fov_deg", value_parser = parse_pixel_aspect, help_heading = "Camera and sky", hide_short_help = true)]
     pub pixel_aspect: Option<f64>,
     /// The camera's focal length is only known to within this fraction (e.g. 0.01): search
     /// the scale within it and fit it.
-    #[arg(long)]
+    #[arg(long, help_heading = "Camera and sky", hide_short_help = true)]
     pub fov_tolerance: Option<f64>,
     /// With a searched field wider than ±5 % (`--fov-deg LOW..HIGH`): a frame the scale-free
     /// pass does not solve is also voted at every 0.1 % step of the scale (seconds to a minute
     /// a frame, off by default; see docs/speed.md, "The end of the walk").
-    #[arg(long)]
+    #[arg(long, help_heading = "Camera and sky", hide_short_help = true)]
     pub fov_walk: bool,
     /// What refinement fits besides the attitude: nothing, the scale (field of view), or the
     /// scale and radial distortion k1 (reported as distortion_k1).
-    #[arg(long, value_enum, default_value_t = CameraFit::None)]
+    #[arg(long, value_enum, default_value_t = CameraFit::None, help_heading = "Camera and sky", hide_short_help = true)]
     pub fit: CameraFit,
     /// Whether a frame may be a mirror image of the sky (a FITS image stored the conventional
     /// way, north up and east left, is one in row order): `either` (each frame takes the
     /// parity its stars fit; records say which in `mirrored`) or `camera` (as the camera file's
     /// `mirrored` says; a --fov-deg camera is not mirrored) [default: either with --fov-deg,
     /// camera with --camera].
-    #[arg(long, value_enum)]
+    #[arg(
+        long,
+        value_enum,
+        help_heading = "Camera and sky",
+        hide_short_help = true
+    )]
     pub parity: Option<ParityArg>,
 }
 
@@ -244,25 +264,25 @@ pub(crate) fn parse_fov(s: &str) -> std::result::Result<FovArg, String> {
 pub struct CatalogOpts {
     /// Catalog: a file `gpustar catalog import` made (binary or CSV) [default: the built-in
     /// Hipparcos-2 catalog, Hp ≤ 8].
-    #[arg(long)]
+    #[arg(long, help_heading = "Camera and sky")]
     pub catalog: Option<PathBuf>,
     /// Observation epoch (decimal year) for proper motion.
-    #[arg(long, default_value_t = 2000.0, value_parser = within(1000.0, 3000.0))]
+    #[arg(long, default_value_t = 2000.0, value_parser = within(1000.0, 3000.0), help_heading = "Camera and sky")]
     pub epoch: f64,
     /// Faintest catalog magnitude used [default: the camera file's mag_limit, else chosen from
     /// the field of view so that about 40 catalog stars are in view; in a scale search, each
     /// band's middle field's for the vote, the fitted field's for the final refinement].
-    #[arg(long, value_parser = within(-2.0, 20.0), allow_negative_numbers = true)]
+    #[arg(long, value_parser = within(-2.0, 20.0), allow_negative_numbers = true, help_heading = "Camera and sky", hide_short_help = true)]
     pub mag_limit: Option<f64>,
     /// Stars the camera cannot separate: merge them into one at their photocentre, drop
     /// them, or keep them.
-    #[arg(long, value_enum, default_value_t = DoubleStars::Merge)]
+    #[arg(long, value_enum, default_value_t = DoubleStars::Merge, help_heading = "Camera and sky", hide_short_help = true)]
     pub double_stars: DoubleStars,
     /// Stars closer than this many pixels count as one.
-    #[arg(long, default_value_t = 2.0, value_parser = within(0.0, 100.0))]
+    #[arg(long, default_value_t = 2.0, value_parser = within(0.0, 100.0), help_heading = "Camera and sky", hide_short_help = true)]
     pub double_star_px: f64,
     /// Do not read or write the distance-table cache.
-    #[arg(long)]
+    #[arg(long, help_heading = "Run", hide_short_help = true)]
     pub no_cache: bool,
 }
 
@@ -272,100 +292,133 @@ pub struct SolveOpts {
     pub camera: CameraOpts,
     #[command(flatten)]
     pub catalog: CatalogOpts,
+    /// Where the frames point: RA,DEC[,RADIUS_DEG] or `header` (each FITS header's pointing).
+    ///
     /// Where the frames point: RA,DEC[,RADIUS_DEG] (degrees, or RA as HH:MM:SS and Dec as
     /// ±DD:MM:SS; radius default 1), or `header[,RADIUS_DEG]` for each frame's own header
     /// (OBJCTRA/OBJCTDEC, RA/DEC, TELRA/TELDEC, or a rough WCS's CRVAL1/2 when CRPIX is near the
     /// centre). A frame with a hint is solved from the catalog stars of that region first,
     /// then lost-in-space; both searches share the false-match budget.
-    #[arg(long, value_parser = parse_hint_arg)]
+    #[arg(long, value_parser = parse_hint_arg, help_heading = "Camera and sky")]
     pub hint: Option<gpustar::sky::hint::HintSource>,
     /// Write the records here instead of stdout.
-    #[arg(short, long)]
+    #[arg(short, long, help_heading = "Output")]
     pub output: Option<PathBuf>,
     /// Record format.
-    #[arg(long, value_enum, default_value_t = Format::Jsonl)]
+    #[arg(long, value_enum, default_value_t = Format::Jsonl, help_heading = "Output")]
     pub format: Format,
+    /// Where the kernels run: a hardware GPU if there is one, else the CPU (auto), the GPU, or the CPU.
+    ///
     /// Where the kernels run: the GPU if there is a hardware one, else the CPU twins (auto;
     /// a software rasterizer such as lavapipe is slower than the twins), the GPU whatever it
     /// is, or the CPU. The adapter is the best one found, or the first whose name contains
     /// $GPUSTAR_ADAPTER.
-    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto, help_heading = "Run")]
     pub backend: BackendChoice,
     /// Frames per GPU batch (one submission for detection and one for voting per batch).
-    #[arg(long, default_value_t = 32, value_parser = count_within(1, 4096))]
+    #[arg(long, default_value_t = 32, value_parser = count_within(1, 4096), help_heading = "Run", hide_short_help = true)]
     pub batch_size: usize,
     /// Detection threshold above the local background, in noise sigmas.
-    #[arg(long, default_value_t = 5.0, value_parser = within_f32(0.5, 100.0))]
+    #[arg(long, default_value_t = 5.0, value_parser = within_f32(0.5, 100.0), help_heading = "Detection and identification", hide_short_help = true)]
     pub sigma: f32,
     /// Detection's matched filter: `binomial` thresholds each pixel's 3x3 binomial smoothing
     /// (about a star's PSF) at --sigma sigmas of the smoothed noise, and the pixel at 0.375 of
     /// that, which finds stars of about half the peak SNR; `none` thresholds the pixels alone.
-    #[arg(long, value_enum, default_value_t = DetectFilter::None)]
+    #[arg(long, value_enum, default_value_t = DetectFilter::None, help_heading = "Detection and identification", hide_short_help = true)]
     pub detect_filter: DetectFilter,
     /// How star positions are measured: a maximum-likelihood fit of a pixel-integrated
     /// Gaussian on a 9x9 window (the centre of gravity where it does not settle; matches then
     /// carry their 1-sigma and weigh the attitude by it), or the centre of gravity.
-    #[arg(long, value_enum, default_value_t = gpustar::solve::detect::Centroid::Ml)]
+    #[arg(long, value_enum, default_value_t = gpustar::solve::detect::Centroid::Ml, help_heading = "Detection and identification", hide_short_help = true)]
     pub centroid: gpustar::solve::detect::Centroid,
+    /// How stars are identified: geometric voting, radial features (narrow, deep fields), or triangles.
+    ///
     /// How stars are identified: geometric voting (triangles as its fallback), radial
     /// features as the candidate filter and triangles among the candidates (seed 002; for
     /// narrow, deep fields), or triangles alone (seed 002's baseline).
-    #[arg(long, value_enum, default_value_t = gpustar::solve::radial::Method::Vote)]
+    #[arg(long, value_enum, default_value_t = gpustar::solve::radial::Method::Vote, help_heading = "Detection and identification")]
     pub method: gpustar::solve::radial::Method,
     /// Brightest detected stars that take part in the vote.
-    #[arg(long, default_value_t = 40, value_parser = count_within(4, 200))]
+    #[arg(long, default_value_t = 40, value_parser = count_within(4, 200), help_heading = "Detection and identification", hide_short_help = true)]
     pub vote_stars: usize,
     /// Pair distance tolerance from centroid errors, pixels.
-    #[arg(long, default_value_t = 0.4, value_parser = within(0.01, 5.0))]
+    #[arg(long, default_value_t = 0.4, value_parser = within(0.01, 5.0), help_heading = "Detection and identification", hide_short_help = true)]
     pub pair_tol_px: f64,
     /// Do not retry frames that fail: first with up to 60 voting stars, then with the voters
     /// spread over a grid of 16 cells (both when there are more stars than --vote-stars), then
     /// with wide tolerances (pair 4 px, match radius 5 px).
-    #[arg(long)]
+    #[arg(
+        long,
+        help_heading = "Detection and identification",
+        hide_short_help = true
+    )]
     pub no_retry: bool,
     /// The retry with wide tolerances only for frames of at least this many detections: on
     /// sparse frames it costs 20-170 ms and solved none of 156 with 8 or fewer (docs/speed.md,
     /// "The wide retry's stars"); 0 tries it on every frame.
-    #[arg(long, default_value_t = gpustar::solve::WIDE_MIN_STARS)]
+    #[arg(long, default_value_t = gpustar::solve::WIDE_MIN_STARS, help_heading = "Detection and identification", hide_short_help = true)]
     pub wide_min_stars: usize,
     /// Pair distance tolerance from focal-length and distortion errors, relative.
-    #[arg(long, default_value_t = 0.0002, value_parser = within(0.0, 0.05))]
+    #[arg(long, default_value_t = 0.0002, value_parser = within(0.0, 0.05), help_heading = "Detection and identification", hide_short_help = true)]
     pub scale_tol: f64,
     /// A detection matches a catalog star within this many pixels in refinement.
-    #[arg(long, default_value_t = 2.0, value_parser = within(0.1, 20.0))]
+    #[arg(long, default_value_t = 2.0, value_parser = within(0.1, 20.0), help_heading = "Detection and identification", hide_short_help = true)]
     pub match_radius_px: f64,
     /// Report `solved` only when the probability of a chance match is below this.
-    #[arg(long, default_value_t = 1e-6, value_parser = within(1e-300, 0.5))]
+    #[arg(long, default_value_t = 1e-6, value_parser = within(1e-300, 0.5), help_heading = "Detection and identification", hide_short_help = true)]
     pub max_false_prob: f64,
+    /// Subtract this dark frame from every frame before detection (hot pixels, fixed pattern).
+    ///
     /// Subtract this dark frame (same size, any readable format) from every frame before
     /// detection: removes hot pixels and fixed-pattern noise.
-    #[arg(long, value_name = "FILE", conflicts_with = "dark_median")]
+    #[arg(
+        long,
+        value_name = "FILE",
+        conflicts_with = "dark_median",
+        help_heading = "Detection and identification"
+    )]
     pub dark: Option<PathBuf>,
     /// Subtract from each frame the per-pixel median of up to 25 frames of its directory (of
     /// the same size): a dark made from the data, for cameras with fixed-pattern noise and
     /// no dark frame. Needs at least 3 frames per directory, pointing at different skies.
-    #[arg(long)]
+    #[arg(
+        long,
+        help_heading = "Detection and identification",
+        hide_short_help = true
+    )]
     pub dark_median: bool,
+    /// Write a FITS WCS header (.wcs, as astrometry.net's) for each solved frame into DIR.
+    ///
     /// Write a FITS WCS header (TAN, plus SIP when distortion is fitted or given) for each
     /// solved frame here, at the input's relative path with the extension .wcs.
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", help_heading = "Output")]
     pub wcs_dir: Option<PathBuf>,
+    /// Write an annotated PNG of each readable frame into DIR.
+    ///
     /// Write an annotated PNG of each readable frame here (identified stars circled in green
     /// with their HIP number, other detections in red, catalog stars in the frame that
     /// nothing matched as cyan crosses), at the input's relative path with the extension .png.
-    #[arg(long, value_name = "DIR")]
+    #[arg(long, value_name = "DIR", help_heading = "Output")]
     pub annotate_dir: Option<PathBuf>,
     /// Refuse frames of more pixels than this, from their headers (a small compressed file can
     /// decode to gigabytes); raise it for larger plate scans.
-    #[arg(long, value_name = "MP", default_value_t = 300.0)]
+    #[arg(
+        long,
+        value_name = "MP",
+        default_value_t = 300.0,
+        help_heading = "Run",
+        hide_short_help = true
+    )]
     pub max_megapixels: f64,
+    /// Replace files at the output paths that gpustar did not write (never an input, never -o).
+    ///
     /// Replace files at the --tdm, --iod, --wcs-dir and --annotate-dir paths that gpustar did
     /// not write (astrometry.net's .wcs files; IOD lines, which carry no mark of their
     /// writer). Never an input, and never the records of -o.
-    #[arg(long)]
+    #[arg(long, help_heading = "Output")]
     pub overwrite: bool,
     /// No progress bar, warnings or summary on stderr.
-    #[arg(short, long)]
+    #[arg(short, long, help_heading = "Output")]
     pub quiet: bool,
     #[command(flatten)]
     pub streaks: StreakOpts,
@@ -374,6 +427,8 @@ pub struct SolveOpts {
 /// Satellite streaks (optical-tracking frames).
 #[derive(Args, Debug, Clone)]
 pub struct StreakOpts {
+    /// Find satellite streaks: ends in pixels, RA/Dec and Az/El; records get a "streaks" list.
+    ///
     /// Find satellite streaks: sub-pixel ends (edge-flagged where they leave the frame),
     /// width, flux, SNR, RA/Dec and Az/El of the ends; detections on a streak are kept out of
     /// star identification. Records get a "streaks" list.
@@ -386,7 +441,7 @@ pub struct StreakOpts {
     pub station: Option<Station>,
     /// Where the RA/Dec of streak ends come from: gpustar's solution, the FITS header's
     /// TAN/TAN-SIP WCS, or the solution when the frame solves and else the header (auto).
-    #[arg(long, value_enum, default_value_t = Astrometry::Auto, help_heading = "Streaks")]
+    #[arg(long, value_enum, default_value_t = Astrometry::Auto, help_heading = "Streaks", hide_short_help = true)]
     pub astrometry: Astrometry,
     /// UT1 − UTC in seconds for Az/El [default: interpolated in the bundled IERS table
     /// (catalog/eop.csv); beyond its end its last value, with a warning].
@@ -395,14 +450,14 @@ pub struct StreakOpts {
         value_name = "SECONDS",
         allow_negative_numbers = true,
         requires = "streaks",
-        help_heading = "Streaks",
-        value_parser = within(-1.0, 1.0)
-    )]
+        value_parser = within(-1.0, 1.0), help_heading = "Streaks", hide_short_help = true)]
     pub dut1: Option<f64>,
     /// Streak mask threshold, noise sigmas of the smoothed frame.
-    #[arg(long, default_value_t = 3.5, help_heading = "Streaks",
-          value_parser = within_f32(0.5, 100.0))]
+    #[arg(long, default_value_t = 3.5,
+          value_parser = within_f32(0.5, 100.0), help_heading = "Streaks", hide_short_help = true)]
     pub streak_sigma: f32,
+    /// Write the streaks as a CCSDS TDM (KVN) file.
+    ///
     /// Write the streaks as a CCSDS TDM (KVN): a RADEC segment, and AZEL when the station is
     /// known, per tracklet (one object over consecutive frames): the ends at the exposure's
     /// start and end where the direction is known, else midpoints at mid-exposure. A run
@@ -414,6 +469,8 @@ pub struct StreakOpts {
         help_heading = "Streaks"
     )]
     pub tdm: Option<PathBuf>,
+    /// Write the streaks as IOD lines (sattools, TruSat).
+    ///
     /// Write the streaks as IOD lines (angle format 2, J2000), the same observations as the
     /// TDM; each tracklet one object: its NORAD id and designator when --tle named it, else
     /// an unidentified one (stvid's 99999-n and YY DOY+500 designation).
@@ -425,9 +482,10 @@ pub struct StreakOpts {
     )]
     pub iod: Option<PathBuf>,
     /// COSPAR station number for the IOD lines (the default, 9999, is no site: warned about).
-    #[arg(long, default_value_t = 9999, value_parser = clap::value_parser!(u16).range(0..=9999),
-          help_heading = "Streaks")]
+    #[arg(long, default_value_t = 9999, value_parser = clap::value_parser!(u16).range(0..=9999), help_heading = "Streaks", hide_short_help = true)]
     pub iod_station: u16,
+    /// Name each streak's object from TLE or OMM elements (SGP4).
+    ///
     /// Name each streak's object from orbital elements: a TLE (2- or 3-line) or OMM (XML or
     /// JSON) file, thousands of objects. Each is propagated by SGP4 to the frame's times and
     /// station; a streak on an object's predicted path gets "satellite" (NORAD id, name,
@@ -440,12 +498,12 @@ pub struct StreakOpts {
     )]
     pub tle: Option<PathBuf>,
     /// --tle: largest distance of a streak's ends across an object's predicted path (arcsec).
-    #[arg(long, value_name = "ARCSEC", default_value_t = 300.0, help_heading = "Streaks",
-          value_parser = within(1.0, 36_000.0))]
+    #[arg(long, value_name = "ARCSEC", default_value_t = 300.0,
+          value_parser = within(1.0, 36_000.0), help_heading = "Streaks", hide_short_help = true)]
     pub tle_cross: f64,
     /// --tle: largest time offset along an object's predicted path (seconds).
-    #[arg(long, value_name = "SECONDS", default_value_t = 5.0, help_heading = "Streaks",
-          value_parser = within(0.01, 600.0))]
+    #[arg(long, value_name = "SECONDS", default_value_t = 5.0,
+          value_parser = within(0.01, 600.0), help_heading = "Streaks", hide_short_help = true)]
     pub tle_along: f64,
 }
 

@@ -6,7 +6,7 @@ use super::solve::*;
 use anyhow::{Context, Result, bail};
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
-use gpustar::pipeline::CameraSource;
+use gpustar::pipeline::{Backend, BackendChoice, BackendNote, CameraSource};
 use gpustar::solve::{PassKind, Settings, Solver, scaled};
 use std::process::ExitCode;
 
@@ -23,9 +23,12 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
             a.name, a.backend, a.device_type, a.driver
         )?;
     }
+    // What each --backend runs on: `auto`, the default, leaves a software rasterizer to the
+    // CPU twins, so naming only the adapter would say the GPU where `batch` uses the CPU.
     match gpustar::gpu::Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref()) {
         Ok(g) => {
-            writeln!(out, "chosen: {}", g.backend_name())?;
+            let name = g.backend_name();
+            writeln!(out, "--backend gpu: {}", name.trim_start_matches("gpu: "))?;
             writeln!(
                 out,
                 "  limits: Limits::default() with max_storage_buffer_binding_size {} MB, \
@@ -34,8 +37,16 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
                 g.limits.max_buffer_size >> 20
             )?;
         }
-        Err(e) => writeln!(out, "chosen: none ({e:#})")?,
+        Err(e) => writeln!(out, "--backend gpu: none ({e:#})")?,
     }
+    let auto = match Backend::open(BackendChoice::Auto) {
+        Ok((backend, None)) => backend.name(),
+        Ok((backend, Some(BackendNote::Info(why) | BackendNote::Warning(why)))) => {
+            format!("{} ({why})", backend.name())
+        }
+        Err(e) => format!("none ({e:#})"),
+    };
+    writeln!(out, "--backend auto (the default): {auto}")?;
     let catalog = Catalog::load(o.catalog.as_deref())?;
     writeln!(out, "catalog: {}", catalog.source)?;
     let (e0, e1) = catalog

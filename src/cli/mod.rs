@@ -49,7 +49,8 @@ continues); 130 when interrupted (Ctrl-C, SIGTERM: the records written so far ar
 
 /// Identify the stars in sky images and find the camera's attitude (lost in space).
 #[derive(Parser, Debug)]
-#[command(name = "gpustar", version, about, long_about = None, after_help = AFTER_HELP)]
+#[command(name = "gpustar", version, about, long_about = None, after_help = AFTER_HELP,
+          disable_help_flag = true)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -57,11 +58,23 @@ pub struct Cli {
     /// sequence with what it was judged).
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]
     pub verbose: u8,
+    /// Print help: the options most runs need (--help-all: every option, in full).
+    #[arg(short = 'h', long = "help", global = true, action = clap::ArgAction::HelpShort)]
+    help: Option<bool>,
+    /// Print help with every option, in full.
+    #[arg(long = "help-all", global = true, action = clap::ArgAction::HelpLong)]
+    help_all: Option<bool>,
 }
+
+/// What `-h` says below the options most runs need.
+const MORE_OPTIONS: &str = "\
+More options (the scale search, detection and identification, the streaks' reduction, retries,
+sequences): --help-all. What each does and the records: README.md and docs/.";
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
     /// Solve every image in DIR (sorted by name); one record per file, in that order.
+    #[command(after_help = MORE_OPTIONS, after_long_help = "")]
     Batch {
         /// Directory of images (PNG, JPEG, TIFF, FITS).
         dir: PathBuf,
@@ -71,6 +84,7 @@ pub enum Command {
         run: RunArgs,
     },
     /// Solve one image; one record.
+    #[command(after_help = MORE_OPTIONS, after_long_help = "")]
     Solve {
         /// The image file.
         image: PathBuf,

@@ -52,3 +52,36 @@ fn the_driver_says_nothing_on_stderr_without_v() {
         assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{backend}: {stderr}");
     }
 }
+
+#[test]
+fn info_says_what_each_backend_runs_on() {
+    let Some(g) = common::gpu("info_says_what_each_backend_runs_on") else {
+        return;
+    };
+    let software = g.adapter.software;
+    drop(g);
+    if std::env::var_os("GPUSTAR_ADAPTER").is_some() {
+        eprintln!("SKIPPED info_says_what_each_backend_runs_on: GPUSTAR_ADAPTER is set");
+        return;
+    }
+    let out = common::gpustar().arg("info").output().unwrap();
+    assert!(out.status.success(), "{}", common::stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    let line = |start: &str| {
+        text.lines()
+            .find(|l| l.starts_with(start))
+            .unwrap_or_else(|| panic!("no {start:?} line in:\n{text}"))
+    };
+    assert!(
+        !line("--backend gpu: ").starts_with("--backend gpu: none"),
+        "{text}"
+    );
+    // `auto` on a software rasterizer (lavapipe) is the CPU, as `batch` runs it.
+    let auto = line("--backend auto (the default): ");
+    assert_eq!(
+        auto.contains(": cpu (") && auto.contains("software rasterizer"),
+        software,
+        "{text}"
+    );
+    assert!(!text.contains("chosen"), "{text}");
+}

@@ -24,6 +24,7 @@ mod fits;
 mod formats;
 mod frames;
 mod gpu_pipeline;
+mod help;
 mod hint;
 mod layout;
 mod noise;

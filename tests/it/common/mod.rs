@@ -23,11 +23,15 @@ pub fn shared_dir(test: &str) -> Option<PathBuf> {
 /// The gpustar binary under test.
 pub fn gpustar() -> std::process::Command {
     let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_gpustar"));
-    // Keep table caches out of the user's home.
-    c.env(
-        "GPUSTAR_CACHE_DIR",
-        std::env::temp_dir().join("gpustar-test-cache"),
-    );
+    // Keep table caches out of the user's home: `cargo test` sets the clone's own
+    // (.cargo/config.toml), which the in-process tests use too; the test binary run by hand
+    // falls back to the temp directory.
+    if std::env::var_os("GPUSTAR_CACHE_DIR").is_none_or(|d| d.is_empty()) {
+        c.env(
+            "GPUSTAR_CACHE_DIR",
+            std::env::temp_dir().join("gpustar-test-cache"),
+        );
+    }
     c
 }
 
