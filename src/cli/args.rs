@@ -159,9 +159,20 @@ pub struct CameraOpts {
     /// distortion. A range (e.g. 8..20) searches the scale; the records give the fitted FOV.
     #[arg(long, value_parser = parse_fov, help_heading = "Camera and sky")]
     pub fov_deg: Option<FovArg>,
-    /// With --fov-deg: a pixel's height over its width, for sensors of non-square pixels (a
-    /// Lodestar's 8.3 µm × 8.6 µm: 8.3/8.6); a number or a ratio A/B. --fov-deg is the width's.
-    #[arg(long, requires = "fov_deg", value_parser = parse_pixel_aspect, help_heading = "Camera and sky", hide_short_help = true)]
+    /// Instead of --camera or --fov-deg: the pixel scale in arcsec per pixel, or a range
+    /// LOW..HIGH to search.
+    ///
+    /// Instead of --camera or --fov-deg: the angle one pixel at the centre subtends, in
+    /// arcseconds (solve-field's `--scale-units arcsecperpix`, ASTAP's -scale); the field of
+    /// view then follows each frame's width. A range (e.g. 1.2..1.5) searches the scale as a
+    /// --fov-deg range does; the records give the fitted field of view.
+    #[arg(long, value_name = "ARCSEC", value_parser = parse_scale,
+          conflicts_with_all = ["camera", "fov_deg"], help_heading = "Camera and sky")]
+    pub scale_arcsec: Option<FovArg>,
+    /// With --fov-deg or --scale-arcsec: a pixel's height over its width, for sensors of
+    /// non-square pixels (a Lodestar's 8.3 µm × 8.6 µm: 8.3/8.6); a number or a ratio A/B.
+    /// --fov-deg and --scale-arcsec are the width's.
+    #[arg(long, value_parser = parse_pixel_aspect, help_heading = "Camera and sky", hide_short_help = true)]
     pub pixel_aspect: Option<f64>,
     /// The camera's focal length is only known to within this fraction (e.g. 0.01): search
     /// the scale within it and fit it.
@@ -179,8 +190,8 @@ pub struct CameraOpts {
     /// Whether a frame may be a mirror image of the sky (a FITS image stored the conventional
     /// way, north up and east left, is one in row order): `either` (each frame takes the
     /// parity its stars fit; records say which in `mirrored`) or `camera` (as the camera file's
-    /// `mirrored` says; a --fov-deg camera is not mirrored) [default: either with --fov-deg,
-    /// camera with --camera].
+    /// `mirrored` says; a --fov-deg camera is not mirrored) [default: either with --fov-deg or
+    /// --scale-arcsec, camera with --camera].
     #[arg(
         long,
         value_enum,
@@ -204,7 +215,7 @@ pub enum DetectFilter {
     Binomial,
 }
 
-/// `--fov-deg`: one value or a range.
+/// `--fov-deg` or `--scale-arcsec`: one value or a range.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FovArg {
     Exact(f64),
@@ -231,6 +242,30 @@ pub(crate) fn parse_pixel_aspect(s: &str) -> std::result::Result<f64, String> {
         Err(format!(
             "pixel aspect (height / width) must be between 0.5 and 2, got {s:?}"
         ))
+    }
+}
+
+/// `--scale-arcsec`: arcseconds per pixel, one value or LOW..HIGH, above 0 and at most 36000
+/// (10° a pixel).
+pub(crate) fn parse_scale(s: &str) -> std::result::Result<FovArg, String> {
+    let num = |v: &str| -> std::result::Result<f64, String> {
+        match v.trim().parse::<f64>() {
+            Ok(x) if x > 0.0 && x <= 36_000.0 => Ok(x),
+            Ok(x) => Err(format!(
+                "pixel scale must be above 0 and at most 36000 arcsec, got {x}"
+            )),
+            Err(_) => Err(format!("bad pixel scale {v:?}")),
+        }
+    };
+    match s.split_once("..") {
+        Some((a, b)) => {
+            let (a, b) = (num(a)?, num(b)?);
+            if a >= b {
+                return Err(format!("expected LOW..HIGH, got {s:?}"));
+            }
+            Ok(FovArg::Range(a, b))
+        }
+        None => Ok(FovArg::Exact(num(s)?)),
     }
 }
 
@@ -417,6 +452,12 @@ pub struct SolveOpts {
     /// writer). Never an input, and never the records of -o.
     #[arg(long, help_heading = "Output")]
     pub overwrite: bool,
+    /// Where stderr is not a terminal (a batch job's log, a pipe): a progress line every this
+    /// many seconds (files done, counts, rate, time to go); 0 for none. On a terminal the
+    /// progress bar shows the same.
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, value_parser = within(0.0, 1e6),
+          help_heading = "Output", hide_short_help = true)]
+    pub progress_every: f64,
     /// No progress bar, warnings or summary on stderr.
     #[arg(short, long, help_heading = "Output")]
     pub quiet: bool,

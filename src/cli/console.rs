@@ -39,13 +39,91 @@ pub(crate) fn interrupt_flag() -> &'static std::sync::atomic::AtomicBool {
     &STOP
 }
 
-/// A progress bar on stderr: rate, ETA and counts; hidden with -q or when stderr is not a
-/// terminal.
-pub(crate) fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
-    use std::io::IsTerminal;
-    if quiet || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
+/// Progress on stderr: a bar (rate, ETA, counts) on a terminal; elsewhere (a Slurm log, a
+/// pipe) a line every `every` seconds, so that a long run's log shows it alive; nothing with
+/// -q (or `every` 0 off a terminal).
+pub(crate) enum Progress {
+    Bar(indicatif::ProgressBar),
+    Lines {
+        total: u64,
+        done: u64,
+        start: std::time::Instant,
+        last: std::time::Instant,
+        every: std::time::Duration,
+    },
+    Hidden,
+}
+
+impl Progress {
+    pub(crate) fn new(total: u64, quiet: bool, every_s: f64) -> Progress {
+        use std::io::IsTerminal;
+        if quiet {
+            return Progress::Hidden;
+        }
+        if std::io::stderr().is_terminal() {
+            return Progress::Bar(progress_bar(total));
+        }
+        if every_s <= 0.0 {
+            return Progress::Hidden;
+        }
+        let now = std::time::Instant::now();
+        Progress::Lines {
+            total,
+            done: 0,
+            start: now,
+            last: now,
+            every: std::time::Duration::from_secs_f64(every_s),
+        }
     }
+
+    /// One more input done; `c` the counts so far.
+    pub(crate) fn tick(&mut self, c: &gpustar::pipeline::Counts) {
+        match self {
+            Progress::Bar(bar) => {
+                bar.inc(1);
+                bar.set_message(format!(
+                    "{} solved, {} unsolved, {} errors",
+                    c.solved, c.unsolved, c.errors
+                ));
+            }
+            Progress::Lines {
+                total,
+                done,
+                start,
+                last,
+                every,
+            } => {
+                *done += 1;
+                if last.elapsed() < *every || *done == *total {
+                    return;
+                }
+                *last = std::time::Instant::now();
+                let seconds = start.elapsed().as_secs_f64();
+                let rate = *done as f64 / seconds.max(1e-9);
+                eprintln!(
+                    "gpustar: {done}/{total} files ({:.0} %): {} solved, {} unsolved, {} errors; \
+                     {rate:.1} images/s, {:.0} s, about {:.0} s to go",
+                    100.0 * *done as f64 / (*total).max(1) as f64,
+                    c.solved,
+                    c.unsolved,
+                    c.errors,
+                    seconds,
+                    total.saturating_sub(*done) as f64 / rate.max(1e-9),
+                );
+            }
+            Progress::Hidden => {}
+        }
+    }
+
+    pub(crate) fn finish(&self) {
+        if let Progress::Bar(bar) = self {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+/// The terminal's progress bar.
+fn progress_bar(len: u64) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(len);
     bar.set_style(
         indicatif::ProgressStyle::with_template(

@@ -68,22 +68,24 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
         catalog.faintest(),
         o.epoch
     )?;
-    if c.camera.is_none() && c.fov_deg.is_none() {
+    if c.camera.is_none() && c.fov_deg.is_none() && c.scale_arcsec.is_none() {
         writeln!(
             out,
-            "(give --camera FILE, or --fov-deg DEG --size WxH, to see the distance table)"
+            "(give --camera FILE, or --fov-deg DEG (or --scale-arcsec S) --size WxH, to see the \
+             distance table)"
         )?;
         return print_all(&out);
     }
     let (source, camera_mag, scale_range) = camera_source(c, false)?;
     let camera = match source {
         CameraSource::Fixed(cam) => cam,
-        CameraSource::None => bail!("give the camera: --camera FILE or --fov-deg DEG"),
-        CameraSource::Fov {
-            fov_x_deg,
-            pixel_aspect,
-        } => {
-            let (w, h) = size.context("--fov-deg needs --size WIDTHxHEIGHT here")?;
+        CameraSource::None => {
+            bail!("give the camera: --camera FILE, --fov-deg DEG or --scale-arcsec S")
+        }
+        sized @ (CameraSource::Fov { .. } | CameraSource::Scale { .. }) => {
+            let (w, h) =
+                size.context("--fov-deg and --scale-arcsec need --size WIDTHxHEIGHT here")?;
+            let (fov_x_deg, pixel_aspect) = sized.fov_for(w).expect("sized");
             Camera::from_fov(w, h, fov_x_deg)?.with_pixel_aspect(pixel_aspect)
         }
     };

@@ -44,7 +44,7 @@ gpustar's or that another gpustar is writing, an output on an input or on anothe
 gpustar did not write at an output path without --overwrite, a folder that cannot be read or
 holds no image files) or merge found inputs missing, repeated or torn;
 3 when the records could not be written (a full disk: those written are whole; --resume
-continues); 130 when interrupted (Ctrl-C, SIGTERM: the records written so far are complete;
+continues); 4 when `solve`'s frame was read but not solved; 130 when interrupted (Ctrl-C, SIGTERM: the records written so far are complete;
 --resume continues).";
 
 /// Identify the stars in sky images and find the camera's attitude (lost in space).

@@ -20,6 +20,9 @@ use gpustar::streaks::{StreakOptions, StreakSettings, export::Exports};
 use std::io::Write;
 use std::process::ExitCode;
 
+/// `gpustar solve`'s exit status when its frame is unsolved.
+pub(crate) const UNSOLVED_EXIT: u8 = 4;
+
 /// Range of focal-length factors (low, high) to search when the scale is uncertain.
 pub(crate) type ScaleRange = (f64, f64);
 
@@ -34,26 +37,43 @@ pub(crate) fn camera_source(
         Some(t) => Some((1.0 - t, 1.0 + t)),
         None => None,
     };
+    let aspect = c.pixel_aspect.unwrap_or(1.0);
+    if c.pixel_aspect.is_some() && c.fov_deg.is_none() && c.scale_arcsec.is_none() {
+        bail!("--pixel-aspect goes with --fov-deg or --scale-arcsec (a camera file gives fy_px)");
+    }
     let fov = |fov_x_deg| CameraSource::Fov {
         fov_x_deg,
-        pixel_aspect: c.pixel_aspect.unwrap_or(1.0),
+        pixel_aspect: aspect,
     };
-    match (&c.camera, c.fov_deg) {
-        (Some(path), _) => {
+    let scale = |arcsec_per_px| CameraSource::Scale {
+        arcsec_per_px,
+        pixel_aspect: aspect,
+    };
+    // A range searches the scale around the camera of its middle value: focal lengths scale as
+    // 1 / tan(FOV / 2), and as 1 / tan(pixel scale).
+    let factors =
+        |f: &dyn Fn(f64) -> f64, lo: f64, mid: f64, hi: f64| (f(hi) / f(mid), f(lo) / f(mid));
+    match (&c.camera, c.fov_deg, c.scale_arcsec) {
+        (Some(path), ..) => {
             let (cam, mag) = Camera::from_toml_file(path)?;
             Ok((CameraSource::Fixed(cam), mag, tolerance))
         }
-        (None, Some(FovArg::Exact(deg))) => Ok((fov(deg), None, tolerance)),
-        (None, Some(FovArg::Range(lo, hi))) => {
-            // The camera of the middle FOV; focal lengths scale as 1 / tan(FOV / 2).
+        (None, Some(FovArg::Exact(deg)), _) => Ok((fov(deg), None, tolerance)),
+        (None, Some(FovArg::Range(lo, hi)), _) => {
             let mid = (lo + hi) / 2.0;
             let f = |fov: f64| 1.0 / (fov.to_radians() / 2.0).tan();
-            Ok((fov(mid), None, Some((f(hi) / f(mid), f(lo) / f(mid)))))
+            Ok((fov(mid), None, Some(factors(&f, lo, mid, hi))))
         }
-        (None, None) if header_only => Ok((CameraSource::None, None, None)),
-        (None, None) => bail!(
-            "give the camera: --camera FILE or --fov-deg DEG (or, for streaks reduced through \
-             each FITS header's WCS alone, --streaks --astrometry header)"
+        (None, None, Some(FovArg::Exact(s))) => Ok((scale(s), None, tolerance)),
+        (None, None, Some(FovArg::Range(lo, hi))) => {
+            let mid = (lo + hi) / 2.0;
+            let f = |s: f64| 1.0 / (s / 3600.0).to_radians().tan();
+            Ok((scale(mid), None, Some(factors(&f, lo, mid, hi))))
+        }
+        (None, None, None) if header_only => Ok((CameraSource::None, None, None)),
+        (None, None, None) => bail!(
+            "give the camera: --camera FILE, --fov-deg DEG or --scale-arcsec ARCSEC (or, for \
+             streaks reduced through each FITS header's WCS alone, --streaks --astrometry header)"
         ),
     }
 }
@@ -62,7 +82,8 @@ pub(crate) fn camera_source(
 /// `--fov-deg` (which says nothing of it), the camera file's with `--camera`.
 pub(crate) fn parity(c: &CameraOpts, source: &CameraSource) -> Parity {
     match (c.parity, source) {
-        (Some(ParityArg::Either), _) | (None, CameraSource::Fov { .. }) => Parity::Either,
+        (Some(ParityArg::Either), _)
+        | (None, CameraSource::Fov { .. } | CameraSource::Scale { .. }) => Parity::Either,
         _ => Parity::AsCamera,
     }
 }
@@ -265,7 +286,7 @@ pub(crate) fn run_solve(
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
     let to_do = inputs.iter().filter(|i| !i.replay).count();
-    let bar = progress_bar(to_do as u64, o.quiet);
+    let mut progress = Progress::new(to_do as u64, o.quiet, o.progress_every);
     let threads = b
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -288,15 +309,11 @@ pub(crate) fn run_solve(
         stop,
         |r, c| {
             exports.add(r);
-            bar.inc(1);
-            bar.set_message(format!(
-                "{} solved, {} unsolved, {} errors",
-                c.solved, c.unsolved, c.errors
-            ));
+            progress.tick(c);
             tracing::debug!("{}: {:?}", r.file, r.status);
         },
     )?;
-    bar.finish_and_clear();
+    progress.finish();
     if let (Some(order), Some(p), None, false) = (
         &retried_order,
         &o.output,
@@ -342,6 +359,11 @@ pub(crate) fn run_solve(
         ExitCode::from(130)
     } else if c.errors + errors_before > 0 {
         ExitCode::from(1)
+    } else if dir.is_none() && c.unsolved > 0 {
+        // `solve`'s one frame was read but not solved: said in the status, as ASTAP does, so
+        // that a script need not parse the record (`batch` keeps 0: unsolved frames are part
+        // of an archive's normal result).
+        ExitCode::from(UNSOLVED_EXIT)
     } else {
         ExitCode::SUCCESS
     })

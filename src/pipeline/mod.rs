@@ -32,6 +32,12 @@ pub enum CameraSource {
     Fixed(Camera),
     /// `--fov-deg` (and `--pixel-aspect`): centred, no distortion, sized by each frame.
     Fov { fov_x_deg: f64, pixel_aspect: f64 },
+    /// `--scale-arcsec`: as `Fov`, from the angle one pixel at the centre subtends (the field
+    /// then grows with each frame's width), as solve-field's `arcsecperpix` and ASTAP's scale.
+    Scale {
+        arcsec_per_px: f64,
+        pixel_aspect: f64,
+    },
     /// None (`--streaks --astrometry header` alone): stars are not identified (records are
     /// `unsolved`, reason `no_camera`); streaks are reduced through each header's WCS.
     None,
@@ -43,6 +49,26 @@ impl CameraSource {
         CameraSource::Fov {
             fov_x_deg,
             pixel_aspect: 1.0,
+        }
+    }
+
+    /// For the sources sized by each frame: the horizontal field of view (degrees) and the
+    /// pixel aspect of a frame `width` pixels wide. A pixel scale s gives the pinhole's focal
+    /// length 1 / tan(s) pixels, so the field is 2 atan(width / 2 · tan(s)).
+    pub fn fov_for(&self, width: u32) -> Option<(f64, f64)> {
+        match *self {
+            CameraSource::Fov {
+                fov_x_deg,
+                pixel_aspect,
+            } => Some((fov_x_deg, pixel_aspect)),
+            CameraSource::Scale {
+                arcsec_per_px,
+                pixel_aspect,
+            } => {
+                let half = width as f64 / 2.0 * (arcsec_per_px / 3600.0).to_radians().tan();
+                Some((2.0 * half.atan().to_degrees(), pixel_aspect))
+            }
+            CameraSource::Fixed(_) | CameraSource::None => None,
         }
     }
 }
@@ -308,19 +334,17 @@ impl Solvers {
                 c.clone()
             }
             CameraSource::None => return Err("no camera given".into()),
-            CameraSource::Fov {
-                fov_x_deg,
-                pixel_aspect,
-            } => {
+            CameraSource::Fov { .. } | CameraSource::Scale { .. } => {
                 if width < MIN_SIDE || height < MIN_SIDE {
                     return Err(format!(
                         "image is {width}x{height}: too small to hold a star field (gpustar \
                          needs at least {MIN_SIDE} pixels a side)"
                     ));
                 }
-                Camera::from_fov(width, height, *fov_x_deg)
+                let (fov_x_deg, pixel_aspect) = self.camera.fov_for(width).expect("sized");
+                Camera::from_fov(width, height, fov_x_deg)
                     .map_err(|e| format!("{e:#}"))?
-                    .with_pixel_aspect(*pixel_aspect)
+                    .with_pixel_aspect(pixel_aspect)
             }
         })
     }

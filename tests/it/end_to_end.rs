@@ -159,10 +159,48 @@ fn a_starless_frame_is_unsolved_with_a_reason() {
     })
     .save(&path)
     .unwrap();
-    let out = run_ok(&["solve", path.to_str().unwrap(), "--fov-deg", "10"]);
+    // `solve` says unsolved in its exit status too (4); `batch` keeps 0 for unsolved frames.
+    let out = gpustar()
+        .args(["solve", path.to_str().unwrap(), "--fov-deg", "10"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(4), "{}", common::stderr(&out));
     let r: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r["status"], "unsolved");
     assert_eq!(r["reason"], "too_few_stars");
+    let out = run_ok(&["batch", tmp.path().to_str().unwrap(), "--fov-deg", "10"]);
+    let r: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(r["status"], "unsolved");
+}
+
+/// Off a terminal (a Slurm log, a pipe) a long run prints a progress line every
+/// `--progress-every` seconds, where a terminal shows the bar; `-q` and 0 print none.
+#[test]
+fn a_run_logged_to_a_file_says_its_progress_in_lines() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sim");
+    common::simulate_small(&dir, 12);
+    let run = |extra: &[&str]| {
+        let mut c = gpustar();
+        c.args(["batch", dir.to_str().unwrap(), "--fov-deg", "18", "-j", "1"])
+            .args(extra);
+        let out = c.output().unwrap();
+        assert!(out.status.success(), "{}", common::stderr(&out));
+        common::stderr(&out)
+    };
+    let lines = |e: &str| e.lines().filter(|l| l.contains(" files (")).count();
+    let every = run(&["--progress-every", "0.000001"]);
+    // Every input but the last (the summary says that one) gets a line.
+    assert_eq!(lines(&every), 11, "{every}");
+    let first = every.lines().find(|l| l.contains(" files (")).unwrap();
+    assert!(
+        first.starts_with("gpustar: 1/12 files (8 %): ") && first.contains("images/s"),
+        "{first}"
+    );
+    assert_eq!(lines(&run(&["--progress-every", "0"])), 0);
+    assert_eq!(lines(&run(&["--progress-every", "0.000001", "-q"])), 0);
+    // The default, 10 s, says nothing in a run this short.
+    assert_eq!(lines(&run(&[])), 0);
 }
 
 /// `gpustar info | head`, `gpustar evaluate ... | head`: a reader that closes the pipe before

@@ -37,6 +37,7 @@ mod radial;
 mod real;
 mod refine;
 mod resume;
+mod scale;
 mod select;
 mod sequence;
 mod simd;
