@@ -2,9 +2,12 @@
 """Copy FITS frames with their pointing and WCS keywords removed, so that a solver cannot read
 the answer from the header (../shared/data/narrow_real/README.md names the keywords).
 
-    python3 scripts/blind_fits.py OUT_DIR FRAME.fits [FRAME.fits ...]
+    python3 scripts/blind_fits.py [--keep-scale] OUT_DIR FRAME.fits [FRAME.fits ...]
 
 Every HDU's header is cleaned; pixel data are copied unchanged (astropy, no scaling applied).
+--keep-scale keeps what states the pixel scale (CD, PC, CDELT, CTYPE, CUNIT, PIXSCALE, SECPIX,
+PLTSCALE) and removes only the pointing (CRVAL, CRPIX, RA/DEC, OBJCTRA/OBJCTDEC, ...): a frame
+as an observer's software leaves it, for solving from the header's scale (issue 47).
 """
 import re
 import sys
@@ -20,10 +23,15 @@ PREFIX = re.compile(r"^(CTYPE|CRVAL|CRPIX|CD\d|PC\d|CDELT|CROTA|CUNIT|A_|B_|AP_|
                     r"XPIXELSZ|YPIXELSZ|DSSORIG|CNPIX|PV\d|ASTAP|ANNOTATE|SIP)")
 
 
-def blind(header):
+SCALE = re.compile(r"^(CD\d|PC\d|CDELT|CTYPE|CUNIT|PIXSCALE|SECPIX|PLTSCALE)")
+
+
+def blind(header, keep_scale=False):
     removed = []
     for key in list(header.keys()):
         k = key.upper()
+        if keep_scale and SCALE.match(k):
+            continue
         if k in EXACT or PREFIX.match(k) or k.startswith("HIERARCH ASTAP"):
             removed.append(k)
             while key in header:
@@ -32,13 +40,16 @@ def blind(header):
 
 
 def main():
-    if len(sys.argv) < 3:
+    args = sys.argv[1:]
+    keep_scale = "--keep-scale" in args
+    args = [a for a in args if a != "--keep-scale"]
+    if len(args) < 2:
         sys.exit(__doc__)
-    out = Path(sys.argv[1])
+    out = Path(args[0])
     out.mkdir(parents=True, exist_ok=True)
-    for name in sys.argv[2:]:
+    for name in args[1:]:
         with fits.open(name, do_not_scale_image_data=True) as hdus:
-            removed = sorted({k for h in hdus for k in blind(h.header)})
+            removed = sorted({k for h in hdus for k in blind(h.header, keep_scale)})
             hdus.writeto(out / Path(name).name, overwrite=True, output_verify="silentfix")
         print(f"{name}: removed {len(removed)} keywords ({' '.join(removed[:12])}{' ...' if len(removed) > 12 else ''})")
 

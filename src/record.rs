@@ -266,6 +266,22 @@ pub struct Record {
     /// stars; an empty list when none); absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub particles: Option<Vec<ParticleRecord>>,
+    /// Without --camera, --fov-deg or --scale-arcsec: the pixel scale the frame's header
+    /// stated, which its camera was made from; absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pixel_scale: Option<PixelScaleRecord>,
+}
+
+/// The pixel scale a frame's header stated (`io::fits::scale`), as its record gives it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PixelScaleRecord {
+    /// The angle one pixel's width subtends, arcseconds (the search around it fits the
+    /// solution's: `fov_x_deg`).
+    pub arcsec_per_px: f64,
+    /// A pixel's height over its width.
+    pub pixel_aspect: f64,
+    /// The keywords it was read from, e.g. "FOCALLEN, XPIXSZ".
+    pub source: String,
 }
 
 /// The attitude's 1σ (arcsec).
@@ -321,6 +337,7 @@ impl Record {
             determinant: None,
             sequence_mode: None,
             particles: None,
+            pixel_scale: None,
         }
     }
 

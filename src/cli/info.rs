@@ -79,7 +79,7 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
     let (source, camera_mag, scale_range) = camera_source(c, false)?;
     let camera = match source {
         CameraSource::Fixed(cam) => cam,
-        CameraSource::None => {
+        CameraSource::None | CameraSource::Header => {
             bail!("give the camera: --camera FILE, --fov-deg DEG or --scale-arcsec S")
         }
         sized @ (CameraSource::Fov { .. } | CameraSource::Scale { .. }) => {

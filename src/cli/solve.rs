@@ -71,19 +71,27 @@ pub(crate) fn camera_source(
             Ok((scale(mid), None, Some(factors(&f, lo, mid, hi))))
         }
         (None, None, None) if header_only => Ok((CameraSource::None, None, None)),
-        (None, None, None) => bail!(
-            "give the camera: --camera FILE, --fov-deg DEG or --scale-arcsec ARCSEC (or, for \
-             streaks reduced through each FITS header's WCS alone, --streaks --astrometry header)"
-        ),
+        // Nothing given: each frame's header states its scale, as ASTAP reads it; a nominal
+        // focal length or pixel size is a few per cent off (the Seestar S50's: 1 %).
+        (None, None, None) => Ok((
+            CameraSource::Header,
+            None,
+            tolerance.or(Some(HEADER_SCALE_RANGE)),
+        )),
     }
 }
+
+/// The focal-length factors searched around a header's scale, unless --fov-tolerance says.
+const HEADER_SCALE_RANGE: ScaleRange = (0.97, 1.03);
 
 /// The parity setting of `--parity`, or its default for the camera's source: open with
 /// `--fov-deg` (which says nothing of it), the camera file's with `--camera`.
 pub(crate) fn parity(c: &CameraOpts, source: &CameraSource) -> Parity {
     match (c.parity, source) {
         (Some(ParityArg::Either), _)
-        | (None, CameraSource::Fov { .. } | CameraSource::Scale { .. }) => Parity::Either,
+        | (None, CameraSource::Fov { .. } | CameraSource::Scale { .. } | CameraSource::Header) => {
+            Parity::Either
+        }
         _ => Parity::AsCamera,
     }
 }

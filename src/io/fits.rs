@@ -34,6 +34,7 @@ use std::collections::BTreeMap;
 
 mod cards;
 mod pixels;
+pub mod scale;
 mod scan;
 
 pub use cards::*;

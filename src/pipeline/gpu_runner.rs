@@ -46,8 +46,9 @@ impl GpuRunner {
     /// Solve decoded frames: each size as one GPU batch (detection, then voting), the rest
     /// on the CPU. One record per frame, in the order given.
     pub fn solve(&mut self, solvers: &Solvers, frames: Vec<Decoded>) -> Vec<Record> {
-        if matches!(solvers.camera, CameraSource::None) {
-            // Streaks alone, through the headers' WCS: the CPU twins (see `streaks_only`).
+        if matches!(solvers.camera, CameraSource::None | CameraSource::Header) {
+            // Streaks alone, through the headers' WCS (see `streaks_only`), or each frame's
+            // camera from its header (the GPU's tables are kept by frame size): the CPU twins.
             return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
         }
         let mut records: Vec<Option<Record>> = (0..frames.len()).map(|_| None).collect();
@@ -78,7 +79,7 @@ impl GpuRunner {
             // built only if a region does not solve its frame.
             let shared;
             let global = if regional.iter().all(Option::is_some) {
-                Global::Lazy(solvers, (w, h))
+                Global::Lazy(solvers, (w, h), None)
             } else {
                 shared = solvers.get(w, h);
                 match shared.as_ref() {
@@ -88,7 +89,7 @@ impl GpuRunner {
                         // region, on the CPU; the others carry the reason.
                         let recs = group.iter().zip(&regional).map(|((_, d), r)| match r {
                             Some(r) => {
-                                let lazy = Global::Lazy(solvers, (w, h));
+                                let lazy = Global::Lazy(solvers, (w, h), None);
                                 solve_with(solvers, r, Some(r), &lazy, d, decoded_frame(d))
                             }
                             None => solvers.error_record(&d.name, e.clone(), &self.name()),

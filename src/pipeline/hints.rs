@@ -3,6 +3,7 @@
 //! built only when a frame needs it.
 
 use super::{Decoded, SharedSolver, Solvers};
+use crate::io::fits::scale::PixelScale;
 use crate::io::frame::Frame;
 use crate::record::Record;
 use crate::sky::hint::{Hint, HintSource, header_hint};
@@ -42,7 +43,10 @@ impl Solvers {
     /// holds too few catalog stars: the frame is then solved lost-in-space alone).
     pub fn regional(&self, d: &Decoded, frame: &Frame) -> Option<Solver> {
         let hint = self.hint_of(d, frame)?;
-        let camera = self.camera_for(frame.width, frame.height).ok()?;
+        let scale = self.header_scale(d);
+        let camera = self
+            .camera_for(frame.width, frame.height, scale.as_ref())
+            .ok()?;
         match regional_solver(&self.catalog, &camera, &self.settings, &hint) {
             Ok(s) => Some(s),
             Err(e) => {
@@ -60,7 +64,7 @@ impl Solvers {
 /// A frame's lost-in-space solver: at hand, or the size's, built when first needed.
 pub(crate) enum Global<'a> {
     Ready(&'a Solver),
-    Lazy(&'a Solvers, (u32, u32)),
+    Lazy(&'a Solvers, (u32, u32), Option<PixelScale>),
 }
 
 impl Global<'_> {
@@ -78,8 +82,8 @@ impl Global<'_> {
     pub(crate) fn solver(&self) -> Option<GlobalSolver<'_>> {
         match self {
             Global::Ready(s) => Some(GlobalSolver::Borrowed(s)),
-            Global::Lazy(solvers, (w, h)) => {
-                let shared = solvers.get(*w, *h);
+            Global::Lazy(solvers, (w, h), scale) => {
+                let shared = solvers.get_scaled(*w, *h, scale.as_ref());
                 match shared.as_ref() {
                     Ok(_) => Some(GlobalSolver::Shared(shared)),
                     Err(e) => {

@@ -11,6 +11,7 @@ use crate::catalog::Catalog;
 use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::io::dark::Darks;
+use crate::io::fits::scale::PixelScale;
 use crate::io::frame::Frame;
 use crate::products::Products;
 use crate::record::{Record, Timing};
@@ -38,6 +39,11 @@ pub enum CameraSource {
         arcsec_per_px: f64,
         pixel_aspect: f64,
     },
+    /// Neither a camera nor a scale given: each frame's camera from the pixel scale its header
+    /// states (`io::fits::scale`: CD, CDELT, PIXSCALE/SECPIX, FOCALLEN with XPIXSZ), searched
+    /// within `Settings::scale_range`; a frame whose header states none gets an error record.
+    /// These frames are solved by the CPU twins (the GPU keeps its tables by frame size).
+    Header,
     /// None (`--streaks --astrometry header` alone): stars are not identified (records are
     /// `unsolved`, reason `no_camera`); streaks are reduced through each header's WCS.
     None,
@@ -68,7 +74,7 @@ impl CameraSource {
                 let half = width as f64 / 2.0 * (arcsec_per_px / 3600.0).to_radians().tan();
                 Some((2.0 * half.atan().to_degrees(), pixel_aspect))
             }
-            CameraSource::Fixed(_) | CameraSource::None => None,
+            CameraSource::Fixed(_) | CameraSource::Header | CameraSource::None => None,
         }
     }
 }
@@ -123,7 +129,8 @@ pub struct Solvers {
     /// Frames with more pixels are refused from their headers (`--max-megapixels`): without
     /// a camera file's size to compare with, a small file can decode to gigabytes.
     pub max_pixels: u64,
-    map: Mutex<HashMap<(u32, u32), SharedSolver>>,
+    /// By frame size, and for [`CameraSource::Header`] the header's scale and aspect (bits).
+    map: Mutex<HashMap<(u32, u32, u64, u64), SharedSolver>>,
 }
 
 /// A frame after its pixel stages (the sequence stage's input): its detections, or the
@@ -309,20 +316,75 @@ impl Solvers {
 
     /// The solver for frames of this size, or why there is none (built once per size).
     pub fn get(&self, width: u32, height: u32) -> SharedSolver {
+        self.get_scaled(width, height, None)
+    }
+
+    /// The solver of a decoded frame: by its size, and with [`CameraSource::Header`] by the
+    /// pixel scale its header states.
+    pub fn get_for(&self, d: &Decoded, frame: &Frame) -> SharedSolver {
+        self.get_scaled(frame.width, frame.height, self.header_scale(d).as_ref())
+    }
+
+    /// The solver for frames of this size and (with [`CameraSource::Header`]) header scale.
+    pub(crate) fn get_scaled(
+        &self,
+        width: u32,
+        height: u32,
+        scale: Option<&PixelScale>,
+    ) -> SharedSolver {
+        let bits = scale.map_or((0, 0), |s| {
+            (s.arcsec_per_px.to_bits(), s.pixel_aspect.to_bits())
+        });
         let mut map = self.map.lock().unwrap_or_else(|e| e.into_inner());
-        map.entry((width, height))
-            .or_insert_with(|| Arc::new(self.build(width, height)))
+        map.entry((width, height, bits.0, bits.1))
+            .or_insert_with(|| Arc::new(self.build(width, height, scale)))
             .clone()
     }
 
-    fn build(&self, width: u32, height: u32) -> std::result::Result<Solver, String> {
-        let camera = self.camera_for(width, height)?;
+    /// With [`CameraSource::Header`]: the pixel scale the frame's header states, if any.
+    pub fn header_scale(&self, d: &Decoded) -> Option<PixelScale> {
+        matches!(self.camera, CameraSource::Header)
+            .then(|| crate::io::fits::scale::pixel_scale(&d.keywords))
+            .flatten()
+    }
+
+    fn build(
+        &self,
+        width: u32,
+        height: u32,
+        scale: Option<&PixelScale>,
+    ) -> std::result::Result<Solver, String> {
+        let camera = self.camera_for(width, height, scale)?;
         Solver::new(&self.catalog, camera, self.settings).map_err(|e| format!("{e:#}"))
     }
 
-    /// The camera of frames of this size, or why there is none.
-    fn camera_for(&self, width: u32, height: u32) -> std::result::Result<Camera, String> {
-        Ok(match &self.camera {
+    /// The camera of frames of this size (and header scale), or why there is none.
+    pub(crate) fn camera_for(
+        &self,
+        width: u32,
+        height: u32,
+        scale: Option<&PixelScale>,
+    ) -> std::result::Result<Camera, String> {
+        let from_header;
+        let source = match (&self.camera, scale) {
+            (CameraSource::Header, Some(s)) => {
+                from_header = CameraSource::Scale {
+                    arcsec_per_px: s.arcsec_per_px,
+                    pixel_aspect: s.pixel_aspect,
+                };
+                &from_header
+            }
+            (CameraSource::Header, None) => {
+                return Err(
+                    "the header states no pixel scale (a CD or CDELT WCS, PIXSCALE, \
+                            SECPIX, or FOCALLEN with XPIXSZ): give --camera, --fov-deg or \
+                            --scale-arcsec"
+                        .into(),
+                );
+            }
+            (source, _) => source,
+        };
+        Ok(match source {
             CameraSource::Fixed(c) => {
                 if (c.width, c.height) != (width, height) {
                     return Err(crate::io::frame::wrong_size(
@@ -333,7 +395,7 @@ impl Solvers {
                 }
                 c.clone()
             }
-            CameraSource::None => return Err("no camera given".into()),
+            CameraSource::None | CameraSource::Header => return Err("no camera given".into()),
             CameraSource::Fov { .. } | CameraSource::Scale { .. } => {
                 if width < MIN_SIDE || height < MIN_SIDE {
                     return Err(format!(
@@ -341,7 +403,7 @@ impl Solvers {
                          needs at least {MIN_SIDE} pixels a side)"
                     ));
                 }
-                let (fov_x_deg, pixel_aspect) = self.camera.fov_for(width).expect("sized");
+                let (fov_x_deg, pixel_aspect) = source.fov_for(width).expect("sized");
                 Camera::from_fov(width, height, fov_x_deg)
                     .map_err(|e| format!("{e:#}"))?
                     .with_pixel_aspect(pixel_aspect)
@@ -376,15 +438,23 @@ impl Solvers {
         }
         // A frame with a hint needs the lost-in-space solver (its distance table: for a deep
         // catalog the largest thing a run builds) only when its region does not solve it.
-        if let Some(r) = self.regional(&d, frame) {
-            let global = Global::Lazy(self, (frame.width, frame.height));
-            return solve_with(self, &r, Some(&r), &global, &d, frame);
-        }
-        let solver = self.get(frame.width, frame.height);
-        match solver.as_ref() {
-            Ok(s) => solve_with(self, s, None, &Global::Ready(s), &d, frame),
-            Err(e) => self.error_record(&d.name, e.clone(), BACKEND_CPU),
-        }
+        let scale = self.header_scale(&d);
+        let mut record = if let Some(r) = self.regional(&d, frame) {
+            let global = Global::Lazy(self, (frame.width, frame.height), scale.clone());
+            solve_with(self, &r, Some(&r), &global, &d, frame)
+        } else {
+            let solver = self.get_scaled(frame.width, frame.height, scale.as_ref());
+            match solver.as_ref() {
+                Ok(s) => solve_with(self, s, None, &Global::Ready(s), &d, frame),
+                Err(e) => self.error_record(&d.name, e.clone(), BACKEND_CPU),
+            }
+        };
+        record.pixel_scale = scale.map(|s| crate::record::PixelScaleRecord {
+            arcsec_per_px: s.arcsec_per_px,
+            pixel_aspect: s.pixel_aspect,
+            source: s.keywords.to_string(),
+        });
+        record
     }
 
     /// Identify stars the caller detected in a `width` × `height` frame (`stars`: pixel

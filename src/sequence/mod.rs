@@ -190,7 +190,7 @@ impl<'a> Sequencer<'a> {
                 return Record::error(&d.name, e.clone(), &f.backend);
             }
         };
-        let solver = self.solvers.get(frame.width, frame.height);
+        let solver = self.solvers.get_for(d, frame);
         let solver = match solver.as_ref() {
             Ok(s) => s,
             Err(e) => return Record::error(&d.name, e.clone(), &f.backend),

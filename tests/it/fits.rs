@@ -27,6 +27,25 @@ fn pad(mut bytes: Vec<u8>, fill: u8) -> Vec<u8> {
 /// Write pixels as a FITS primary image: BITPIX 16 with BZERO 32768 (unsigned), or −32 with
 /// every 97th pixel blank (NaN).
 fn write_fits(path: &Path, w: u32, h: u32, pixels: &[u16], float: bool, date_obs: &str) {
+    write_fits_with(
+        path,
+        w,
+        h,
+        pixels,
+        float,
+        &[("DATE-OBS", &format!("'{date_obs}'"))],
+    );
+}
+
+/// [`write_fits`] with these cards (keyword, value text) in the header.
+fn write_fits_with(
+    path: &Path,
+    w: u32,
+    h: u32,
+    pixels: &[u16],
+    float: bool,
+    extra: &[(&str, &str)],
+) {
     let mut cards = vec![
         card("SIMPLE", "T"),
         card("BITPIX", if float { "-32" } else { "16" }),
@@ -38,7 +57,9 @@ fn write_fits(path: &Path, w: u32, h: u32, pixels: &[u16], float: bool, date_obs
         cards.push(card("BZERO", "32768"));
         cards.push(card("BSCALE", "1"));
     }
-    cards.push(card("DATE-OBS", &format!("'{date_obs}'")));
+    for (k, v) in extra {
+        cards.push(card(k, v));
+    }
     cards.push(format!("{:<80}", "END"));
     let mut bytes = pad(cards.concat().into_bytes(), b' ');
     let mut data = Vec::new();
@@ -110,4 +131,94 @@ fn fits_frames_solve_at_their_own_epoch() {
     assert!(total >= 40, "only {total} stars identified");
     // Merged doubles sit at their photocentre, so not quite every star.
     assert!(at_epoch * 10 >= total * 9, "{at_epoch} of {total}");
+}
+
+/// Without --camera, --fov-deg or --scale-arcsec each frame's camera comes from the pixel scale
+/// its header states (issue 47, as ASTAP reads it): a focal length and pixel size 1 % off the
+/// truth (a nominal value), a CD matrix; the record says which. A frame that states none gets
+/// an error record saying what to give.
+#[test]
+fn frames_solve_from_the_pixel_scale_their_header_states() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("fits");
+    std::fs::create_dir(&dir).unwrap();
+    let cat = Catalog::builtin();
+    let s = SimSettings {
+        width: 640,
+        height: 480,
+        fov_x_deg: 15.0,
+        bits: 16,
+        seed: 8,
+        ..SimSettings::default()
+    };
+    // One pixel at the centre: atan(tan(7.5°) / 320).
+    let rad = (7.5f64.to_radians().tan() / 320.0).atan();
+    let deg = rad.to_degrees();
+    let focal = format!("{}", 250.0);
+    let pixel_um = format!("{}", (rad.tan() * 250.0e3 * 1.01));
+    let cd = (format!("{:e}", -deg), format!("{:e}", deg));
+    let headers: [Vec<(&str, &str)>; 3] = [
+        vec![
+            ("FOCALLEN", &focal),
+            ("XPIXSZ", &pixel_um),
+            ("YPIXSZ", &pixel_um),
+        ],
+        vec![
+            ("CD1_1", &cd.0),
+            ("CD1_2", "0.0"),
+            ("CD2_1", "0.0"),
+            ("CD2_2", &cd.1),
+        ],
+        vec![("OBJECT", "'no scale'")],
+    ];
+    let mut truths = Vec::new();
+    for (k, cards) in headers.iter().enumerate() {
+        let (pixels, truth) = render(&cat, &s, k).unwrap();
+        write_fits_with(
+            &dir.join(format!("f{k}.fits")),
+            640,
+            480,
+            &pixels,
+            false,
+            cards,
+        );
+        truths.push(truth);
+    }
+    let out = common::gpustar()
+        .arg("batch")
+        .arg(&dir)
+        .args(["--mag-limit", "6", "-q"])
+        .output()
+        .unwrap();
+    // The frame without a scale is an error record: exit 1.
+    assert_eq!(out.status.code(), Some(1), "{}", common::stderr(&out));
+    let records: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(records.len(), 3);
+    for (r, (t, source)) in records[..2]
+        .iter()
+        .zip(truths.iter().zip(["FOCALLEN, XPIXSZ", "CD1_1..CD2_2"]))
+    {
+        assert_eq!(r["status"], "solved", "{r}");
+        let d_ra = (r["ra_deg"].as_f64().unwrap() - t.ra_deg) * t.dec_deg.to_radians().cos();
+        let d_dec = r["dec_deg"].as_f64().unwrap() - t.dec_deg;
+        assert!(d_ra.hypot(d_dec) * 3600.0 < 5.0, "{r}");
+        assert!(
+            (r["fov_x_deg"].as_f64().unwrap() - 15.0).abs() < 0.01,
+            "{r}"
+        );
+        assert_eq!(r["pixel_scale"]["source"], source, "{r}");
+    }
+    let stated = records[0]["pixel_scale"]["arcsec_per_px"].as_f64().unwrap();
+    assert!((stated / (deg * 3600.0) - 1.01).abs() < 1e-4, "{stated}");
+    assert_eq!(records[2]["status"], "error");
+    let e = records[2]["error"].as_str().unwrap();
+    assert!(
+        e.contains("no pixel scale") && e.contains("--fov-deg"),
+        "{e}"
+    );
+    assert!(records[2].get("pixel_scale").is_none());
 }
