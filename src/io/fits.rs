@@ -74,6 +74,13 @@ pub fn is_fits_extension(ext_lowercase: &str) -> bool {
 const BLOCK: usize = 2880;
 const CARD: usize = 80;
 
+/// Where the image's data end in a FITS file whose first `head` bytes hold its headers (the
+/// same checks as [`decode_fits`]): how much of a compressed stream to inflate.
+pub fn image_end(head: &[u8], max_pixels: u64) -> Result<u64> {
+    let l = layout(head, max_pixels)?;
+    Ok(l.image.data_start as u64 + l.width * l.height * l.image.bytes_per_value)
+}
+
 /// Decode the primary HDU of a FITS file held in memory. `max_pixels` caps width×height before any allocation.
 ///
 /// When the primary HDU has no data (NAXIS = 0), as in multi-extension files, the first IMAGE

@@ -34,12 +34,28 @@ pub struct FileInfo {
 /// File extensions `batch` treats as images (lower case).
 pub const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff", "fits", "fit", "fts"];
 
-/// Is this path an image by its extension?
+/// Is this path an image by its extension? Gzipped FITS (`x.fits.gz`, `.fit.gz`, `.fts.gz`)
+/// is one too.
 pub fn is_image_path(path: &Path) -> bool {
     path.extension()
         .and_then(|e| e.to_str())
         .map(|e| IMAGE_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
         .unwrap_or(false)
+        || is_gzipped_fits_name(path)
+}
+
+/// `x.fits.gz` and the like.
+fn is_gzipped_fits_name(path: &Path) -> bool {
+    let ext = |p: &Path| {
+        p.extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+    };
+    ext(path).as_deref() == Some("gz")
+        && path
+            .file_stem()
+            .and_then(|stem| ext(Path::new(stem)))
+            .is_some_and(|e| crate::io::fits::is_fits_extension(&e))
 }
 
 /// Largest frame accepted, in pixels per side, and its decoder memory budget: a header that
@@ -132,6 +148,9 @@ impl Frame<'static> {
         }
         if meta.len() == 0 {
             fail!(Input, "cannot decode {shown}: the file is empty (0 bytes)");
+        }
+        if is_gzipped_fits_name(path) {
+            return read_gzipped_fits(path, &shown, max_pixels);
         }
         if is_fits(path)? {
             return read_fits(path, &shown, meta.len(), max_pixels);
@@ -257,6 +276,76 @@ fn read_fits(
                 .with_context(|| format!("cannot decode {shown}"))?
         }
     };
+    Ok((
+        Frame {
+            width: f.width,
+            height: f.height,
+            pixels: f.pixels.into(),
+            saturation: f.saturation,
+        },
+        FileInfo {
+            epoch: f.epoch,
+            keywords: f.keywords,
+            warnings: f.warnings,
+        },
+    ))
+}
+
+/// A gzipped FITS file (`x.fits.gz`), decompressed in memory: its headers first, then no more
+/// than the image they declare (within `max_pixels`), so that a small file cannot inflate
+/// without bound.
+fn read_gzipped_fits(
+    path: &Path,
+    shown: &str,
+    max_pixels: u64,
+) -> Result<(Frame<'static>, FileInfo)> {
+    use std::io::Read;
+    let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64)
+        .min(MAX_ALLOC / 2)
+        .min(max_pixels);
+    let file = std::fs::File::open(path).with_context(|| format!("cannot open {shown}"))?;
+    let mut gz = flate2::read::MultiGzDecoder::new(std::io::BufReader::new(file));
+    let inflate_error = |e: std::io::Error| {
+        if e.kind() == std::io::ErrorKind::UnexpectedEof || e.to_string().contains("incomplete") {
+            error!(
+                Input,
+                "cannot decode {shown}: the compressed data end early (truncated file?)"
+            )
+        } else {
+            error!(
+                Input,
+                "cannot decode {shown}: not a readable gzip file ({e}; a FITS file named .gz \
+                 must be gzip-compressed)"
+            )
+        }
+    };
+    // Headers of up to a thousand cards or so (a plate's); the data follow.
+    const GZ_HEAD_BYTES: usize = 1 << 20;
+    let mut bytes = Vec::with_capacity(GZ_HEAD_BYTES);
+    gz.by_ref()
+        .take(GZ_HEAD_BYTES as u64)
+        .read_to_end(&mut bytes)
+        .map_err(inflate_error)?;
+    let end = crate::io::fits::image_end(&bytes, max_pixels)
+        .with_context(|| format!("cannot decode {shown}"))?;
+    if end > MAX_ALLOC {
+        fail!(
+            Input,
+            "cannot decode {shown}: the FITS data are larger than gpustar reads (2 GiB)"
+        );
+    }
+    let more = end.saturating_sub(bytes.len() as u64);
+    bytes.try_reserve_exact(more as usize).map_err(|_| {
+        error!(
+            Input,
+            "cannot decode {shown}: not enough memory for its data"
+        )
+    })?;
+    gz.take(more)
+        .read_to_end(&mut bytes)
+        .map_err(inflate_error)?;
+    let f = crate::io::fits::decode_fits(&bytes, max_pixels)
+        .with_context(|| format!("cannot decode {shown}"))?;
     Ok((
         Frame {
             width: f.width,

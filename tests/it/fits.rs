@@ -222,3 +222,109 @@ fn frames_solve_from_the_pixel_scale_their_header_states() {
     );
     assert!(records[2].get("pixel_scale").is_none());
 }
+
+/// Gzipped FITS (issue 47): `x.fits.gz` gives the record `x.fits` gives, field for field but
+/// the file's name; a stream cut short, a gzip that is not FITS and a FITS file named .gz that
+/// is not gzipped are error records.
+#[test]
+fn gzipped_fits_frames_give_the_records_of_the_uncompressed_ones() {
+    use std::io::Write;
+    let tmp = tempfile::tempdir().unwrap();
+    let plain = tmp.path().join("plain");
+    common::simulate(
+        &plain,
+        &[
+            "-n",
+            "3",
+            "--fov-deg",
+            "12",
+            "--size",
+            "400x300",
+            "--hint-offset-deg",
+            "0.5",
+        ],
+    );
+    let gzipped = tmp.path().join("gz");
+    std::fs::create_dir(&gzipped).unwrap();
+    let gzip = |bytes: &[u8]| {
+        let mut e = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+        e.write_all(bytes).unwrap();
+        e.finish().unwrap()
+    };
+    let mut names = Vec::new();
+    for e in std::fs::read_dir(&plain).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "fits") {
+            let name = p.file_name().unwrap().to_str().unwrap().to_string();
+            std::fs::write(
+                gzipped.join(format!("{name}.gz")),
+                gzip(&std::fs::read(&p).unwrap()),
+            )
+            .unwrap();
+            names.push(name);
+        }
+    }
+    assert_eq!(names.len(), 3);
+    let records = |dir: &Path| {
+        let mut c = common::gpustar();
+        c.arg("batch")
+            .arg(dir)
+            .args(["--fov-deg", "12", "--backend", "cpu", "-q"]);
+        common::run_records(&mut c)
+            .into_iter()
+            .map(|mut r| {
+                let o = r.as_object_mut().unwrap();
+                o.remove("timing_ms");
+                let file = o.remove("file").unwrap();
+                (file.as_str().unwrap().to_string(), r)
+            })
+            .collect::<Vec<_>>()
+    };
+    let (a, b) = (records(&plain), records(&gzipped));
+    assert_eq!(a.len(), 3);
+    assert!(a.iter().all(|(_, r)| r["status"] == "solved"), "{a:?}");
+    for ((fa, ra), (fb, rb)) in a.iter().zip(&b) {
+        assert_eq!(format!("{fa}.gz"), *fb);
+        assert_eq!(ra, rb, "{fa}");
+    }
+    // Bad ones: each an error record naming what is wrong.
+    let bad = tmp.path().join("bad");
+    std::fs::create_dir(&bad).unwrap();
+    let whole = std::fs::read(plain.join(&names[0])).unwrap();
+    let packed = gzip(&whole);
+    std::fs::write(bad.join("cut.fits.gz"), &packed[..packed.len() / 2]).unwrap();
+    std::fs::write(bad.join("text.fits.gz"), gzip(b"not a FITS file at all")).unwrap();
+    std::fs::write(bad.join("plain.fits.gz"), &whole).unwrap();
+    let out = common::gpustar()
+        .arg("batch")
+        .arg(&bad)
+        .args(["--fov-deg", "12", "-q"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", common::stderr(&out));
+    let errors: Vec<String> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .map(|r| {
+            format!(
+                "{}: {}",
+                r["file"].as_str().unwrap(),
+                r["error"].as_str().unwrap()
+            )
+        })
+        .collect();
+    assert_eq!(errors.len(), 3, "{errors:?}");
+    assert!(
+        errors[0].starts_with("cut.fits.gz") && errors[0].contains("truncated"),
+        "{errors:?}"
+    );
+    assert!(
+        errors[1].starts_with("plain.fits.gz") && errors[1].contains("gzip"),
+        "{errors:?}"
+    );
+    assert!(
+        errors[2].starts_with("text.fits.gz") && errors[2].contains("not a FITS file"),
+        "{errors:?}"
+    );
+}
