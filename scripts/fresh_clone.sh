@@ -41,7 +41,10 @@ print(s[:s.index("```")])
 PY
 mkdir -p "$B/example" && (cd "$B/example" && step example "$B/venv/bin/python $B/example.py")
 echo "== disk"
-du -sh target target/debug target/debug/incremental target/release target/gpustar-cache python/target 2>/dev/null
+# One at a time: du counts a folder once, so a folder listed after its parent would be skipped.
+for d in target target/debug target/debug/incremental target/release target/gpustar-cache python/target; do
+  [ -e "$d" ] && du -sh "$d"
+done
 echo "== outside the clone: HOME ($(du -sh "$B/home" | cut -f1)), TMPDIR ($(du -sh "$B/tmp" | cut -f1))"
 (cd "$B/home" && find . -mindepth 1 -maxdepth 3)
 ls "$B/tmp"

@@ -16,7 +16,7 @@ pub enum Format {
     Csv,
 }
 
-pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1,streaks,sequence_mode,particles";
+pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1,streaks,sequence_mode,particles,epoch,warnings,hint,sigma_boresight_arcsec,sigma_roll_arcsec,mirrored,pixel_scale_arcsec,pixel_scale_source";
 
 /// Held while records are handed to a file: a process that must end before its run does
 /// (a stop request that frames in flight do not heed) takes it first, so that it never ends
@@ -79,7 +79,14 @@ fn csv_field(s: &str) -> String {
 }
 
 pub(crate) fn csv_row(r: &Record) -> String {
-    let num = |v: Option<f64>| v.map(|x| x.to_string()).unwrap_or_default();
+    // As the JSON record writes numbers: the shortest text that reads back to the value, with
+    // an exponent where it is shorter (a false-match probability of 1e-70, not 70 zeros).
+    let num = |v: Option<f64>| {
+        v.filter(|x| x.is_finite())
+            .map(|x| serde_json::to_string(&x).expect("finite numbers serialise"))
+            .unwrap_or_default()
+    };
+    let json = |v: Option<String>| csv_field(&v.unwrap_or_default());
     let int = |v: Option<usize>| v.map(|x| x.to_string()).unwrap_or_default();
     let q = r.quaternion.map(|q| q.map(Some)).unwrap_or([None; 4]);
     let status = match r.status {
@@ -125,6 +132,22 @@ pub(crate) fn csv_row(r: &Record) -> String {
                 .map(|p| serde_json::to_string(p).expect("particles serialise"))
                 .unwrap_or_default(),
         ),
+        num(r.epoch),
+        // The warnings and the hint as their JSON (empty when none).
+        json(
+            (!r.warnings.is_empty())
+                .then(|| serde_json::to_string(&r.warnings).expect("warnings serialise")),
+        ),
+        json(
+            r.hint
+                .as_ref()
+                .map(|h| serde_json::to_string(h).expect("hint serialises")),
+        ),
+        num(r.attitude_sigma_arcsec.as_ref().map(|a| a.boresight)),
+        num(r.attitude_sigma_arcsec.as_ref().map(|a| a.roll)),
+        r.mirrored.map(|m| m.to_string()).unwrap_or_default(),
+        num(r.pixel_scale.as_ref().map(|p| p.arcsec_per_px)),
+        csv_field(r.pixel_scale.as_ref().map_or("", |p| p.source.as_str())),
     ]
     .join(",")
 }

@@ -234,3 +234,63 @@ fn a_reader_that_stops_early_ends_info_and_evaluate_quietly() {
         );
     }
 }
+
+/// `--format csv` carries what the JSON record says (issue 47): numbers as JSON writes them,
+/// so a false-match probability of 1e-100 is `1e-100`, not a hundred zeros, and reads back to
+/// the same value; the epoch, the attitude's 1σ and the parity are columns.
+#[test]
+fn csv_rows_carry_the_json_records_numbers() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("sim");
+    common::simulate_small(&dir, 3);
+    let run = |format: &str| {
+        let out = run_ok(&[
+            "batch",
+            dir.to_str().unwrap(),
+            "--fov-deg",
+            "18",
+            "--format",
+            format,
+            "-q",
+        ]);
+        String::from_utf8(out.stdout).unwrap()
+    };
+    // serde_json's reader rounds some numbers one unit in the last place off (without its
+    // float_roundtrip feature): compared to that, not to the bit.
+    let same = |a: f64, b: f64| (a - b).abs() <= 2.0 * f64::EPSILON * a.abs().max(b.abs());
+    let json: Vec<Value> = run("jsonl")
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let csv = run("csv");
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert_eq!(rows.len(), json.len());
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    for (row, r) in rows.iter().zip(&json) {
+        assert_eq!(row.len(), header.len(), "{row:?}");
+        assert_eq!(r["status"], "solved", "{r}");
+        let p = &row[col("false_match_prob")];
+        assert!(p.contains('e') && p.len() < 30, "{p}");
+        assert!(
+            same(p.parse().unwrap(), r["false_match_prob"].as_f64().unwrap()),
+            "{p}"
+        );
+        for (name, value) in [
+            ("epoch", &r["epoch"]),
+            (
+                "sigma_boresight_arcsec",
+                &r["attitude_sigma_arcsec"]["boresight"],
+            ),
+            ("sigma_roll_arcsec", &r["attitude_sigma_arcsec"]["roll"]),
+            ("ra_deg", &r["ra_deg"]),
+        ] {
+            let v = row[col(name)].parse::<f64>().unwrap();
+            assert!(same(v, value.as_f64().unwrap()), "{name}: {v} {value}");
+        }
+        assert_eq!(row[col("mirrored")], r["mirrored"].to_string());
+    }
+}
