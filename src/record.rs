@@ -303,6 +303,43 @@ pub struct ParticleRecord {
 }
 
 impl Record {
+    /// The names of a record's fields, as JSON writes them (its whole schema's names, present
+    /// or not in a given record): read from the `Deserialize` impl, so never out of date.
+    pub fn field_names() -> &'static [&'static str] {
+        use serde::de::{self, Visitor};
+        /// A deserializer that only notes the field list serde asks a struct for.
+        struct Fields<'a>(&'a mut &'static [&'static str]);
+        impl<'de> de::Deserializer<'de> for Fields<'_> {
+            type Error = de::value::Error;
+            fn deserialize_any<V: Visitor<'de>>(
+                self,
+                _: V,
+            ) -> std::result::Result<V::Value, Self::Error> {
+                Err(de::Error::custom("only the field names are read"))
+            }
+            fn deserialize_struct<V: Visitor<'de>>(
+                self,
+                _: &'static str,
+                fields: &'static [&'static str],
+                _: V,
+            ) -> std::result::Result<V::Value, Self::Error> {
+                *self.0 = fields;
+                Err(de::Error::custom("only the field names are read"))
+            }
+            serde::forward_to_deserialize_any! {
+                bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes
+                byte_buf option unit unit_struct newtype_struct seq tuple tuple_struct map enum
+                identifier ignored_any
+            }
+        }
+        static NAMES: std::sync::OnceLock<&'static [&'static str]> = std::sync::OnceLock::new();
+        NAMES.get_or_init(|| {
+            let mut names: &'static [&'static str] = &[];
+            let _ = Record::deserialize(Fields(&mut names));
+            names
+        })
+    }
+
     pub fn empty(file: &str, backend: &str) -> Record {
         Record {
             file: file.to_string(),
@@ -378,4 +415,42 @@ pub fn read_jsonl<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Re
                 .with_context(|| format!("{}: line {}: not a {what}", path.display(), n + 1))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn field_names_are_every_field_a_record_can_write() {
+        let names = Record::field_names();
+        assert!(names.len() > 30, "{names:?}");
+        let mut r = Record::error("f", "e".into(), "cpu");
+        r.hint = Some(HintRecord {
+            ra_deg: 1.0,
+            dec_deg: 2.0,
+            radius_deg: 1.0,
+            source: "--hint".into(),
+            offset_deg: None,
+        });
+        r.pixel_scale = Some(PixelScaleRecord {
+            arcsec_per_px: 1.0,
+            pixel_aspect: 1.0,
+            source: "SECPIX".into(),
+        });
+        let written = serde_json::to_value(&r).unwrap();
+        for key in written.as_object().unwrap().keys() {
+            assert!(names.contains(&key.as_str()), "{key} not in {names:?}");
+        }
+        for key in [
+            "file",
+            "status",
+            "ra_deg",
+            "matches",
+            "false_match_prob",
+            "pixel_scale",
+        ] {
+            assert!(names.contains(&key), "{key}");
+        }
+    }
 }

@@ -56,6 +56,8 @@ from ._gpustar import (  # noqa: E402
     __version__,
 )
 
+_RECORD_FIELDS = frozenset(_gpustar.RECORD_FIELDS)
+
 __all__ = [
     "Solver",
     "Result",
@@ -122,8 +124,8 @@ class Result:
     ``quaternion`` ([w, x, y, z], w >= 0) and ``rotation_matrix`` (3x3, ICRS into the camera
     frame) are numpy arrays; ``matches`` is a :class:`Matches` of arrays. Every other record
     field (``ra_deg``, ``dec_deg``, ``roll_deg``, ``fov_x_deg``, ``false_match_prob``,
-    ``rmse_arcsec``, ``streaks``, ``timing_ms``, ...) is the record's value; a field the
-    record does not have is None. :meth:`to_dict` gives the record exactly.
+    ``rmse_arcsec``, ``streaks``, ``timing_ms``, ...) is the record's value; a field this
+    record does not have is None, and a name that is no record field raises AttributeError. :meth:`to_dict` gives the record exactly.
     """
 
     __slots__ = ("_source", "_text", "_dict")
@@ -179,8 +181,9 @@ class Result:
         return Matches(self._field("matches") or [])
 
     def __getattr__(self, name: str) -> Any:
-        if name.startswith("_"):
-            raise AttributeError(name)
+        if name.startswith("_") or name not in _RECORD_FIELDS:
+            raise AttributeError(f"a gpustar record has no field {name!r} (its fields: "
+                                 f"{', '.join(sorted(_RECORD_FIELDS))})")
         return self._field(name)
 
     def to_dict(self) -> dict:

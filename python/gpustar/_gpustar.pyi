@@ -7,6 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 __version__: str
+RECORD_FIELDS: list[str]
 
 class Error(Exception): ...
 class InputError(Error): ...

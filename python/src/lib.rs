@@ -1405,5 +1405,8 @@ fn _gpustar(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // Every field a record can have, so that a misspelt attribute raises instead of reading
+    // as an absent field.
+    m.add("RECORD_FIELDS", gpustar::Record::field_names().to_vec())?;
     Ok(())
 }

@@ -453,3 +453,15 @@ def test_readme_quickstart_runs_as_written(tmp_path, monkeypatch, capsys):
     assert "8/8" in out, out
     records = [json.loads(line) for line in (tmp_path / "out.jsonl").read_text().splitlines()]
     assert [r["file"] for r in records] == ["frame.png"] and records[0]["status"] == "solved"
+
+
+def test_a_misspelt_field_raises_and_an_absent_one_is_none():
+    """Issue 47: `r.ra` raised nothing and read None; a record field the record lacks is None."""
+    image, _ = gpustar.simulate(1, fov_deg=FOV)[0]
+    r = gpustar.Solver(fov_deg=FOV, backend="cpu").solve(image)
+    assert r.solved and r.reason is None and r.error is None
+    with pytest.raises(AttributeError, match="no field 'ra'"):
+        r.ra
+    assert not hasattr(r, "ra_degrees")
+    assert {"ra_deg", "pixel_scale", "matches"} <= set(gpustar._gpustar.RECORD_FIELDS)
+    assert set(r.to_dict()) <= set(gpustar._gpustar.RECORD_FIELDS)
