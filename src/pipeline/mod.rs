@@ -332,12 +332,21 @@ impl Solvers {
         height: u32,
         scale: Option<&PixelScale>,
     ) -> SharedSolver {
-        let bits = scale.map_or((0, 0), |s| {
+        // Stated scales within 0.01 % of each other share a solver (the search around them
+        // covers far more): the CD matrices of an archive's solved frames differ in their last
+        // digits, and would otherwise build a table each.
+        let step = |x: f64| ((x.ln() / 1e-4).round() * 1e-4).exp();
+        let scale = scale.map(|s| PixelScale {
+            arcsec_per_px: step(s.arcsec_per_px),
+            pixel_aspect: step(s.pixel_aspect),
+            keywords: s.keywords,
+        });
+        let bits = scale.as_ref().map_or((0, 0), |s| {
             (s.arcsec_per_px.to_bits(), s.pixel_aspect.to_bits())
         });
         let mut map = self.map.lock().unwrap_or_else(|e| e.into_inner());
         map.entry((width, height, bits.0, bits.1))
-            .or_insert_with(|| Arc::new(self.build(width, height, scale)))
+            .or_insert_with(|| Arc::new(self.build(width, height, scale.as_ref())))
             .clone()
     }
 

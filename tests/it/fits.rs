@@ -328,3 +328,37 @@ fn gzipped_fits_frames_give_the_records_of_the_uncompressed_ones() {
         "{errors:?}"
     );
 }
+
+/// Frames whose headers state scales a hair apart (the CD matrices of an archive's solved
+/// frames differ in their last digits) share one solver; a scale 1 % off gets its own.
+#[test]
+fn header_scales_a_hair_apart_share_a_solver() {
+    use gpustar::pipeline::{CameraSource, Decoded, Solvers};
+    use std::sync::Arc;
+    let solvers = Solvers::new(
+        Catalog::builtin(),
+        gpustar::solve::Settings {
+            scale_range: Some((0.97, 1.03)),
+            ..Default::default()
+        },
+        CameraSource::Header,
+    );
+    let decoded = |secpix: f64| {
+        let frame = gpustar::io::frame::Frame {
+            width: 320,
+            height: 240,
+            pixels: vec![0u16; 320 * 240].into(),
+            saturation: u16::MAX,
+        };
+        let keywords = [("SECPIX".to_string(), secpix.to_string())].into();
+        Decoded::in_memory("f", Ok((frame, Vec::new())), None, keywords)
+    };
+    let get = |secpix: f64| {
+        let d = decoded(secpix);
+        solvers.get_for(&d, d.frame.as_ref().unwrap())
+    };
+    let a = get(120.0);
+    assert!(a.as_ref().is_ok());
+    assert!(Arc::ptr_eq(&a, &get(120.0 * (1.0 + 1e-9))));
+    assert!(!Arc::ptr_eq(&a, &get(121.2)));
+}
