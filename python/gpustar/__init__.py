@@ -282,6 +282,13 @@ class Solver:
         """
         return Result(self._inner.solve(image, name, epoch, _header(time, header)))
 
+    def solve_file(self, path: PathLike) -> Result:
+        """Read and solve one image file (PNG, JPEG, TIFF, FITS, .fits.gz) as ``gpustar solve
+        FILE`` does: the same record, its ``file`` the path as given. A file that cannot be
+        read is a result with status "error", not an exception; a FITS header's date, station
+        and pixel scale are used as the command line uses them."""
+        return Result(self._inner.solve_file(os.fspath(path)))
+
     def solve_many(self, images: Iterable[np.ndarray], *, names: Optional[_Seq[str]] = None,
                    epochs: Optional[_Seq[Optional[float]]] = None, progress: Progress = None,
                    batch_size: Optional[int] = None) -> Iterator[Result]:

@@ -691,6 +691,14 @@ impl Solver {
         Ok(RecordHandle::new(record))
     }
 
+    /// Read and solve one image file as `gpustar solve FILE` does (its record's `file` is the
+    /// path as given; a file that cannot be read gets an error record, not an exception).
+    fn solve_file(&self, py: Python<'_>, path: PathBuf) -> PyResult<RecordHandle> {
+        let name = path.display().to_string();
+        let record = py.detach(|| self.solve_one(self.solvers.decode(&path, &name)));
+        Ok(RecordHandle::new(record))
+    }
+
     /// Start solving frames streamed in with `ManyRun.put` (worker threads on the CPU, GPU
     /// batches of `batch_size`), as `batch` streams files.
     #[pyo3(signature = (batch_size=None))]

@@ -465,3 +465,30 @@ def test_a_misspelt_field_raises_and_an_absent_one_is_none():
     assert not hasattr(r, "ra_degrees")
     assert {"ra_deg", "pixel_scale", "matches"} <= set(gpustar._gpustar.RECORD_FIELDS)
     assert set(r.to_dict()) <= set(gpustar._gpustar.RECORD_FIELDS)
+
+
+def test_solve_file_gives_the_record_gpustar_solve_gives(tmp_path):
+    """Issue 47: a file solved from Python is `gpustar solve FILE`'s record (less timing), for
+    a PNG and a gzipped FITS; a file that cannot be read is an error result."""
+    from PIL import Image
+
+    image, _ = gpustar.simulate(1, fov_deg=FOV, seed=4)[0]
+    png = tmp_path / "frame.png"
+    Image.fromarray(image).save(png)
+    fits = tmp_path / "frame.fits"
+    write_fits(fits, image.astype(np.uint16))
+    import gzip
+    gz = tmp_path / "frame.fits.gz"
+    gz.write_bytes(gzip.compress(fits.read_bytes()))
+    solver = gpustar.Solver(fov_deg=FOV, backend="cpu")
+    for path in (png, gz):
+        got = solver.solve_file(path).to_dict()
+        p = subprocess.run([cli(), "solve", str(path), "--fov-deg", str(FOV), "--backend", "cpu"],
+                           capture_output=True, text=True)
+        assert p.returncode == 0, p.stderr
+        want = json.loads(p.stdout)
+        assert got["status"] == "solved" and got["file"] == str(path)
+        got.pop("timing_ms"), want.pop("timing_ms")
+        assert got == want, path
+    missing = solver.solve_file(tmp_path / "absent.png")
+    assert missing.status == "error" and "absent.png" in missing.error
