@@ -245,18 +245,11 @@ pub(crate) fn parse_pixel_aspect(s: &str) -> std::result::Result<f64, String> {
     }
 }
 
-/// `--scale-arcsec`: arcseconds per pixel, one value or LOW..HIGH, above 0 and at most 36000
-/// (10° a pixel).
-pub(crate) fn parse_scale(s: &str) -> std::result::Result<FovArg, String> {
-    let num = |v: &str| -> std::result::Result<f64, String> {
-        match v.trim().parse::<f64>() {
-            Ok(x) if x > 0.0 && x <= 36_000.0 => Ok(x),
-            Ok(x) => Err(format!(
-                "pixel scale must be above 0 and at most 36000 arcsec, got {x}"
-            )),
-            Err(_) => Err(format!("bad pixel scale {v:?}")),
-        }
-    };
+/// One value or a range `LOW..HIGH` (LOW < HIGH), each read by `num`.
+fn value_or_range(
+    s: &str,
+    num: impl Fn(&str) -> std::result::Result<f64, String>,
+) -> std::result::Result<FovArg, String> {
     match s.split_once("..") {
         Some((a, b)) => {
             let (a, b) = (num(a)?, num(b)?);
@@ -269,30 +262,26 @@ pub(crate) fn parse_scale(s: &str) -> std::result::Result<FovArg, String> {
     }
 }
 
+/// `--scale-arcsec`: arcseconds per pixel, one value or LOW..HIGH, above 0 and at most 36000
+/// (10° a pixel).
+pub(crate) fn parse_scale(s: &str) -> std::result::Result<FovArg, String> {
+    value_or_range(s, |v| match v.trim().parse::<f64>() {
+        Ok(x) if x > 0.0 && x <= 36_000.0 => Ok(x),
+        Ok(x) => Err(format!(
+            "pixel scale must be above 0 and at most 36000 arcsec, got {x}"
+        )),
+        Err(_) => Err(format!("bad pixel scale {v:?}")),
+    })
+}
+
 pub(crate) fn parse_fov(s: &str) -> std::result::Result<FovArg, String> {
-    let num = |v: &str| -> std::result::Result<f64, String> {
-        let x: f64 = v
-            .trim()
-            .parse()
-            .map_err(|_| format!("bad field of view {v:?}"))?;
-        if x > 0.0 && x < 170.0 {
-            Ok(x)
-        } else {
-            Err(format!(
-                "field of view must be between 0 and 170 degrees, got {x}"
-            ))
-        }
-    };
-    match s.split_once("..") {
-        Some((a, b)) => {
-            let (a, b) = (num(a)?, num(b)?);
-            if a >= b {
-                return Err(format!("expected LOW..HIGH, got {s:?}"));
-            }
-            Ok(FovArg::Range(a, b))
-        }
-        None => Ok(FovArg::Exact(num(s)?)),
-    }
+    value_or_range(s, |v| match v.trim().parse::<f64>() {
+        Ok(x) if x > 0.0 && x < 170.0 => Ok(x),
+        Ok(x) => Err(format!(
+            "field of view must be between 0 and 170 degrees, got {x}"
+        )),
+        Err(_) => Err(format!("bad field of view {v:?}")),
+    })
 }
 
 #[derive(Args, Debug, Clone)]

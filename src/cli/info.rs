@@ -4,7 +4,6 @@ use super::args::*;
 use super::console::*;
 use super::solve::*;
 use anyhow::{Context, Result, bail};
-use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::pipeline::{Backend, BackendChoice, BackendNote, CameraSource};
 use gpustar::solve::{PassKind, Settings, Solver, scaled};
@@ -85,8 +84,7 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
         sized @ (CameraSource::Fov { .. } | CameraSource::Scale { .. }) => {
             let (w, h) =
                 size.context("--fov-deg and --scale-arcsec need --size WIDTHxHEIGHT here")?;
-            let (fov_x_deg, pixel_aspect) = sized.fov_for(w).expect("sized");
-            Camera::from_fov(w, h, fov_x_deg)?.with_pixel_aspect(pixel_aspect)
+            sized.camera_for(w, h, None).map_err(anyhow::Error::msg)?
         }
     };
     let s = Settings {

@@ -252,6 +252,30 @@ fn read_camera_fits(path: &Path, file_len: u64, max_pixels: u64) -> Option<FitsF
 /// How much of a FITS file is read for its header before its data: a few header blocks.
 const HEAD_BYTES: usize = 64 << 10;
 
+/// The most pixels a FITS image may have: `max_pixels`, within what gpustar allocates.
+fn fits_max_pixels(max_pixels: u64) -> u64 {
+    (MAX_SIDE as u64 * MAX_SIDE as u64)
+        .min(MAX_ALLOC / 2)
+        .min(max_pixels)
+}
+
+/// A decoded FITS image as a frame and what its header says.
+fn fits_frame(f: FitsFrame) -> (Frame<'static>, FileInfo) {
+    (
+        Frame {
+            width: f.width,
+            height: f.height,
+            pixels: f.pixels.into(),
+            saturation: f.saturation,
+        },
+        FileInfo {
+            epoch: f.epoch,
+            keywords: f.keywords,
+            warnings: f.warnings,
+        },
+    )
+}
+
 /// A FITS file's primary image (or first image extension), with its DATE-OBS.
 fn read_fits(
     path: &Path,
@@ -265,9 +289,7 @@ fn read_fits(
             "cannot decode {shown}: the FITS file is larger than gpustar reads (2 GiB)"
         );
     }
-    let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64)
-        .min(MAX_ALLOC / 2)
-        .min(max_pixels);
+    let max_pixels = fits_max_pixels(max_pixels);
     let f = match read_camera_fits(path, file_len, max_pixels) {
         Some(f) => f,
         None => {
@@ -276,19 +298,7 @@ fn read_fits(
                 .with_context(|| format!("cannot decode {shown}"))?
         }
     };
-    Ok((
-        Frame {
-            width: f.width,
-            height: f.height,
-            pixels: f.pixels.into(),
-            saturation: f.saturation,
-        },
-        FileInfo {
-            epoch: f.epoch,
-            keywords: f.keywords,
-            warnings: f.warnings,
-        },
-    ))
+    Ok(fits_frame(f))
 }
 
 /// A gzipped FITS file (`x.fits.gz`), decompressed in memory: its headers first, then no more
@@ -300,9 +310,7 @@ fn read_gzipped_fits(
     max_pixels: u64,
 ) -> Result<(Frame<'static>, FileInfo)> {
     use std::io::Read;
-    let max_pixels = (MAX_SIDE as u64 * MAX_SIDE as u64)
-        .min(MAX_ALLOC / 2)
-        .min(max_pixels);
+    let max_pixels = fits_max_pixels(max_pixels);
     let file = std::fs::File::open(path).with_context(|| format!("cannot open {shown}"))?;
     let mut gz = flate2::read::MultiGzDecoder::new(std::io::BufReader::new(file));
     let inflate_error = |e: std::io::Error| {
@@ -319,7 +327,7 @@ fn read_gzipped_fits(
             )
         }
     };
-    // Headers of up to a thousand cards or so (a plate's); the data follow.
+    // Headers of up to 13,000 cards (a plate's hold a few hundred); the data follow.
     const GZ_HEAD_BYTES: usize = 1 << 20;
     let mut bytes = Vec::with_capacity(GZ_HEAD_BYTES);
     gz.by_ref()
@@ -346,19 +354,7 @@ fn read_gzipped_fits(
         .map_err(inflate_error)?;
     let f = crate::io::fits::decode_fits(&bytes, max_pixels)
         .with_context(|| format!("cannot decode {shown}"))?;
-    Ok((
-        Frame {
-            width: f.width,
-            height: f.height,
-            pixels: f.pixels.into(),
-            saturation: f.saturation,
-        },
-        FileInfo {
-            epoch: f.epoch,
-            keywords: f.keywords,
-            warnings: f.warnings,
-        },
-    ))
+    Ok(fits_frame(f))
 }
 
 /// Grey PNGs (the usual star-tracker frame) straight through the png crate, a fifth faster

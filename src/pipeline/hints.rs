@@ -45,6 +45,7 @@ impl Solvers {
         let hint = self.hint_of(d, frame)?;
         let scale = self.header_scale(d);
         let camera = self
+            .camera
             .camera_for(frame.width, frame.height, scale.as_ref())
             .ok()?;
         match regional_solver(&self.catalog, &camera, &self.settings, &hint) {

@@ -3,10 +3,10 @@
 //! that owns the GPU context, `gpu_runner.rs`). `batch::run` streams a directory through them.
 //! Both paths end in the same `solve_with`/`Solvers::record`, so they build the same records.
 
+mod camera_source;
 mod gpu_runner;
 mod hints;
 
-use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::error::Result;
 use crate::gpu::Gpu;
@@ -18,6 +18,7 @@ use crate::record::{Record, Timing};
 use crate::solve::detect;
 use crate::solve::{Outcome, Settings, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
+pub use camera_source::CameraSource;
 pub use gpu_runner::*;
 use hints::hint_record;
 pub(crate) use hints::{Global, identify_hinted};
@@ -25,59 +26,6 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
-
-/// Where the camera model comes from.
-#[derive(Clone, Debug)]
-pub enum CameraSource {
-    /// A camera file: frames of another size are errors.
-    Fixed(Camera),
-    /// `--fov-deg` (and `--pixel-aspect`): centred, no distortion, sized by each frame.
-    Fov { fov_x_deg: f64, pixel_aspect: f64 },
-    /// `--scale-arcsec`: as `Fov`, from the angle one pixel at the centre subtends (the field
-    /// then grows with each frame's width), as solve-field's `arcsecperpix` and ASTAP's scale.
-    Scale {
-        arcsec_per_px: f64,
-        pixel_aspect: f64,
-    },
-    /// Neither a camera nor a scale given: each frame's camera from the pixel scale its header
-    /// states (`io::fits::scale`: CD, CDELT, PIXSCALE/SECPIX, FOCALLEN with XPIXSZ), searched
-    /// within `Settings::scale_range`; a frame whose header states none gets an error record.
-    /// These frames are solved by the CPU twins (the GPU keeps its tables by frame size).
-    Header,
-    /// None (`--streaks --astrometry header` alone): stars are not identified (records are
-    /// `unsolved`, reason `no_camera`); streaks are reduced through each header's WCS.
-    None,
-}
-
-impl CameraSource {
-    /// `--fov-deg` alone: square pixels.
-    pub fn fov(fov_x_deg: f64) -> CameraSource {
-        CameraSource::Fov {
-            fov_x_deg,
-            pixel_aspect: 1.0,
-        }
-    }
-
-    /// For the sources sized by each frame: the horizontal field of view (degrees) and the
-    /// pixel aspect of a frame `width` pixels wide. A pixel scale s gives the pinhole's focal
-    /// length 1 / tan(s) pixels, so the field is 2 atan(width / 2 · tan(s)).
-    pub fn fov_for(&self, width: u32) -> Option<(f64, f64)> {
-        match *self {
-            CameraSource::Fov {
-                fov_x_deg,
-                pixel_aspect,
-            } => Some((fov_x_deg, pixel_aspect)),
-            CameraSource::Scale {
-                arcsec_per_px,
-                pixel_aspect,
-            } => {
-                let half = width as f64 / 2.0 * (arcsec_per_px / 3600.0).to_radians().tan();
-                Some((2.0 * half.atan().to_degrees(), pixel_aspect))
-            }
-            CameraSource::Fixed(_) | CameraSource::Header | CameraSource::None => None,
-        }
-    }
-}
 
 /// Which backend runs the kernels, as asked on the command line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -332,15 +280,7 @@ impl Solvers {
         height: u32,
         scale: Option<&PixelScale>,
     ) -> SharedSolver {
-        // Stated scales within 0.01 % of each other share a solver (the search around them
-        // covers far more): the CD matrices of an archive's solved frames differ in their last
-        // digits, and would otherwise build a table each.
-        let step = |x: f64| ((x.ln() / 1e-4).round() * 1e-4).exp();
-        let scale = scale.map(|s| PixelScale {
-            arcsec_per_px: step(s.arcsec_per_px),
-            pixel_aspect: step(s.pixel_aspect),
-            keywords: s.keywords,
-        });
+        let scale = scale.map(CameraSource::shared_scale);
         let bits = scale.as_ref().map_or((0, 0), |s| {
             (s.arcsec_per_px.to_bits(), s.pixel_aspect.to_bits())
         });
@@ -352,9 +292,7 @@ impl Solvers {
 
     /// With [`CameraSource::Header`]: the pixel scale the frame's header states, if any.
     pub fn header_scale(&self, d: &Decoded) -> Option<PixelScale> {
-        matches!(self.camera, CameraSource::Header)
-            .then(|| crate::io::fits::scale::pixel_scale(&d.keywords))
-            .flatten()
+        self.camera.header_scale(&d.keywords)
     }
 
     fn build(
@@ -363,61 +301,8 @@ impl Solvers {
         height: u32,
         scale: Option<&PixelScale>,
     ) -> std::result::Result<Solver, String> {
-        let camera = self.camera_for(width, height, scale)?;
+        let camera = self.camera.camera_for(width, height, scale)?;
         Solver::new(&self.catalog, camera, self.settings).map_err(|e| format!("{e:#}"))
-    }
-
-    /// The camera of frames of this size (and header scale), or why there is none.
-    pub(crate) fn camera_for(
-        &self,
-        width: u32,
-        height: u32,
-        scale: Option<&PixelScale>,
-    ) -> std::result::Result<Camera, String> {
-        let from_header;
-        let source = match (&self.camera, scale) {
-            (CameraSource::Header, Some(s)) => {
-                from_header = CameraSource::Scale {
-                    arcsec_per_px: s.arcsec_per_px,
-                    pixel_aspect: s.pixel_aspect,
-                };
-                &from_header
-            }
-            (CameraSource::Header, None) => {
-                return Err(
-                    "the header states no pixel scale (a CD or CDELT WCS, PIXSCALE, \
-                            SECPIX, or FOCALLEN with XPIXSZ): give --camera, --fov-deg or \
-                            --scale-arcsec"
-                        .into(),
-                );
-            }
-            (source, _) => source,
-        };
-        Ok(match source {
-            CameraSource::Fixed(c) => {
-                if (c.width, c.height) != (width, height) {
-                    return Err(crate::io::frame::wrong_size(
-                        width,
-                        height,
-                        (c.width, c.height),
-                    ));
-                }
-                c.clone()
-            }
-            CameraSource::None | CameraSource::Header => return Err("no camera given".into()),
-            CameraSource::Fov { .. } | CameraSource::Scale { .. } => {
-                if width < MIN_SIDE || height < MIN_SIDE {
-                    return Err(format!(
-                        "image is {width}x{height}: too small to hold a star field (gpustar \
-                         needs at least {MIN_SIDE} pixels a side)"
-                    ));
-                }
-                let (fov_x_deg, pixel_aspect) = source.fov_for(width).expect("sized");
-                Camera::from_fov(width, height, fov_x_deg)
-                    .map_err(|e| format!("{e:#}"))?
-                    .with_pixel_aspect(pixel_aspect)
-            }
-        })
     }
 
     /// The pixel stages alone on the CPU (`--sequence`), keeping the brightest `max_stars`.
