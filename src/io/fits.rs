@@ -34,8 +34,10 @@ use std::collections::BTreeMap;
 
 mod cards;
 mod pixels;
+mod rice;
 pub mod scale;
 mod scan;
+mod tiled;
 
 pub use cards::*;
 use pixels::*;
@@ -65,10 +67,10 @@ pub struct FitsFrame {
 // gpustar's one writer of FITS header cards (frames, WCS headers, simulated sets): 80 columns,
 // values in fixed format (FITS 4.0, 4.2), keyword names at most 8 characters.
 
-/// Is this (lower-case) file extension a FITS file? Tile-compressed `.fz` files are not:
-/// gpustar does not decompress them.
+/// Is this (lower-case) file extension a FITS file? Tile-compressed `.fz` files are FITS too
+/// (`fits/tiled.rs` expands them).
 pub fn is_fits_extension(ext_lowercase: &str) -> bool {
-    matches!(ext_lowercase, "fits" | "fit" | "fts")
+    matches!(ext_lowercase, "fits" | "fit" | "fts" | "fz")
 }
 
 const BLOCK: usize = 2880;
@@ -87,11 +89,17 @@ pub fn image_end(head: &[u8], max_pixels: u64) -> Result<u64> {
 /// extension is decoded instead. Errors say what is wrong in words a person can act on; they
 /// do not name the file, which the caller adds.
 pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
+    if let Some((plain, note)) = expand_tiled(bytes, max_pixels)? {
+        let mut f = decode_fits(&plain, max_pixels)?;
+        f.warnings.extend(note);
+        return Ok(f);
+    }
     let Layout {
         image,
         headers,
         width: w,
         height: h,
+        cube,
     } = layout(bytes, max_pixels)?;
     let Some(header) = headers.last() else {
         fail!(Input, "no FITS header");
@@ -110,6 +118,7 @@ pub fn decode_fits(bytes: &[u8], max_pixels: u64) -> Result<FitsFrame> {
 
     let (scaling, blank) = scaling_and_blank(header, image.bitpix)?;
     let (epoch, mut warnings) = epoch(headers.iter().rev());
+    warnings.extend(cube);
     let with_warning = |(p, s, w): (Vec<u16>, u16, Option<String>), all: &mut Vec<String>| {
         all.extend(w);
         (p, s)
@@ -149,6 +158,25 @@ struct Layout {
     headers: Vec<Header<Image>>,
     width: u64,
     height: u64,
+    /// Said of a cube, whose first plane is read.
+    cube: Option<String>,
+}
+
+/// The image of a file whose image is tile-compressed (fpack's `.fz`), expanded into a plain
+/// FITS file, with what the reading should say; None for other files.
+fn expand_tiled(bytes: &[u8], max_pixels: u64) -> Result<Option<(Vec<u8>, Option<String>)>> {
+    if !bytes.starts_with(b"SIMPLE  =") {
+        return Ok(None);
+    }
+    let primary = scan_header(bytes, 0, "FITS primary HDU".to_string())?;
+    if !primary.naxis.is_empty() {
+        return Ok(None);
+    }
+    let ext = find_image_extension(bytes, &primary)?;
+    if !ext.zimage {
+        return Ok(None);
+    }
+    tiled::expand(bytes, &primary, &ext, max_pixels).map(Some)
 }
 
 /// The [`Layout`] of a FITS file of which `bytes` hold at least the headers: what every
@@ -176,11 +204,19 @@ fn layout(bytes: &[u8], max_pixels: u64) -> Result<Layout> {
     } else {
         None
     };
+    if let Some(e) = ext.as_ref().filter(|e| e.zimage) {
+        fail!(
+            Input,
+            "{} holds a tile-compressed image, which is read from .fz files, not from inside \
+             a gzip file",
+            e.what
+        );
+    }
     let headers = parse_headers(bytes, &primary, ext.as_ref())?;
     let image = ext.unwrap_or(primary);
 
     let dims = &image.naxis;
-    if dims.len() < 2 || dims[2..].iter().any(|&d| d != 1) {
+    if dims.len() < 2 {
         let shape = if dims.is_empty() {
             "no data".to_string()
         } else {
@@ -197,6 +233,18 @@ fn layout(bytes: &[u8], max_pixels: u64) -> Result<Layout> {
         );
     }
     let (w, h) = (dims[0], dims[1]);
+    // A cube (stvid's four planes: mean, spread, maximum and its frame index): the first
+    // plane, stvid's mean, is the sky.
+    let cube = (dims[2..].iter().any(|&d| d != 1)).then(|| {
+        format!(
+            "{} is a cube ({}): its first plane was read",
+            image.what,
+            dims.iter()
+                .map(u64::to_string)
+                .collect::<Vec<_>>()
+                .join("×")
+        )
+    });
     if w == 0 || h == 0 {
         fail!(Input, "{} has an empty image ({w}×{h} pixels)", image.what);
     }
@@ -214,6 +262,7 @@ fn layout(bytes: &[u8], max_pixels: u64) -> Result<Layout> {
         headers,
         width: w,
         height: h,
+        cube,
     })
 }
 
@@ -254,6 +303,7 @@ pub fn read_camera_frame(
         headers,
         width: w,
         height: h,
+        cube,
     } = layout(head, max_pixels).ok()?;
     let count = w * h;
     let need = usize::try_from(count * 2).ok()?;
@@ -288,7 +338,8 @@ pub fn read_camera_frame(
         rest.read_exact(&mut bytes[filled..end]).ok()?;
         filled = end;
     }
-    let (epoch, warnings) = epoch(headers.iter().rev());
+    let (epoch, mut warnings) = epoch(headers.iter().rev());
+    warnings.extend(cube);
     let keywords = keywords(&headers);
     if super::bayer::mosaic(&keywords).is_some() {
         super::bayer::luminance(&mut pixels, w as usize, h as usize);

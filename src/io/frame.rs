@@ -32,7 +32,9 @@ pub struct FileInfo {
 }
 
 /// File extensions `batch` treats as images (lower case).
-pub const IMAGE_EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "tif", "tiff", "fits", "fit", "fts"];
+pub const IMAGE_EXTENSIONS: &[&str] = &[
+    "png", "jpg", "jpeg", "tif", "tiff", "fits", "fit", "fts", "fz",
+];
 
 /// Is this path an image by its extension? Gzipped FITS (`x.fits.gz`, `.fit.gz`, `.fts.gz`)
 /// is one too.
@@ -158,7 +160,7 @@ impl Frame<'static> {
         let fits_name = path
             .extension()
             .and_then(|e| e.to_str())
-            .is_some_and(|e| ["fits", "fit", "fts"].contains(&e.to_ascii_lowercase().as_str()));
+            .is_some_and(|e| crate::io::fits::is_fits_extension(&e.to_ascii_lowercase()));
         // The format from the extension, unless the first bytes say otherwise.
         let reader = ImageReader::open(path)
             .with_context(|| format!("cannot open {shown}"))?

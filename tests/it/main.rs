@@ -23,6 +23,7 @@ mod faults;
 mod fits;
 mod formats;
 mod frames;
+mod fz;
 mod gpu_pipeline;
 mod help;
 mod hint;

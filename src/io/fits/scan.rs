@@ -176,7 +176,8 @@ pub(crate) fn ascii(key: &[u8]) -> String {
     String::from_utf8_lossy(key).into_owned()
 }
 
-/// With an empty primary HDU, the first IMAGE extension; tables before it are skipped.
+/// With an empty primary HDU, the first IMAGE extension or tile-compressed image; other
+/// tables before it are skipped.
 pub(crate) fn find_image_extension(bytes: &[u8], primary: &Scan) -> Result<Scan> {
     let mut pos = primary.next_start(bytes.len())?;
     let mut index = 0;
@@ -185,12 +186,9 @@ pub(crate) fn find_image_extension(bytes: &[u8], primary: &Scan) -> Result<Scan>
         index += 1;
         let scan = scan_header(bytes, pos, format!("FITS extension {index}"))?;
         match scan.xtension.as_deref() {
+            // A tile-compressed image (fpack) is an image too: `tiled` expands it.
             Some("IMAGE" | "IUEIMAGE") => return Ok(scan),
-            Some("BINTABLE") if scan.zimage => fail!(
-                Input,
-                "FITS extension {index} holds a tile-compressed image (fpack): compressed FITS is \
-                 not supported; decompress it first (e.g. funpack)"
-            ),
+            Some("BINTABLE") if scan.zimage => return Ok(scan),
             Some(_) => {}
             None => fail!(Input, "FITS extension {index}: the header lacks XTENSION"),
         }
