@@ -11,9 +11,9 @@ use std::path::Path;
 
 /// What a run reads and where its records go, for [`check_outputs`].
 pub struct RunFiles<'a> {
-    /// The directory the frames were listed from, and whether its subdirectories were too
-    /// (None for `solve`'s one frame).
-    pub dir: Option<(&'a Path, bool)>,
+    /// The directories the frames were listed from, and whether their subdirectories were
+    /// too (none for `solve`'s one frame).
+    pub dirs: Vec<(&'a Path, bool)>,
     pub inputs: &'a [Input],
     /// The other files read, with what they are: the catalog, camera, dark, TLEs.
     pub read: Vec<(&'a Path, &'static str)>,
@@ -28,7 +28,7 @@ pub struct RunFiles<'a> {
 /// be written; `products` learns which inputs' products keep their extension.
 pub fn check_outputs(f: &RunFiles, exports: &Exports, products: &mut Products) -> Result<()> {
     let mut claims = Claims::new();
-    if let Some((dir, recursive)) = f.dir {
+    for &(dir, recursive) in &f.dirs {
         claims.input_dir(dir, recursive);
     }
     for i in f.inputs {

@@ -76,8 +76,12 @@ pub enum Command {
     /// Solve every image in DIR (sorted by name); one record per file, in that order.
     #[command(after_help = MORE_OPTIONS, after_long_help = "")]
     Batch {
-        /// Directory of images (PNG, JPEG, TIFF, FITS).
-        dir: PathBuf,
+        /// Directories of images (PNG, JPEG, TIFF, FITS, .fits.gz, .fits.fz), image files,
+        /// @LIST (a file naming one image a line) or - (that list on standard input). One
+        /// directory alone names its frames relative to it; otherwise each is named by its
+        /// path as given.
+        #[arg(value_name = "DIR", required = true)]
+        dir: Vec<PathBuf>,
         #[command(flatten)]
         opts: SolveOpts,
         #[command(flatten)]
@@ -191,12 +195,16 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
     }
     match cli.command {
         Command::Batch { dir, opts, run } => {
-            let mut inputs = inputs::list(&dir, run.recursive)?;
+            let gathered = inputs::gather(&dir, run.recursive, &mut std::io::stdin().lock())?;
+            let mut inputs = gathered.inputs;
             // A batch never ends "0 files", exit 0, having read nothing.
             if inputs.is_empty() {
                 anyhow::bail!(
                     "{} holds no image files (PNG, JPEG, TIFF, FITS){}",
-                    dir.display(),
+                    dir.iter()
+                        .map(|d| d.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", "),
                     if run.recursive {
                         ""
                     } else {
@@ -214,7 +222,7 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
                     })
                 });
             }
-            run_solve(inputs, Some((&dir, run.recursive)), &opts, &run)
+            run_solve(inputs, Some(&gathered.dirs), &opts, &run)
         }
         Command::Solve { image, opts } => {
             let name = image.display().to_string();

@@ -107,11 +107,11 @@ pub(crate) fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
     }
 }
 
-/// Run `solve` or `batch` over `inputs`, listed from `dir` (with its subdirectories when the
-/// flag is set; None for `solve`'s one frame).
+/// Run `batch` over `inputs`, listed from the directories `Some(dirs)` (with their
+/// subdirectories when the flag is set), or `solve` over its one frame (None).
 pub(crate) fn run_solve(
     inputs: Vec<Input>,
-    dir: Option<(&std::path::Path, bool)>,
+    dirs: Option<&[std::path::PathBuf]>,
     o: &SolveOpts,
     b: &RunArgs,
 ) -> Result<ExitCode> {
@@ -178,7 +178,11 @@ pub(crate) fn run_solve(
     ];
     batch::claims::check_outputs(
         &batch::claims::RunFiles {
-            dir,
+            dirs: dirs
+                .unwrap_or_default()
+                .iter()
+                .map(|d| (d.as_path(), b.recursive))
+                .collect(),
             inputs: &inputs,
             read: read
                 .iter()
@@ -367,7 +371,7 @@ pub(crate) fn run_solve(
         ExitCode::from(130)
     } else if c.errors + errors_before > 0 {
         ExitCode::from(1)
-    } else if dir.is_none() && c.unsolved > 0 {
+    } else if dirs.is_none() && c.unsolved > 0 {
         // `solve`'s one frame was read but not solved: said in the status, as ASTAP does, so
         // that a script need not parse the record (`batch` keeps 0: unsolved frames are part
         // of an archive's normal result).

@@ -134,6 +134,131 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
     Ok(out)
 }
 
+/// The inputs `batch` was given, and the directories among them (claimed as read: no output
+/// may land on a frame a later run would list).
+#[derive(Debug, Default)]
+pub struct Gathered {
+    pub inputs: Vec<Input>,
+    pub dirs: Vec<PathBuf>,
+}
+
+/// What `batch` takes as its inputs, each argument one of:
+/// - a directory: its image files (in its subdirectories too with `recursive`);
+/// - a file: that file, whatever its name says;
+/// - `@LIST`: the files LIST names, one path a line (blank lines and lines starting with `#`
+///   skipped; relative paths are taken from the current directory, as a shell would);
+/// - `-`: the same, read from standard input (`stdin`, read whole).
+///
+/// Names in the records: one directory alone keeps its files' paths relative to it, as
+/// always. Otherwise each name is the path as given (a directory's files: the directory's
+/// path as given, then the file's below it), so that inputs from several places keep
+/// apart. An argument that does not exist stops the run before any work; a listed file that
+/// does not exist gets an error record like any unreadable frame. A file given twice is taken
+/// once. Sorted by name, as [`list`] sorts.
+pub fn gather(
+    args: &[PathBuf],
+    recursive: bool,
+    stdin: &mut dyn std::io::BufRead,
+) -> Result<Gathered> {
+    if let [dir] = args
+        && dir.is_dir()
+    {
+        return Ok(Gathered {
+            inputs: list(dir, recursive)?,
+            dirs: vec![dir.clone()],
+        });
+    }
+    let mut out = Gathered::default();
+    let file = |path: &Path| Input {
+        path: path.to_path_buf(),
+        name: given_name(path),
+        replay: false,
+    };
+    for arg in args {
+        let text = arg.to_string_lossy();
+        let listed = if arg.as_os_str() == "-" {
+            Some(read_list(stdin, "standard input")?)
+        } else if let Some(list_path) = text.strip_prefix('@') {
+            let f = std::fs::File::open(list_path)
+                .with_context(|| format!("cannot open the list {list_path}"))?;
+            Some(read_list(&mut std::io::BufReader::new(f), list_path)?)
+        } else {
+            None
+        };
+        match listed {
+            Some(paths) => out.inputs.extend(paths.iter().map(|p| file(p))),
+            None if arg.is_dir() => {
+                let prefix = given_name(arg);
+                for mut i in list(arg, recursive)? {
+                    i.name = format!("{prefix}/{}", i.name);
+                    out.inputs.push(i);
+                }
+                out.dirs.push(arg.clone());
+            }
+            // A dangling link is an input (its record says where it leads).
+            None if std::fs::symlink_metadata(arg).is_ok() => out.inputs.push(file(arg)),
+            None => fail!(Input, "{}: no such file or directory", arg.display()),
+        }
+    }
+    out.inputs.sort_by(|a, b| a.name.cmp(&b.name));
+    out.inputs.dedup_by(|a, b| a.name == b.name);
+    Ok(out)
+}
+
+/// The paths of a list, one a line (bytes on Unix: a name need not be UTF-8).
+fn read_list(r: &mut dyn std::io::BufRead, shown: &str) -> Result<Vec<PathBuf>> {
+    let mut paths = Vec::new();
+    let mut line = Vec::new();
+    loop {
+        line.clear();
+        let n = r
+            .read_until(b'\n', &mut line)
+            .with_context(|| format!("cannot read the list {shown}"))?;
+        if n == 0 {
+            break;
+        }
+        let end = line.iter().rposition(|&b| b != b'\n' && b != b'\r');
+        let line = &line[..end.map_or(0, |e| e + 1)];
+        if line.trim_ascii().is_empty() || line.starts_with(b"#") {
+            continue;
+        }
+        paths.push(path_of_bytes(line));
+    }
+    Ok(paths)
+}
+
+#[cfg(unix)]
+fn path_of_bytes(b: &[u8]) -> PathBuf {
+    use std::os::unix::ffi::OsStrExt;
+    PathBuf::from(std::ffi::OsStr::from_bytes(b))
+}
+
+#[cfg(not(unix))]
+fn path_of_bytes(b: &[u8]) -> PathBuf {
+    PathBuf::from(String::from_utf8_lossy(b).into_owned())
+}
+
+/// A path as given, in a record's name: its components joined by '/' (escaped as
+/// [`relative_name`] does), `./` left out, a leading '/' kept.
+fn given_name(path: &Path) -> String {
+    use std::path::Component;
+    let parts: Vec<String> = path
+        .components()
+        .filter_map(|c| match c {
+            Component::CurDir => None,
+            Component::RootDir => Some(String::new()),
+            Component::ParentDir => Some("..".to_string()),
+            Component::Normal(p) => Some(escape_component(p)),
+            Component::Prefix(p) => Some(p.as_os_str().to_string_lossy().into_owned()),
+        })
+        .collect();
+    match parts.as_slice() {
+        [] => ".".to_string(),
+        [root] if root.is_empty() => "/".to_string(),
+        _ => parts.join("/"),
+    }
+}
+
 /// Shard K of N (0-based): the inputs whose stable hash of the name is K modulo N.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Shard {
@@ -168,5 +293,29 @@ impl Shard {
     /// on every machine and every run.
     pub fn takes(&self, name: &str) -> bool {
         crate::catalog::fnv1a(name.as_bytes()) % self.n == self.k
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_of_given_paths() {
+        assert_eq!(given_name(Path::new("./a/b.png")), "a/b.png");
+        assert_eq!(given_name(Path::new("/data/x.fits")), "/data/x.fits");
+        assert_eq!(given_name(Path::new("../n/")), "../n");
+        assert_eq!(given_name(Path::new(".")), ".");
+        assert_eq!(given_name(Path::new("/")), "/");
+    }
+
+    #[test]
+    fn lists_skip_blanks_and_comments() {
+        let text = "a.png\n\n# a comment\nsub dir/b.fits\r\n";
+        let got = read_list(&mut text.as_bytes(), "t").unwrap();
+        assert_eq!(
+            got,
+            [PathBuf::from("a.png"), PathBuf::from("sub dir/b.fits")]
+        );
     }
 }

@@ -11,6 +11,7 @@ mod common;
 mod attitude;
 mod backend;
 mod bad_input;
+mod batch_inputs;
 mod catalog;
 mod catalog_files;
 mod centroid;
