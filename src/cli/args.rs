@@ -424,6 +424,28 @@ pub struct SolveOpts {
     /// nothing matched as cyan crosses), at the input's relative path with the extension .png.
     #[arg(long, value_name = "DIR", help_heading = "Output")]
     pub annotate_dir: Option<PathBuf>,
+    /// Write each solved frame with its WCS in its header into DIR (solve-field's .new).
+    ///
+    /// Write each solved frame with the solution's WCS in its header into DIR as x.fits
+    /// (solve-field's .new): a FITS input keeps its header, less its old WCS keywords, and its
+    /// data as stored; other formats become 16-bit FITS of the pixels read. Never the input.
+    #[arg(long, value_name = "DIR", help_heading = "Output")]
+    pub new_fits: Option<PathBuf>,
+    /// Write each solved frame's matched stars into DIR as a FITS table (solve-field's .corr).
+    ///
+    /// Write each solved frame's matched stars into DIR as x.corr, a FITS table with
+    /// solve-field's columns (field_x, field_y, field_ra, field_dec, index_x, index_y,
+    /// index_ra, index_dec, index_id, field_id, FLUX) and MAG, RESIDUAL_ARCSEC, CATALOG_ID;
+    /// pixels 1-based, as astrometry.net's.
+    #[arg(long, value_name = "DIR", help_heading = "Output")]
+    pub corr: Option<PathBuf>,
+    /// Write each readable frame's detections into DIR as a FITS table (solve-field's .axy).
+    ///
+    /// Write each readable frame's detections into DIR as x.axy, a FITS table of X, Y (FITS
+    /// pixels, 1-based), FLUX, PEAK, AREA, SIGMA_PX and SATURATED, brightest first, with
+    /// IMAGEW and IMAGEH in its header (what solve-field needs to solve a star list).
+    #[arg(long, value_name = "DIR", help_heading = "Output")]
+    pub axy: Option<PathBuf>,
     /// Refuse frames of more pixels than this, from their headers (a small compressed file can
     /// decode to gigabytes); raise it for larger plate scans.
     #[arg(

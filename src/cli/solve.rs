@@ -166,6 +166,9 @@ pub(crate) fn run_solve(
     let mut products = Products {
         wcs_dir: o.wcs_dir.clone(),
         annotate_dir: o.annotate_dir.clone(),
+        new_fits_dir: o.new_fits.clone(),
+        corr_dir: o.corr.clone(),
+        axy_dir: o.axy.clone(),
         overwrite: o.overwrite,
         ..Products::default()
     };

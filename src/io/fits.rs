@@ -33,10 +33,12 @@ use fitsrs::hdu::header::extension::image::Image;
 use std::collections::BTreeMap;
 
 mod cards;
+pub mod copy;
 mod pixels;
 mod rice;
 pub mod scale;
 mod scan;
+pub mod table;
 mod tiled;
 
 pub use cards::*;

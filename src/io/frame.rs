@@ -225,6 +225,11 @@ impl Frame<'static> {
     }
 }
 
+/// Is this a FITS file (by its first card), or a gzipped one (by its name)?
+pub fn is_fits_file(path: &Path) -> bool {
+    is_gzipped_fits_name(path) || is_fits(path).unwrap_or(false)
+}
+
 /// Does the file start like FITS (`SIMPLE  =`)?
 fn is_fits(path: &Path) -> Result<bool> {
     use std::io::Read;

@@ -21,7 +21,16 @@ pub enum Kind {
     Wcs,
     Annotation,
     Camera,
+    NewFits,
+    Corr,
+    Axy,
 }
+
+/// The marks gpustar puts in the FITS files `--new-fits`, `--corr` and `--axy` write (a
+/// COMMENT card), by which it knows them again.
+pub const NEW_FITS_MARK: &str = "gpustar --new-fits";
+pub const CORR_MARK: &str = "gpustar --corr";
+pub const AXY_MARK: &str = "gpustar --axy";
 
 /// The mark gpustar puts in the annotated PNGs it writes (a tEXt chunk), by which it knows
 /// them again.
@@ -39,6 +48,9 @@ impl Kind {
             Kind::Wcs => "a WCS header gpustar wrote",
             Kind::Annotation => "an image gpustar annotated",
             Kind::Camera => "a camera file gpustar calibrate wrote",
+            Kind::NewFits => "a FITS frame gpustar wrote with its WCS",
+            Kind::Corr => "a table of matched stars gpustar wrote",
+            Kind::Axy => "a star list gpustar wrote",
         }
     }
 
@@ -60,7 +72,15 @@ impl Kind {
             Kind::Iod => false,
             // Our WCS headers end with this comment card (io::wcs::wcs_header); one header
             // of 2880-byte blocks holds it.
-            Kind::Wcs => head.starts_with(b"SIMPLE  =") && text.contains("WCS by gpustar."),
+            Kind::Wcs => {
+                head.starts_with(b"SIMPLE  =")
+                    && text.contains("WCS by gpustar.")
+                    && !text.contains(NEW_FITS_MARK)
+            }
+            // The marks sit in headers, within the first blocks read.
+            Kind::NewFits => head.starts_with(b"SIMPLE  =") && text.contains(NEW_FITS_MARK),
+            Kind::Corr => head.starts_with(b"SIMPLE  =") && text.contains(CORR_MARK),
+            Kind::Axy => head.starts_with(b"SIMPLE  =") && text.contains(AXY_MARK),
             Kind::Annotation => png_has_text(head, PNG_SOFTWARE),
             Kind::Camera => text.starts_with("# written by gpustar calibrate"),
         }

@@ -128,6 +128,20 @@ pub fn wcs_header(camera: &Camera, r: &Matrix3<f64>) -> Vec<String> {
 /// Write the header of [`wcs_header`] as a header-only FITS file, padded with blanks to a
 /// multiple of 2880 bytes.
 pub fn write_wcs_file(path: &Path, camera: &Camera, r: &Matrix3<f64>) -> Result<()> {
+    let cards = checked_wcs_header(camera, r)?;
+    let mut text: String = cards.concat();
+    let padded = text.len().div_ceil(2880) * 2880;
+    text.extend(std::iter::repeat_n(' ', padded - text.len()));
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create directory {}", dir.display()))?;
+    }
+    crate::io::guard::write_atomically(path, text.as_bytes())
+}
+
+/// [`wcs_header`], or an error when the camera or attitude cannot have one (focal lengths
+/// not positive and finite, not a rotation, a distortion that folds over in the image).
+pub fn checked_wcs_header(camera: &Camera, r: &Matrix3<f64>) -> Result<Vec<String>> {
     if !(camera.fx.is_finite() && camera.fy.is_finite() && camera.fx > 0.0 && camera.fy > 0.0) {
         fail!(
             Config,
@@ -164,14 +178,7 @@ pub fn write_wcs_file(path: &Path, camera: &Camera, r: &Matrix3<f64>) -> Result<
             "cannot write a WCS: the camera's distortion cannot be inverted over the image"
         );
     }
-    let mut text: String = cards.concat();
-    let padded = text.len().div_ceil(2880) * 2880;
-    text.extend(std::iter::repeat_n(' ', padded - text.len()));
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create directory {}", dir.display()))?;
-    }
-    crate::io::guard::write_atomically(path, text.as_bytes())
+    Ok(cards)
 }
 
 /// The linear part of the WCS.

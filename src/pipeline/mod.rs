@@ -235,7 +235,7 @@ impl Solvers {
         let found = found.as_deref();
         self.add_streaks(&mut r, d, (frame.width, frame.height), sol, found);
         let drawn = found.unwrap_or_default();
-        if let Err(e) = self.products.write(&d.name, frame, sol, drawn) {
+        if let Err(e) = self.products.write(&d.name, &d.path, frame, sol, drawn) {
             // The solution stands; the user learns which file is missing and why.
             tracing::warn!("{}: {e:#}", d.name);
             r.warnings.push(format!("{e:#}"));

@@ -1,8 +1,11 @@
 //! Files written per frame beside the records: a FITS WCS header for each solved frame
-//! (`--wcs-dir`) and an annotated PNG for each decoded frame (`--annotate-dir`), at the
-//! input's relative path with the extension replaced (`a/b.png` → `DIR/a/b.wcs`, `DIR/a/b.png`).
+//! (`--wcs-dir`), an annotated PNG for each decoded frame (`--annotate-dir`), and what
+//! astrometry.net's users read (`astrometry`: `--new-fits`, `--corr`, `--axy`), at the input's
+//! relative path with the extension replaced (`a/b.png` → `DIR/a/b.wcs`, `DIR/a/b.png`,
+//! `DIR/a/b.fits`, `DIR/a/b.corr`, `DIR/a/b.axy`).
 
 pub mod annotate;
+pub mod astrometry;
 
 use self::annotate::{Annotation, Mark};
 use crate::error::{Context, Result};
@@ -21,6 +24,9 @@ use std::path::{Component, Path, PathBuf};
 pub struct Products {
     pub wcs_dir: Option<PathBuf>,
     pub annotate_dir: Option<PathBuf>,
+    pub new_fits_dir: Option<PathBuf>,
+    pub corr_dir: Option<PathBuf>,
+    pub axy_dir: Option<PathBuf>,
     /// Replace files there that gpustar did not write (`--overwrite`).
     pub overwrite: bool,
     /// Inputs whose products keep the input's extension (`x.fits` → `x.fits.wcs`): another
@@ -42,6 +48,9 @@ impl Products {
                 "png",
                 Kind::Annotation,
             ),
+            (&self.new_fits_dir, "--new-fits", "fits", Kind::NewFits),
+            (&self.corr_dir, "--corr", "corr", Kind::Corr),
+            (&self.axy_dir, "--axy", "axy", Kind::Axy),
         ]
         .into_iter()
         .filter_map(|(d, o, e, k)| d.clone().map(|d| (d, o, e, k)))
@@ -99,10 +108,11 @@ impl Products {
         }
     }
 
-    /// Write the products asked for of one frame (named `name`).
+    /// Write the products asked for of one frame (named `name`, read from `input`).
     pub fn write(
         &self,
         name: &str,
+        input: &Path,
         frame: &Frame,
         sol: &Solution,
         streaks: &[StreakFit],
@@ -110,12 +120,35 @@ impl Products {
         if let (Some(dir), Outcome::Solved(r, _)) = (&self.wcs_dir, &sol.outcome) {
             crate::io::wcs::write_wcs_file(&self.path(dir, name, "wcs"), &r.camera, &r.r)?;
         }
+        if let (Some(dir), Outcome::Solved(r, _)) = (&self.new_fits_dir, &sol.outcome) {
+            let bytes = astrometry::new_fits(input, frame, r)?;
+            write_product(&self.path(dir, name, "fits"), &bytes)?;
+        }
+        if let (Some(dir), Outcome::Solved(r, refs)) = (&self.corr_dir, &sol.outcome) {
+            write_product(
+                &self.path(dir, name, "corr"),
+                &astrometry::corr(sol, r, refs),
+            )?;
+        }
+        if let Some(dir) = &self.axy_dir {
+            let bytes = astrometry::axy(frame.width, frame.height, &sol.detections);
+            write_product(&self.path(dir, name, "axy"), &bytes)?;
+        }
         if let Some(dir) = &self.annotate_dir {
             let out = self.path(dir, name, "png");
             annotate::write_png(&out, &annotation(frame, sol, streaks))?;
         }
         Ok(())
     }
+}
+
+/// Write a product file whole (its folder made first).
+fn write_product(path: &Path, bytes: &[u8]) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create directory {}", dir.display()))?;
+    }
+    crate::io::guard::write_atomically(path, bytes)
 }
 
 /// The names of inputs that share their directory and stem with another image file there

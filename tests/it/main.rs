@@ -8,6 +8,7 @@
 
 mod common;
 
+mod astrometry_products;
 mod attitude;
 mod backend;
 mod bad_input;
