@@ -709,6 +709,7 @@ impl Solver {
             flush_every: std::time::Duration::from_millis(250),
             sequence: None,
             tracklets: false,
+            star_lists: None,
         };
         let (frames_tx, frames_rx) = crossbeam_channel::unbounded::<Decoded<'static>>();
         let (records_tx, records_rx) = crossbeam_channel::unbounded::<Record>();
@@ -1201,6 +1202,7 @@ fn start_batch(
         }),
         // As the command line: with streaks, a directory's frames are linked into tracklets.
         tracklets: b.solvers.streaks.is_some(),
+        star_lists: None,
     };
     let stop = Arc::new(AtomicBool::new(false));
     let (tx, rx) = crossbeam_channel::bounded::<String>(4 * b.batch_size.max(b.threads));

@@ -32,6 +32,8 @@ pub struct RunOptions {
     /// `--streaks`: link the streaks of consecutive frames of a directory into tracklets
     /// ([`crate::streaks::tracklet`]); each record is then written when the next one is done.
     pub tracklets: bool,
+    /// `--xyls`: the inputs are star lists, solved on the CPU.
+    pub star_lists: Option<crate::pipeline::star_lists::StarLists>,
 }
 
 impl RunOptions {
@@ -174,6 +176,7 @@ fn run_work(
     let threads = opts.threads.max(1);
     let batch = opts.batch_size.max(1);
     let window = opts.window();
+    let star_lists = opts.star_lists;
     let (work_tx, work_rx) = bounded::<(usize, Work)>(window);
     let (done_tx, done_rx) = bounded::<(usize, Record)>(window);
     let (ticket_tx, ticket_rx) = bounded::<()>(window);
@@ -236,8 +239,11 @@ fn run_work(
                                     Work::File(input) => input.name.clone(),
                                     Work::Frame(d) => d.name.clone(),
                                 };
-                                let r = guarded(solvers, &name, || {
-                                    solvers.solve_cpu(work.decode(solvers))
+                                let r = guarded(solvers, &name, || match (&work, star_lists) {
+                                    (Work::File(i), Some(l)) => {
+                                        solvers.solve_star_list(&i.path, &i.name, l)
+                                    }
+                                    _ => solvers.solve_cpu(work.decode(solvers)),
                                 });
                                 if tx.send((i, r)).is_err() {
                                     break;

@@ -424,6 +424,18 @@ pub struct SolveOpts {
     /// nothing matched as cyan crosses), at the input's relative path with the extension .png.
     #[arg(long, value_name = "DIR", help_heading = "Output")]
     pub annotate_dir: Option<PathBuf>,
+    /// The inputs are star lists (solve-field's .xyls, --axy's tables), not images.
+    ///
+    /// The inputs are star lists, not images: FITS tables with X and Y columns (1-based FITS
+    /// pixels, as solve-field's .xyls and --axy's .axy) and FLUX when they have one (else the
+    /// rows are taken as brightest first); the image size from IMAGEW/IMAGEH in the header or
+    /// --image-size. Solved on the CPU; --wcs-dir and --corr are written, products that need
+    /// pixels are not. A folder given to batch gives its .xyls, .axy and .fits files.
+    #[arg(long, help_heading = "Input")]
+    pub xyls: bool,
+    /// With --xyls: the image size of star lists whose header states none.
+    #[arg(long, value_name = "WxH", value_parser = parse_size, help_heading = "Input")]
+    pub image_size: Option<(u32, u32)>,
     /// Write each solved frame with its WCS in its header into DIR (solve-field's .new).
     ///
     /// Write each solved frame with the solution's WCS in its header into DIR as x.fits

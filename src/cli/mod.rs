@@ -195,16 +195,27 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
     }
     match cli.command {
         Command::Batch { dir, opts, run } => {
-            let gathered = inputs::gather(&dir, run.recursive, &mut std::io::stdin().lock())?;
+            let accept = if opts.xyls {
+                inputs::is_star_list_path
+            } else {
+                gpustar::io::frame::is_image_path
+            };
+            let gathered =
+                inputs::gather(&dir, run.recursive, accept, &mut std::io::stdin().lock())?;
             let mut inputs = gathered.inputs;
             // A batch never ends "0 files", exit 0, having read nothing.
             if inputs.is_empty() {
                 anyhow::bail!(
-                    "{} holds no image files (PNG, JPEG, TIFF, FITS){}",
+                    "{} holds no {}{}",
                     dir.iter()
                         .map(|d| d.display().to_string())
                         .collect::<Vec<_>>()
                         .join(", "),
+                    if opts.xyls {
+                        "star lists (.xyls, .axy, FITS tables)"
+                    } else {
+                        "image files (PNG, JPEG, TIFF, FITS)"
+                    },
                     if run.recursive {
                         ""
                     } else {

@@ -9,7 +9,8 @@ use gpustar::catalog::Catalog;
 use gpustar::io::dark::Darks;
 use gpustar::io::inputs::Input;
 use gpustar::io::output::{self, RecordWriter};
-use gpustar::pipeline::{Backend, BackendNote, CameraSource, Solvers};
+use gpustar::pipeline::star_lists::StarLists;
+use gpustar::pipeline::{Backend, BackendChoice, BackendNote, CameraSource, Solvers};
 use gpustar::products::Products;
 use gpustar::sequence::SequenceOptions;
 use gpustar::sky::tle::TleCatalog;
@@ -107,6 +108,27 @@ pub(crate) fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
     }
 }
 
+/// `--xyls` runs have stars, not pixels: the options that need pixels are refused.
+fn check_star_list_options(o: &SolveOpts, b: &RunArgs) -> Result<()> {
+    let pixels = [
+        (b.sequence, "--sequence"),
+        (o.streaks.streaks, "--streaks"),
+        (o.hint.is_some(), "--hint"),
+        (
+            o.dark.is_some() || o.dark_median,
+            "--dark and --dark-median",
+        ),
+        (o.new_fits.is_some(), "--new-fits"),
+        (o.axy.is_some(), "--axy"),
+        (o.annotate_dir.is_some(), "--annotate-dir"),
+        (o.backend == BackendChoice::Gpu, "--backend gpu"),
+    ];
+    if let Some((_, what)) = pixels.iter().find(|(given, _)| *given) {
+        bail!("{what} needs the frames' pixels: not with --xyls (star lists)");
+    }
+    Ok(())
+}
+
 /// Run `batch` over `inputs`, listed from the directories `Some(dirs)` (with their
 /// subdirectories when the flag is set), or `solve` over its one frame (None).
 pub(crate) fn run_solve(
@@ -126,6 +148,11 @@ pub(crate) fn run_solve(
             "--hint is not used with --sequence: a sequence's frames are identified lost-in-space \
              and then tracked from frame to frame"
         );
+    }
+    if o.xyls {
+        check_star_list_options(o, b)?;
+    } else if o.image_size.is_some() {
+        bail!("--image-size is the size of star lists: it goes with --xyls");
     }
     let header_only = o.streaks.streaks && o.streaks.astrometry == Astrometry::Header;
     let (camera, camera_mag, scale_range) = camera_source(&o.camera, header_only)?;
@@ -259,7 +286,12 @@ pub(crate) fn run_solve(
         }
         None => Box::new(std::io::stdout()),
     };
-    let (mut backend, note) = Backend::open(o.backend)?;
+    // Star lists have no pixels for the GPU's stages.
+    let (mut backend, note) = Backend::open(if o.xyls {
+        BackendChoice::Cpu
+    } else {
+        o.backend
+    })?;
     match note {
         Some(BackendNote::Warning(w)) => tracing::warn!("{w}"),
         Some(BackendNote::Info(i)) => tracing::info!("{i}"),
@@ -314,6 +346,7 @@ pub(crate) fn run_solve(
             ..SequenceOptions::default()
         }),
         tracklets: so.streaks,
+        star_lists: o.xyls.then_some(StarLists { size: o.image_size }),
     };
     let summary = batch::run(
         inputs,

@@ -38,6 +38,7 @@ mod pixels;
 mod rice;
 pub mod scale;
 mod scan;
+pub mod star_list;
 pub mod table;
 mod tiled;
 

@@ -67,6 +67,18 @@ pub(crate) fn escape_component(c: &std::ffi::OsStr) -> String {
 /// A directory that cannot be read is refused; a subdirectory that cannot be read is listed
 /// as an input of its own (its error record says why), with a warning.
 pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
+    list_with(dir, recursive, is_image_path)
+}
+
+/// Star lists `--xyls` takes from a folder: `.xyls`, `.axy` and FITS tables.
+pub fn is_star_list_path(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| ["xyls", "axy", "fits", "fit"].contains(&e.to_ascii_lowercase().as_str()))
+}
+
+/// [`list`] of the files `accept` takes by their path.
+pub fn list_with(dir: &Path, recursive: bool, accept: fn(&Path) -> bool) -> Result<Vec<Input>> {
     if !dir.is_dir() {
         fail!(Input, "{} is not a directory", dir.display());
     }
@@ -104,7 +116,7 @@ pub fn list(dir: &Path, recursive: bool) -> Result<Vec<Input>> {
         // broken link gets an error record rather than no record.
         let ft = entry.file_type();
         let is_file = !(ft.is_dir() || ft.is_symlink() && entry.path().is_dir());
-        if is_file && is_image_path(entry.path()) {
+        if is_file && accept(entry.path()) {
             let rel = entry
                 .path()
                 .strip_prefix(dir)
@@ -143,7 +155,8 @@ pub struct Gathered {
 }
 
 /// What `batch` takes as its inputs, each argument one of:
-/// - a directory: its image files (in its subdirectories too with `recursive`);
+/// - a directory: its files that `accept` takes, images or star lists (in its subdirectories
+///   too with `recursive`);
 /// - a file: that file, whatever its name says;
 /// - `@LIST`: the files LIST names, one path a line (blank lines and lines starting with `#`
 ///   skipped; relative paths are taken from the current directory, as a shell would);
@@ -158,8 +171,10 @@ pub struct Gathered {
 pub fn gather(
     args: &[PathBuf],
     recursive: bool,
+    accept: fn(&Path) -> bool,
     stdin: &mut dyn std::io::BufRead,
 ) -> Result<Gathered> {
+    let list = |dir: &Path, recursive| list_with(dir, recursive, accept);
     if let [dir] = args
         && dir.is_dir()
     {

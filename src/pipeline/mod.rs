@@ -6,6 +6,7 @@
 mod camera_source;
 mod gpu_runner;
 mod hints;
+pub mod star_lists;
 
 use crate::catalog::Catalog;
 use crate::error::Result;

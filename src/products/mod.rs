@@ -108,6 +108,21 @@ impl Products {
         }
     }
 
+    /// The products that need only the solution, not the pixels: `--wcs-dir` and `--corr`
+    /// (what star lists get, `--xyls`).
+    pub fn write_solution(&self, name: &str, sol: &Solution) -> Result<()> {
+        if let (Some(dir), Outcome::Solved(r, _)) = (&self.wcs_dir, &sol.outcome) {
+            crate::io::wcs::write_wcs_file(&self.path(dir, name, "wcs"), &r.camera, &r.r)?;
+        }
+        if let (Some(dir), Outcome::Solved(r, refs)) = (&self.corr_dir, &sol.outcome) {
+            write_product(
+                &self.path(dir, name, "corr"),
+                &astrometry::corr(sol, r, refs),
+            )?;
+        }
+        Ok(())
+    }
+
     /// Write the products asked for of one frame (named `name`, read from `input`).
     pub fn write(
         &self,
@@ -117,18 +132,10 @@ impl Products {
         sol: &Solution,
         streaks: &[StreakFit],
     ) -> Result<()> {
-        if let (Some(dir), Outcome::Solved(r, _)) = (&self.wcs_dir, &sol.outcome) {
-            crate::io::wcs::write_wcs_file(&self.path(dir, name, "wcs"), &r.camera, &r.r)?;
-        }
+        self.write_solution(name, sol)?;
         if let (Some(dir), Outcome::Solved(r, _)) = (&self.new_fits_dir, &sol.outcome) {
             let bytes = astrometry::new_fits(input, frame, r)?;
             write_product(&self.path(dir, name, "fits"), &bytes)?;
-        }
-        if let (Some(dir), Outcome::Solved(r, refs)) = (&self.corr_dir, &sol.outcome) {
-            write_product(
-                &self.path(dir, name, "corr"),
-                &astrometry::corr(sol, r, refs),
-            )?;
         }
         if let Some(dir) = &self.axy_dir {
             let bytes = astrometry::axy(frame.width, frame.height, &sol.detections);

@@ -131,3 +131,120 @@ fn new_fits_corr_and_axy_hold_the_solution() {
     );
     assert!(Path::new(&corr.join("b.corr")).exists());
 }
+
+/// `--xyls`: the `.axy` star lists `--axy` wrote (solve-field's format) solve to the attitude
+/// their frames gave; a list without its image size needs `--image-size`; options that need
+/// pixels are refused.
+#[test]
+fn star_lists_solve_as_their_frames_did() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("frames");
+    common::simulate_small(&dir, 2);
+    let axy = tmp.path().join("axy");
+    let mut c = common::gpustar();
+    c.arg("batch")
+        .arg(&dir)
+        .args(["--fov-deg", "18", "--backend", "cpu", "-q"]);
+    let frames = common::run_records(c.arg("--axy").arg(&axy));
+    // The same stars without IMAGEW/IMAGEH, and a list that is not a table.
+    let (x, y): (Vec<f64>, Vec<f64>) = frames[0]["matches"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| {
+            (
+                m["x"].as_f64().unwrap() + 1.0,
+                m["y"].as_f64().unwrap() + 1.0,
+            )
+        })
+        .unzip();
+    use gpustar::io::fits::table::{Column, Values, encode_table};
+    let bare = encode_table(
+        &[
+            Column {
+                name: "X",
+                unit: "",
+                values: Values::F64(x),
+            },
+            Column {
+                name: "Y",
+                unit: "",
+                values: Values::F64(y),
+            },
+        ],
+        &[],
+    );
+    std::fs::write(axy.join("bare.xyls"), bare).unwrap();
+    std::fs::write(axy.join("text.xyls"), "x y\n1 2\n").unwrap();
+    let lists = |more: &[&str]| {
+        common::gpustar()
+            .arg("batch")
+            .arg(&axy)
+            .args(["--xyls", "--fov-deg", "18", "-q"])
+            .args(more)
+            .output()
+            .unwrap()
+    };
+    let o = lists(&[]);
+    assert_eq!(o.status.code(), Some(1), "{}", common::stderr(&o));
+    let records: Vec<serde_json::Value> = String::from_utf8(o.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let names: Vec<&str> = records
+        .iter()
+        .map(|r| r["file"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        ["bare.xyls", "sim_00000.axy", "sim_00001.axy", "text.xyls"]
+    );
+    assert!(
+        records[0]["error"]
+            .as_str()
+            .unwrap()
+            .contains("--image-size")
+    );
+    assert!(
+        records[3]["error"]
+            .as_str()
+            .unwrap()
+            .contains("not a FITS file")
+    );
+    let v = |r: &serde_json::Value| {
+        gpustar::catalog::radec_to_vector(
+            r["ra_deg"].as_f64().unwrap(),
+            r["dec_deg"].as_f64().unwrap(),
+        )
+    };
+    for (list, frame) in records[1..3].iter().zip(&frames) {
+        assert_eq!(list["status"], "solved", "{list}");
+        let (a, b) = (v(list), v(frame));
+        let arcsec = a.cross(&b).norm().atan2(a.dot(&b)).to_degrees() * 3600.0;
+        assert!(
+            arcsec < 5.0,
+            "{}: {arcsec}\" from its frame's",
+            list["file"]
+        );
+    }
+    // With the size given, the bare list (the first frame's matched stars) solves too.
+    let o = lists(&["--image-size", "256x256"]);
+    let first: serde_json::Value =
+        serde_json::from_str(String::from_utf8(o.stdout).unwrap().lines().next().unwrap()).unwrap();
+    assert_eq!(first["status"], "solved", "{first}");
+    // Pixels needed: refused before any work.
+    for more in [
+        &["--new-fits", "n"][..],
+        &["--backend", "gpu"],
+        &["--sequence"],
+    ] {
+        let o = lists(more);
+        assert_eq!(o.status.code(), Some(2), "{more:?}");
+        assert!(
+            common::stderr(&o).contains("--xyls"),
+            "{}",
+            common::stderr(&o)
+        );
+    }
+}

@@ -48,6 +48,7 @@ fn frames_in_memory_give_the_records_of_their_files() {
         flush_every: std::time::Duration::from_millis(250),
         sequence: None,
         tracklets: false,
+        star_lists: None,
     };
     let stop = AtomicBool::new(false);
     let mut files = Vec::new();
