@@ -21,11 +21,16 @@ pub enum Kind {
     Wcs,
     Annotation,
     Camera,
+    Report,
 }
 
 /// The mark gpustar puts in the annotated PNGs it writes (a tEXt chunk), by which it knows
 /// them again.
 pub const PNG_SOFTWARE: (&str, &str) = ("Software", "gpustar");
+
+/// The mark gpustar puts in the head of the report pages it writes (`gpustar report --html`),
+/// followed by its version.
+pub const HTML_GENERATOR: &str = "<meta name=\"generator\" content=\"gpustar";
 
 /// How much of an existing file is read to tell whose it is: a FIFO, a device or a huge file
 /// at an output path costs no more than this.
@@ -39,6 +44,7 @@ impl Kind {
             Kind::Wcs => "a WCS header gpustar wrote",
             Kind::Annotation => "an image gpustar annotated",
             Kind::Camera => "a camera file gpustar calibrate wrote",
+            Kind::Report => "a page gpustar report wrote",
         }
     }
 
@@ -63,6 +69,8 @@ impl Kind {
             Kind::Wcs => head.starts_with(b"SIMPLE  =") && text.contains("WCS by gpustar."),
             Kind::Annotation => png_has_text(head, PNG_SOFTWARE),
             Kind::Camera => text.starts_with("# written by gpustar calibrate"),
+            // Our pages name their generator in the head.
+            Kind::Report => text.lines().take(4).any(|l| l.starts_with(HTML_GENERATOR)),
         }
     }
 }
@@ -400,6 +408,9 @@ mod tests {
         assert!(!Kind::Camera.ours(b"width = 10\n"));
         assert!(Kind::Camera.ours(b"# written by gpustar calibrate from 3 solved frames\n"));
         assert!(!Kind::Wcs.ours(b"SIMPLE  =                    T / astrometry.net"));
+        let page = "<!DOCTYPE html>\n<html><head>\n<meta name=\"generator\" content=\"gpustar 1\">";
+        assert!(Kind::Report.ours(page.as_bytes()));
+        assert!(!Kind::Report.ours(b"<!DOCTYPE html>\n<html><head><title>mine</title>"));
     }
 
     #[test]
