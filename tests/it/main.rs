@@ -36,6 +36,7 @@ mod psf_fit;
 mod radial;
 mod real;
 mod refine;
+mod report;
 mod resume;
 mod scale;
 mod select;
