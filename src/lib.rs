@@ -10,7 +10,8 @@
 //! [`streaks`] finds and reduces satellite streaks, with times, stations and Az/El from [`sky`];
 //! [`sequence`] tracks sequences of frames and rejects moving particles; [`calibrate`] fits the
 //! camera; [`products`] writes WCS headers and annotated images; [`simulate`] makes and scores
-//! synthetic sets. [`simd`] runs the CPU's hot loops compiled again for AVX2 where it has it.
+//! synthetic sets; [`report`] summarises a run's records (text and an HTML page). [`simd`] runs
+//! the CPU's hot loops compiled again for AVX2 where it has it.
 
 pub mod batch;
 pub mod calibrate;
@@ -24,6 +25,7 @@ pub mod io;
 pub mod pipeline;
 pub mod products;
 pub mod record;
+pub mod report;
 pub mod sequence;
 pub mod simd;
 pub mod simulate;

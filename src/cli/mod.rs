@@ -16,6 +16,7 @@ mod console;
 mod evaluate;
 mod info;
 mod merge;
+mod report;
 mod simulate;
 mod solve;
 
@@ -26,6 +27,7 @@ use console::*;
 use evaluate::*;
 use info::*;
 use merge::*;
+use report::*;
 use simulate::*;
 use solve::*;
 
@@ -182,6 +184,11 @@ pub enum Command {
         #[command(flatten)]
         catalog: CatalogOpts,
     },
+    /// Summarise result records without a truth file; --html: a page of plots.
+    ///
+    /// Outcomes (unsolved by reason, errors by message), availability per folder, the residual,
+    /// match-count, solve-time and scale distributions, and the attitude over time.
+    Report(ReportArgs),
     /// Catalog maintenance.
     #[command(subcommand)]
     Catalog(CatalogCommand),
@@ -301,6 +308,7 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
             id_tolerance_px,
             per_frame,
         } => evaluate_cmd(&results, &truth, tolerance_deg, id_tolerance_px, per_frame),
+        Command::Report(a) => report_cmd(a),
         Command::Catalog(CatalogCommand::Import {
             input,
             format,

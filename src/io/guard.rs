@@ -24,6 +24,7 @@ pub enum Kind {
     NewFits,
     Corr,
     Axy,
+    Report,
 }
 
 /// The marks gpustar puts in the FITS files `--new-fits`, `--corr` and `--axy` write (a
@@ -35,6 +36,10 @@ pub const AXY_MARK: &str = "gpustar --axy";
 /// The mark gpustar puts in the annotated PNGs it writes (a tEXt chunk), by which it knows
 /// them again.
 pub const PNG_SOFTWARE: (&str, &str) = ("Software", "gpustar");
+
+/// The mark gpustar puts in the head of the report pages it writes (`gpustar report --html`),
+/// followed by its version.
+pub const HTML_GENERATOR: &str = "<meta name=\"generator\" content=\"gpustar";
 
 /// How much of an existing file is read to tell whose it is: a FIFO, a device or a huge file
 /// at an output path costs no more than this.
@@ -51,6 +56,7 @@ impl Kind {
             Kind::NewFits => "a FITS frame gpustar wrote with its WCS",
             Kind::Corr => "a table of matched stars gpustar wrote",
             Kind::Axy => "a star list gpustar wrote",
+            Kind::Report => "a page gpustar report wrote",
         }
     }
 
@@ -83,6 +89,8 @@ impl Kind {
             Kind::Axy => head.starts_with(b"SIMPLE  =") && text.contains(AXY_MARK),
             Kind::Annotation => png_has_text(head, PNG_SOFTWARE),
             Kind::Camera => text.starts_with("# written by gpustar calibrate"),
+            // Our pages name their generator in the head.
+            Kind::Report => text.lines().take(4).any(|l| l.starts_with(HTML_GENERATOR)),
         }
     }
 }
@@ -420,6 +428,9 @@ mod tests {
         assert!(!Kind::Camera.ours(b"width = 10\n"));
         assert!(Kind::Camera.ours(b"# written by gpustar calibrate from 3 solved frames\n"));
         assert!(!Kind::Wcs.ours(b"SIMPLE  =                    T / astrometry.net"));
+        let page = "<!DOCTYPE html>\n<html><head>\n<meta name=\"generator\" content=\"gpustar 1\">";
+        assert!(Kind::Report.ours(page.as_bytes()));
+        assert!(!Kind::Report.ours(b"<!DOCTYPE html>\n<html><head><title>mine</title>"));
     }
 
     #[test]

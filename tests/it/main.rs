@@ -39,6 +39,7 @@ mod psf_fit;
 mod radial;
 mod real;
 mod refine;
+mod report;
 mod resume;
 mod scale;
 mod select;
