@@ -1,6 +1,7 @@
 //! The result record: one JSON object per input file (spec/INTERFACE.md). Scripts parse these;
 //! fields are only ever added.
 
+use crate::camera::Camera;
 use crate::error::{Context, Error, IntoKind, Result, fail};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -270,6 +271,12 @@ pub struct Record {
     /// stated, which its camera was made from; absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_scale: Option<PixelScaleRecord>,
+    /// Solved records: the camera of the solution (the fitted scale, distortion and parity),
+    /// which with `rotation_matrix` is the plate solution `--wcs-dir` writes; for the Python
+    /// package's `Result.wcs()` and `pixel_to_sky`. Never written (a record read back has
+    /// none).
+    #[serde(skip)]
+    pub camera: Option<Camera>,
 }
 
 /// The pixel scale a frame's header stated (`io::fits::scale`), as its record gives it.
@@ -345,6 +352,7 @@ impl Record {
             sequence_mode: None,
             particles: None,
             pixel_scale: None,
+            camera: None,
         }
     }
 
