@@ -1,6 +1,7 @@
 //! The result record: one JSON object per input file (spec/INTERFACE.md). Scripts parse these;
 //! fields are only ever added.
 
+use crate::camera::Camera;
 use crate::error::{Context, Error, IntoKind, Result, fail};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -270,6 +271,12 @@ pub struct Record {
     /// stated, which its camera was made from; absent otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pixel_scale: Option<PixelScaleRecord>,
+    /// Solved records: the camera of the solution (the fitted scale, distortion and parity),
+    /// which with `rotation_matrix` is the plate solution `--wcs-dir` writes; for the Python
+    /// package's `Result.wcs()` and `pixel_to_sky`. Never written (a record read back has
+    /// none).
+    #[serde(skip)]
+    pub camera: Option<Camera>,
 }
 
 /// The pixel scale a frame's header stated (`io::fits::scale`), as its record gives it.
@@ -306,38 +313,8 @@ impl Record {
     /// The names of a record's fields, as JSON writes them (its whole schema's names, present
     /// or not in a given record): read from the `Deserialize` impl, so never out of date.
     pub fn field_names() -> &'static [&'static str] {
-        use serde::de::{self, Visitor};
-        /// A deserializer that only notes the field list serde asks a struct for.
-        struct Fields<'a>(&'a mut &'static [&'static str]);
-        impl<'de> de::Deserializer<'de> for Fields<'_> {
-            type Error = de::value::Error;
-            fn deserialize_any<V: Visitor<'de>>(
-                self,
-                _: V,
-            ) -> std::result::Result<V::Value, Self::Error> {
-                Err(de::Error::custom("only the field names are read"))
-            }
-            fn deserialize_struct<V: Visitor<'de>>(
-                self,
-                _: &'static str,
-                fields: &'static [&'static str],
-                _: V,
-            ) -> std::result::Result<V::Value, Self::Error> {
-                *self.0 = fields;
-                Err(de::Error::custom("only the field names are read"))
-            }
-            serde::forward_to_deserialize_any! {
-                bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes
-                byte_buf option unit unit_struct newtype_struct seq tuple tuple_struct map enum
-                identifier ignored_any
-            }
-        }
         static NAMES: std::sync::OnceLock<&'static [&'static str]> = std::sync::OnceLock::new();
-        NAMES.get_or_init(|| {
-            let mut names: &'static [&'static str] = &[];
-            let _ = Record::deserialize(Fields(&mut names));
-            names
-        })
+        NAMES.get_or_init(struct_fields::<Record>)
     }
 
     pub fn empty(file: &str, backend: &str) -> Record {
@@ -375,6 +352,7 @@ impl Record {
             sequence_mode: None,
             particles: None,
             pixel_scale: None,
+            camera: None,
         }
     }
 
@@ -390,6 +368,40 @@ impl Record {
     pub fn to_json_line(&self) -> String {
         serde_json::to_string(self).expect("records serialise")
     }
+}
+
+/// The JSON names of the fields of a struct `T` (those `#[serde(skip)]` leaves out are not
+/// among them), as serde's derived `Deserialize` lists them to a deserializer.
+fn struct_fields<'de, T: Deserialize<'de>>() -> &'static [&'static str] {
+    use serde::de::{self, Visitor};
+    /// A deserializer that only notes the field list serde asks a struct for.
+    struct Fields<'a>(&'a mut &'static [&'static str]);
+    impl<'de> de::Deserializer<'de> for Fields<'_> {
+        type Error = de::value::Error;
+        fn deserialize_any<V: Visitor<'de>>(
+            self,
+            _: V,
+        ) -> std::result::Result<V::Value, Self::Error> {
+            Err(de::Error::custom("only the field names are read"))
+        }
+        fn deserialize_struct<V: Visitor<'de>>(
+            self,
+            _: &'static str,
+            fields: &'static [&'static str],
+            _: V,
+        ) -> std::result::Result<V::Value, Self::Error> {
+            *self.0 = fields;
+            Err(de::Error::custom("only the field names are read"))
+        }
+        serde::forward_to_deserialize_any! {
+            bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes
+            byte_buf option unit unit_struct newtype_struct seq tuple tuple_struct map enum
+            identifier ignored_any
+        }
+    }
+    let mut names: &'static [&'static str] = &[];
+    let _ = T::deserialize(Fields(&mut names));
+    names
 }
 
 /// gpustar's one JSON Lines reader (result records, truth files): every line one `T`, blank
@@ -451,6 +463,189 @@ mod tests {
             "pixel_scale",
         ] {
             assert!(names.contains(&key), "{key}");
+        }
+    }
+
+    /// docs/record.schema.json, the record's JSON Schema.
+    fn schema() -> serde_json::Value {
+        serde_json::from_str(include_str!("../docs/record.schema.json"))
+            .expect("the schema is JSON")
+    }
+
+    fn keys(v: &serde_json::Value) -> std::collections::BTreeSet<String> {
+        v.as_object()
+            .unwrap_or_else(|| panic!("not an object: {v}"))
+            .keys()
+            .cloned()
+            .collect()
+    }
+
+    fn required(v: &serde_json::Value) -> std::collections::BTreeSet<String> {
+        let list = v["required"].as_array();
+        let list = list.unwrap_or_else(|| panic!("no required list: {v}"));
+        list.iter()
+            .map(|k| k.as_str().unwrap().to_string())
+            .collect()
+    }
+
+    fn set(names: &[&str]) -> std::collections::BTreeSet<String> {
+        names.iter().map(|n| n.to_string()).collect()
+    }
+
+    /// Issue 47, item 6: docs/record.schema.json names exactly the fields a record can have, at
+    /// the top level (`Record::field_names`) and in every nested object, closes each object
+    /// (`additionalProperties: false`) and requires exactly the fields always written (those
+    /// without `skip_serializing_if`): a field added to a record and not to the schema fails
+    /// here, and the Python tests validate the records the command line writes against it.
+    #[test]
+    fn the_schema_has_exactly_the_records_fields() {
+        let s = schema();
+        assert_eq!(s["$schema"], "https://json-schema.org/draft/2020-12/schema");
+        assert_eq!(keys(&s["properties"]), set(Record::field_names()));
+        assert_eq!(s["additionalProperties"], false);
+        let written = |v: &dyn erased::Ser| keys(&v.value());
+        assert_eq!(required(&s), written(&Record::empty("f", "cpu")));
+
+        let end = |edge| StreakEnd {
+            x: 1.0,
+            y: 2.0,
+            ra_deg: None,
+            dec_deg: None,
+            edge,
+            time_utc: None,
+            az_deg: None,
+            el_deg: None,
+        };
+        let streak = StreakRecord::for_tests(
+            [end(Some(false)), end(Some(true))],
+            [end(Some(true)), end(Some(false))],
+            10.0,
+            None,
+        );
+        let matched = MatchRecord {
+            x: 1.0,
+            y: 2.0,
+            hip: None,
+            ra_deg: 0.0,
+            dec_deg: 0.0,
+            mag: 1.0,
+            flux: 1.0,
+            residual_arcsec: 1.0,
+            sigma_px: None,
+            catalog_id: String::new(),
+        };
+        let hint = HintRecord {
+            ra_deg: 1.0,
+            dec_deg: 2.0,
+            radius_deg: 1.0,
+            source: "--hint".into(),
+            offset_deg: None,
+        };
+        let satellite = SatelliteRecord {
+            norad: 25544,
+            name: String::new(),
+            intl_des: None,
+            cross_track_arcsec: 0.0,
+            along_track_s: 0.0,
+        };
+        let scale = PixelScaleRecord {
+            arcsec_per_px: 1.0,
+            pixel_aspect: 1.0,
+            source: "SECPIX".into(),
+        };
+        let sigma = AttitudeSigma {
+            boresight: 1.0,
+            roll: 1.0,
+        };
+        let particle = ParticleRecord {
+            x: 1.0,
+            y: 1.0,
+            vx_px_s: None,
+            vy_px_s: None,
+        };
+        // Each object of the schema: its fields (from `Deserialize`) and one value of it with
+        // every optional field left out.
+        let objects: [(&str, &[&str], &dyn erased::Ser); 9] = [
+            ("match", struct_fields::<MatchRecord>(), &matched),
+            ("timing", struct_fields::<Timing>(), &Timing::default()),
+            ("hint", struct_fields::<HintRecord>(), &hint),
+            ("streak", struct_fields::<StreakRecord>(), &streak),
+            ("streak_end", struct_fields::<StreakEnd>(), &end(None)),
+            ("satellite", struct_fields::<SatelliteRecord>(), &satellite),
+            ("attitude_sigma", struct_fields::<AttitudeSigma>(), &sigma),
+            ("pixel_scale", struct_fields::<PixelScaleRecord>(), &scale),
+            ("particle", struct_fields::<ParticleRecord>(), &particle),
+        ];
+        let defs = &s["$defs"];
+        for (name, fields, value) in objects {
+            let def = &defs[name];
+            assert_eq!(keys(&def["properties"]), set(fields), "$defs/{name}");
+            assert_eq!(def["additionalProperties"], false, "$defs/{name}");
+            assert_eq!(required(def), written(value), "$defs/{name}");
+        }
+    }
+
+    /// The schema's enums are the code's sets: every `Outcome::Unsolved` reason in src/ and
+    /// both sequence modes.
+    #[test]
+    fn the_schemas_enums_are_the_codes() {
+        let s = schema();
+        let listed = |v: &serde_json::Value| -> std::collections::BTreeSet<String> {
+            v.as_array()
+                .unwrap_or_else(|| panic!("not an enum: {v}"))
+                .iter()
+                .map(|x| x.as_str().unwrap().to_string())
+                .collect()
+        };
+        let mut reasons = std::collections::BTreeSet::new();
+        let mut dirs = vec![std::path::PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/src"
+        ))];
+        while let Some(dir) = dirs.pop() {
+            for e in std::fs::read_dir(&dir).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    dirs.push(p);
+                } else if p.extension().is_some_and(|x| x == "rs") {
+                    let text = std::fs::read_to_string(&p).unwrap();
+                    for part in text.split("Unsolved(\"").skip(1) {
+                        reasons.insert(part[..part.find('"').unwrap()].to_string());
+                    }
+                }
+            }
+        }
+        assert!(reasons.contains("too_few_stars"), "{reasons:?}");
+        assert_eq!(
+            listed(&s["properties"]["reason"]["oneOf"][0]["enum"]),
+            reasons
+        );
+        assert_eq!(
+            listed(&s["properties"]["sequence_mode"]["enum"]),
+            set(&[crate::sequence::TRACKING, crate::sequence::LOST_IN_SPACE])
+        );
+        assert_eq!(
+            listed(&s["properties"]["status"]["enum"]),
+            [Status::Solved, Status::Unsolved, Status::Error]
+                .iter()
+                .map(|st| serde_json::to_value(st)
+                    .unwrap()
+                    .as_str()
+                    .unwrap()
+                    .to_string())
+                .collect()
+        );
+    }
+
+    /// Values of different types serialised alike, for the table above.
+    mod erased {
+        pub trait Ser {
+            fn value(&self) -> serde_json::Value;
+        }
+        impl<T: serde::Serialize> Ser for T {
+            fn value(&self) -> serde_json::Value {
+                serde_json::to_value(self).expect("serialises")
+            }
         }
     }
 }

@@ -10,8 +10,12 @@ every result is the command line's JSON Lines record, field for field.
         print(result.ra_deg, result.dec_deg, result.roll_deg, result.quaternion)
         print(result.matches.hip, result.matches.x, result.matches.y)
     record = result.to_dict()                      # exactly the JSONL record
+    ra, dec = result.pixel_to_sky(100.0, 200.0)    # the plate solution, distortion included
+    wcs = result.wcs()                             # astropy.wcs.WCS: what --wcs-dir writes
+    df = gpustar.read_records("out.jsonl")         # a pandas DataFrame (a list without pandas)
 
-``Solver`` is safe to share between threads; solving releases the GIL.
+``Solver`` is safe to share between threads; solving releases the GIL. The records follow
+the JSON Schema docs/record.schema.json of the repository.
 """
 
 from __future__ import annotations
@@ -67,6 +71,7 @@ __all__ = [
     "batch",
     "simulate",
     "calibrate",
+    "read_records",
     "Error",
     "InputError",
     "CatalogError",
@@ -125,7 +130,13 @@ class Result:
     frame) are numpy arrays; ``matches`` is a :class:`Matches` of arrays. Every other record
     field (``ra_deg``, ``dec_deg``, ``roll_deg``, ``fov_x_deg``, ``false_match_prob``,
     ``rmse_arcsec``, ``streaks``, ``timing_ms``, ...) is the record's value; a field this
-    record does not have is None, and a name that is no record field raises AttributeError. :meth:`to_dict` gives the record exactly.
+    record does not have is None, and a name that is no record field raises AttributeError.
+    :meth:`to_dict` gives the record exactly (docs/record.schema.json describes its fields).
+
+    A solved result also holds its plate solution: :meth:`pixel_to_sky` and
+    :meth:`sky_to_pixel` map through its camera model, :meth:`wcs` and :meth:`wcs_header`
+    give the FITS WCS ``--wcs-dir`` writes. (A record read back from JSON does not carry the
+    camera model: these raise ValueError for it.)
     """
 
     __slots__ = ("_source", "_text", "_dict")
@@ -186,6 +197,79 @@ class Result:
                                  f"{', '.join(sorted(_RECORD_FIELDS))})")
         return self._field(name)
 
+    def _solution(self, what: str) -> Any:
+        """The extension's handle of a solved result (it holds the solution's camera model),
+        None for a result that is not solved; ValueError for a solved result read back from a
+        JSON line, whose record does not carry the camera model."""
+        if not self.solved:
+            return None
+        if isinstance(self._source, str):
+            raise ValueError(
+                f"{what}: {self.file!r} is a record read back from JSON, which does not carry the "
+                "camera model of its solution; take the result from Solver.solve, solve_file, "
+                "solve_many, Sequence.add or gpustar.batch")
+        return self._source
+
+    def _solved(self, what: str) -> Any:
+        handle = self._solution(what)
+        if handle is None:
+            raise ValueError(f"{what}: {self.file!r} is {self.status}, so it has no plate solution")
+        return handle
+
+    def wcs_header(self) -> Optional[str]:
+        """The solution's FITS WCS header exactly as ``--wcs-dir`` writes it: 80-character
+        cards, TAN (TAN-SIP when the camera has distortion), ``END`` last, blank-padded to a
+        multiple of 2880 characters (the ``.wcs`` file's content). FITS pixel (1, 1) is the
+        centre of the top-left pixel (gpustar's (0, 0)). None when the result is not
+        solved."""
+        handle = self._solution("wcs_header")
+        if handle is None:
+            return None
+        text = "".join(handle.wcs_cards())
+        return text + " " * (-len(text) % 2880)
+
+    def wcs(self) -> Any:
+        """The solution's FITS WCS (the header of :meth:`wcs_header`, as ``--wcs-dir`` writes
+        it): an ``astropy.wcs.WCS`` when astropy is installed (its 0-based pixel coordinates
+        are gpustar's: (0, 0) the centre of the top-left pixel; ``pixel_shape`` is the image's
+        (width, height)), else a dict of the header's keywords and their values (``CRVAL1``,
+        ``CD1_1``, ``A_2_0``, ...; bool, int, float or str). None when the result is not
+        solved.
+
+        astropy evaluates the SIP polynomials, whose pixel-to-sky part (A, B) is a fit within
+        0.005 px of the camera model; :meth:`pixel_to_sky` and :meth:`sky_to_pixel` use the
+        camera model itself."""
+        text = self.wcs_header()
+        if text is None:
+            return None
+        try:
+            from astropy.io import fits
+            from astropy.wcs import WCS
+        except ImportError:
+            return _header_values(text)
+        header = fits.Header.fromstring(text)
+        # The image's size as a FITS image header gives it (the .wcs file is header-only):
+        # astropy then knows pixel_shape, and does not warn of a 2-axis WCS on no image.
+        header["NAXIS"] = 2
+        header.set("NAXIS1", header["IMAGEW"], "Image width, in pixels.", after="NAXIS")
+        header.set("NAXIS2", header["IMAGEH"], "Image height, in pixels.", after="NAXIS1")
+        return WCS(header)
+
+    def pixel_to_sky(self, x: Any, y: Any) -> Tuple[Any, Any]:
+        """(ra_deg, dec_deg), ICRS degrees (RA in [0, 360)), of pixel positions (x = column,
+        y = row, 0-based, (0, 0) the centre of the top-left pixel) through the solution: its
+        rotation and camera model (scale, principal point, distortion, parity), as gpustar
+        computes the matches' residuals. Numbers give floats; arrays (broadcast together)
+        give arrays of their shape. ValueError when the result is not solved."""
+        return _mapped(self._solved("pixel_to_sky").pixel_to_sky, x, y)
+
+    def sky_to_pixel(self, ra_deg: Any, dec_deg: Any) -> Tuple[Any, Any]:
+        """(x, y) pixel positions (as :meth:`pixel_to_sky` takes them) of ICRS directions
+        (degrees), through the solution; NaN for a direction behind the camera (a position
+        off the image is still given). The inverse of :meth:`pixel_to_sky`. ValueError when
+        the result is not solved."""
+        return _mapped(self._solved("sky_to_pixel").sky_to_pixel, ra_deg, dec_deg)
+
     def to_dict(self) -> dict:
         """The JSON Lines record, exactly as ``gpustar batch`` writes it (a fresh copy)."""
         return json.loads(self._line)
@@ -200,6 +284,48 @@ class Result:
             return (f"Result({r['file']!r}, solved, ra={r['ra_deg']:.4f}, dec={r['dec_deg']:.4f}, "
                     f"roll={r['roll_deg']:.3f}, {r['stars_matched']} stars)")
         return f"Result({r['file']!r}, {r['status']}, {r.get('reason') or r.get('error')!r})"
+
+
+def _mapped(convert: Callable, a: Any, b: Any) -> Tuple[Any, Any]:
+    """``convert`` (the extension's, on two 1-D float64 arrays) of numbers or arrays."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    shape = a.shape
+    p, q = convert(np.ascontiguousarray(a.ravel()), np.ascontiguousarray(b.ravel()))
+    if shape == ():
+        return float(p[0]), float(q[0])
+    return p.reshape(shape), q.reshape(shape)
+
+
+def _header_values(text: str) -> dict:
+    """The keywords of a FITS header (80-character cards) and their values: bool, int, float
+    or str (COMMENT and END left out)."""
+    values: dict = {}
+    for k in range(0, len(text), 80):
+        card = text[k:k + 80]
+        key = card[:8].strip()
+        if card[8:10] != "= " or not key:
+            continue
+        raw = card[10:].strip()
+        if raw.startswith("'"):
+            # A string: to the closing quote ('' is a quote), trailing blanks not significant.
+            end = 1
+            while True:
+                end = raw.index("'", end)
+                if raw[end + 1:end + 2] == "'":
+                    end += 2
+                    continue
+                break
+            values[key] = raw[1:end].replace("''", "'").rstrip()
+            continue
+        token = raw.split("/")[0].strip()
+        if token in ("T", "F"):
+            values[key] = token == "T"
+        else:
+            try:
+                values[key] = int(token)
+            except ValueError:
+                values[key] = float(token.replace("D", "E"))
+    return values
 
 
 def _header(epoch_time: Any, header: Optional[dict]) -> Optional[dict]:
@@ -393,12 +519,12 @@ class Batch:
         return self
 
     def __next__(self) -> Result:
-        line = self._run.next_record()
-        if line is None:
+        handle = self._run.next_record()
+        if handle is None:
             raise StopIteration
         self._done += 1
         _tick(self._progress, self._done, self.total)
-        return Result(line)
+        return Result(handle)
 
     def __len__(self) -> int:
         return self.total
@@ -470,3 +596,65 @@ def calibrate(directory: PathLike, camera: PathLike, *, fov_tolerance: Optional[
                            None if catalog is None else os.fspath(catalog), fit_k2, fixed_centre)
     d["records"] = [Result(line) for line in d["records"]]
     return d
+
+
+# The columns of gpustar's CSV records that hold JSON (an empty cell: none).
+_CSV_JSON = frozenset({"streaks", "particles", "warnings", "hint"})
+
+
+def _csv_value(column: str, text: str) -> Any:
+    """A CSV cell as the value it stands for: None (empty), JSON (the JSON columns), a bool,
+    an int, a float, or the text."""
+    if text == "":
+        return None
+    if column in _CSV_JSON:
+        return json.loads(text)
+    if text in ("true", "false"):
+        return text == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def read_records(path: PathLike, *, format: Optional[str] = None) -> Any:
+    """The records of a gpustar output file: a pandas ``DataFrame`` (one row per record, a
+    column per field; nested fields such as ``matches``, ``streaks`` and ``timing_ms`` are
+    Python lists and dicts) when pandas is installed, else a list of dicts.
+
+    ``format`` is "jsonl" (one record per line, as ``gpustar batch -o`` writes) or "csv"
+    (``--format csv``: its columns, the JSON cells of streaks, particles, warnings and hint
+    decoded); by default "csv" for a name ending in .csv, else "jsonl". Blank lines are
+    skipped; a line that is not JSON raises :class:`InputError` naming it (a last line
+    without its newline is a run that did not finish)."""
+    p = os.fspath(path)
+    if format is None:
+        format = "csv" if p.lower().endswith(".csv") else "jsonl"
+    if format not in ("jsonl", "csv"):
+        raise ConfigError(f"format: {format!r} is not one of jsonl, csv")
+    try:
+        f = open(p, encoding="utf-8", newline="" if format == "csv" else None)
+    except OSError as e:
+        raise IoError(f"cannot read records {p}: {e.strerror or e}") from None
+    with f:
+        if format == "csv":
+            import csv
+
+            rows = [{k: _csv_value(k, v) for k, v in row.items()} for row in csv.DictReader(f)]
+        else:
+            rows = []
+            for n, line in enumerate(f, 1):
+                if not line.strip():
+                    continue
+                try:
+                    rows.append(json.loads(line))
+                except json.JSONDecodeError as e:
+                    torn = "" if line.endswith("\n") else " (its last line is cut off: that run did not finish)"
+                    raise InputError(f"{p}: line {n}: not a gpustar record{torn}: {e}") from None
+    try:
+        import pandas
+    except ImportError:
+        return rows
+    return pandas.DataFrame(rows)

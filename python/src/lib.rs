@@ -1,8 +1,9 @@
 //! gpustar's Python bindings: a thin layer over the gpustar crate's library. Options become
 //! the library's `Settings` and `Solvers` (as the command line's options do), numpy arrays
 //! become `Frame`s through `Frame::from_samples`, and every record is the library's `Record`,
-//! handed to Python as its JSON line (`Record::to_json_line`), so that `to_dict()` is the
-//! command line's record exactly. The pure-Python part (python/gpustar/) wraps these.
+//! handed to Python in a `RecordHandle` whose JSON line is `Record::to_json_line`, so that
+//! `to_dict()` is the command line's record exactly (and whose solution's camera gives the
+//! WCS `--wcs-dir` writes). The pure-Python part (python/gpustar/) wraps these.
 
 use gpustar::batch::{self, RunOptions};
 use gpustar::io::array::Samples;
@@ -18,7 +19,9 @@ use gpustar::solve::detect::Detection;
 use gpustar::streaks::export::{Exports, NO_SITE};
 use gpustar::streaks::{StreakOptions, StreakSettings};
 use gpustar::{Camera, Catalog, Frame, Record, Settings};
-use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyTypeError};
 use pyo3::prelude::*;
@@ -595,6 +598,94 @@ impl RecordHandle {
             None => Ok(py.None()),
         }
     }
+
+    /// The FITS WCS header of the solution, as `--wcs-dir` writes it: its cards (80
+    /// characters each, `END` last, no padding); None for a record that is not solved.
+    fn wcs_cards(&self) -> Option<Vec<String>> {
+        let (camera, r) = self.solution()?;
+        Some(gpustar::io::wcs::wcs_header(camera, &r))
+    }
+
+    /// RA, Dec (degrees, ICRS; RA in [0, 360)) of pixels (x, y), through the solution's camera
+    /// model (distortion included); None for a record that is not solved.
+    fn pixel_to_sky<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray1<'py, f64>,
+        y: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Option<Coords<'py>>> {
+        let Some((camera, r)) = self.solution() else {
+            return Ok(None);
+        };
+        let (x, y) = (x.as_array(), y.as_array());
+        same_length(x.len(), y.len(), "x", "y")?;
+        let (ra, dec): (Vec<f64>, Vec<f64>) = x
+            .iter()
+            .zip(y.iter())
+            .map(|(&x, &y)| {
+                if !(x.is_finite() && y.is_finite()) {
+                    return (f64::NAN, f64::NAN);
+                }
+                let v = r.transpose() * camera.pixel_to_vector(x, y);
+                gpustar::catalog::vector_to_radec(&v)
+            })
+            .unzip();
+        Ok(Some((
+            PyArray1::from_vec(py, ra),
+            PyArray1::from_vec(py, dec),
+        )))
+    }
+
+    /// Pixels (x, y) of directions (RA, Dec in degrees, ICRS), through the solution's camera
+    /// model; NaN for a direction behind the camera; None for a record that is not solved.
+    fn sky_to_pixel<'py>(
+        &self,
+        py: Python<'py>,
+        ra_deg: PyReadonlyArray1<'py, f64>,
+        dec_deg: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Option<Coords<'py>>> {
+        let Some((camera, r)) = self.solution() else {
+            return Ok(None);
+        };
+        let (ra, dec) = (ra_deg.as_array(), dec_deg.as_array());
+        same_length(ra.len(), dec.len(), "ra", "dec")?;
+        let (x, y): (Vec<f64>, Vec<f64>) = ra
+            .iter()
+            .zip(dec.iter())
+            .map(|(&ra, &dec)| {
+                let v = r * gpustar::catalog::radec_to_vector(ra, dec);
+                match camera.vector_to_pixel(&v) {
+                    Some(p) if ra.is_finite() && dec.is_finite() => p,
+                    _ => (f64::NAN, f64::NAN),
+                }
+            })
+            .unzip();
+        Ok(Some((PyArray1::from_vec(py, x), PyArray1::from_vec(py, y))))
+    }
+}
+
+impl RecordHandle {
+    /// The solution's camera and rotation (ICRS into the camera frame): those `--wcs-dir`
+    /// writes the header of. None unless the record is solved.
+    fn solution(&self) -> Option<(&Camera, nalgebra::Matrix3<f64>)> {
+        let camera = self.record.camera.as_ref()?;
+        let m = self.record.rotation_matrix?;
+        Some((camera, nalgebra::Matrix3::from_fn(|i, j| m[i][j])))
+    }
+}
+
+/// Two coordinate arrays of one length: (RA, Dec) or (x, y).
+type Coords<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+
+/// `InputError` unless two coordinate arrays are of one length.
+fn same_length(a: usize, b: usize, what_a: &str, what_b: &str) -> PyResult<()> {
+    if a == b {
+        Ok(())
+    } else {
+        Err(InputError::new_err(format!(
+            "{a} {what_a} and {b} {what_b}: give one of each per point"
+        )))
+    }
 }
 
 /// Where a solver's kernels run.
@@ -797,7 +888,7 @@ impl Solver {
         fluxes: Option<PyReadonlyArray1<'_, f64>>,
         name: &str,
         epoch: Option<f64>,
-    ) -> PyResult<String> {
+    ) -> PyResult<RecordHandle> {
         let (x, y) = (x.as_array(), y.as_array());
         let n = x.len();
         let f: Vec<f64> = match &fluxes {
@@ -833,7 +924,7 @@ impl Solver {
             self.solvers
                 .solve_detections(name, (width, height), stars, epoch)
         });
-        Ok(r.to_json_line())
+        Ok(RecordHandle::new(r))
     }
 }
 
@@ -866,7 +957,7 @@ impl Sequence {
         })
     }
 
-    /// The next frame's record as a JSON line; `name`'s directory part names its sequence.
+    /// The next frame's record; `name`'s directory part names its sequence.
     #[pyo3(signature = (image, name, header=None))]
     fn add(
         &self,
@@ -874,7 +965,7 @@ impl Sequence {
         image: Bound<'_, PyAny>,
         name: &str,
         header: Option<BTreeMap<String, String>>,
-    ) -> PyResult<String> {
+    ) -> PyResult<RecordHandle> {
         let held = held(&image)?;
         let d = decoded_of(&held, name, None, header, true)?;
         // The sequence keeps frames between calls: their pixels are its own.
@@ -887,14 +978,14 @@ impl Sequence {
             let mut s = self.seq.lock().unwrap_or_else(|e| e.into_inner());
             s.next(detected)
         });
-        Ok(r.to_json_line())
+        Ok(RecordHandle::new(r))
     }
 }
 
 /// A `batch` run on a thread of its own, its records handed over in input order.
 #[pyclass(module = "gpustar._gpustar")]
 struct BatchRun {
-    records: crossbeam_channel::Receiver<String>,
+    records: crossbeam_channel::Receiver<Record>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<gpustar::Result<batch::RunSummary>>>,
     total: usize,
@@ -908,12 +999,11 @@ impl BatchRun {
         self.total
     }
 
-    /// The next record as a JSON line, or None when the run is over (then its error, if any,
-    /// is raised).
-    fn next_record(&mut self, py: Python<'_>) -> PyResult<Option<String>> {
+    /// The next record, or None when the run is over (then its error, if any, is raised).
+    fn next_record(&mut self, py: Python<'_>) -> PyResult<Option<RecordHandle>> {
         let rx = self.records.clone();
         match py.detach(move || rx.recv()) {
-            Ok(line) => Ok(Some(line)),
+            Ok(record) => Ok(Some(RecordHandle::new(record))),
             Err(_) => {
                 if let Some(t) = self.thread.take() {
                     let summary = py
@@ -1205,7 +1295,7 @@ fn start_batch(
         star_lists: None,
     };
     let stop = Arc::new(AtomicBool::new(false));
-    let (tx, rx) = crossbeam_channel::bounded::<String>(4 * b.batch_size.max(b.threads));
+    let (tx, rx) = crossbeam_channel::bounded::<Record>(4 * b.batch_size.max(b.threads));
     let solvers = b.solvers;
     let stop2 = stop.clone();
     let thread = std::thread::spawn(move || {
@@ -1220,7 +1310,7 @@ fn start_batch(
             |r, _| {
                 exports.add(r);
                 // A closed receiver (the iterator dropped) has set the stop flag.
-                let _ = tx.send(r.to_json_line());
+                let _ = tx.send(r.clone());
             },
         )?;
         if let (Some((path, order)), None, false) =

@@ -36,6 +36,7 @@ impl Solver {
                 if r.camera.k1 != self.camera.k1 {
                     rec.distortion_k1 = Some(r.camera.k1);
                 }
+                rec.camera = Some(r.camera.clone());
                 rec.stars_matched = Some(r.matches.len());
                 rec.rmse_arcsec = Some(r.rmse_arcsec);
                 rec.p90_arcsec = Some(r.p90_arcsec);
