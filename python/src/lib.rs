@@ -1249,7 +1249,7 @@ fn start_batch(
             .collect();
     gpustar::batch::claims::check_outputs(
         &gpustar::batch::claims::RunFiles {
-            dir: Some((&directory, recursive)),
+            dirs: vec![(&directory, recursive)],
             inputs: &list,
             read,
             records: output.as_deref(),
