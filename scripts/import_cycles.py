@@ -23,6 +23,7 @@ LAYERS = [
     ["sequence"],
     ["batch"],
     ["calibrate"],
+    ["report"],
     ["cli"],
     ["lib", "main", "fuzz"],
 ]

@@ -359,26 +359,39 @@ impl Solvers {
     pub fn solve_detections(
         &self,
         name: &str,
+        size: (u32, u32),
+        stars: Vec<detect::Detection>,
+        epoch: Option<f64>,
+    ) -> Record {
+        self.identify_detections(name, size, stars, epoch, 0.0).0
+    }
+
+    /// [`Solvers::solve_detections`], with the solution (None when there is no solver for
+    /// the size: the record is an error); `read_ms` is the time the stars took to read.
+    pub(crate) fn identify_detections(
+        &self,
+        name: &str,
         (width, height): (u32, u32),
         mut stars: Vec<detect::Detection>,
         epoch: Option<f64>,
-    ) -> Record {
+        read_ms: f64,
+    ) -> (Record, Option<Solution>) {
         let solver = self.get(width, height);
         let solver = match solver.as_ref() {
             Ok(s) => s,
-            Err(e) => return self.error_record(name, e.clone(), BACKEND_CPU),
+            Err(e) => return (self.error_record(name, e.clone(), BACKEND_CPU), None),
         };
         let t0 = Instant::now();
         stars.sort_by(|a, b| b.flux.total_cmp(&a.flux));
         let sol = solver.identify(stars, epoch);
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         let timing = Timing {
-            decode: 0.0,
+            decode: read_ms,
             detect: 0.0,
             identify: ms,
-            total: ms,
+            total: read_ms + ms,
         };
-        solver.record(name, &sol, timing, BACKEND_CPU)
+        (solver.record(name, &sol, timing, BACKEND_CPU), Some(sol))
     }
 
     /// A frame without a camera: its streaks through the header's WCS, its stars detected

@@ -3,7 +3,7 @@
 
 use super::{BACKEND_CPU, Solvers};
 use crate::io::fits::star_list::read_star_list;
-use crate::record::{Record, Timing};
+use crate::record::Record;
 use crate::solve::detect::Detection;
 use std::path::Path;
 use std::time::Instant;
@@ -37,7 +37,7 @@ impl Solvers {
             );
         };
         let n = list.x.len();
-        let mut stars: Vec<Detection> = (0..n)
+        let stars: Vec<Detection> = (0..n)
             .map(|i| Detection {
                 x: list.x[i],
                 y: list.y[i],
@@ -50,23 +50,9 @@ impl Solvers {
                 sigma_px: None,
             })
             .collect();
-        let decode_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let shared = self.get(width, height);
-        let solver = match shared.as_ref() {
-            Ok(s) => s,
-            Err(e) => return self.error_record(name, e.clone(), BACKEND_CPU),
-        };
-        let t1 = Instant::now();
-        stars.sort_by(|a, b| b.flux.total_cmp(&a.flux));
-        let sol = solver.identify(stars, None);
-        let ms = t1.elapsed().as_secs_f64() * 1e3;
-        let timing = Timing {
-            decode: decode_ms,
-            detect: 0.0,
-            identify: ms,
-            total: decode_ms + ms,
-        };
-        let mut r = solver.record(name, &sol, timing, BACKEND_CPU);
+        let read_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let (mut r, sol) = self.identify_detections(name, (width, height), stars, None, read_ms);
+        let Some(sol) = sol else { return r };
         if let Err(e) = self.products.write_solution(name, &sol) {
             tracing::warn!("{name}: {e:#}");
             r.warnings.push(format!("{e:#}"));

@@ -165,6 +165,11 @@ pub fn corr(sol: &Solution, r: &Refined, refs: &RefCatalog) -> Vec<u8> {
         unit,
         values: Values::F64(v),
     };
+    let plain = |name, values| Column {
+        name,
+        unit: "",
+        values,
+    };
     encode_table(
         &[
             f("field_x", "pix", fx),
@@ -175,24 +180,12 @@ pub fn corr(sol: &Solution, r: &Refined, refs: &RefCatalog) -> Vec<u8> {
             f("index_y", "pix", iy),
             f("index_ra", "deg", ira),
             f("index_dec", "deg", idec),
-            Column {
-                name: "index_id",
-                unit: "",
-                values: Values::I32(index_id),
-            },
-            Column {
-                name: "field_id",
-                unit: "",
-                values: Values::I32(field_id),
-            },
+            plain("index_id", Values::I32(index_id)),
+            plain("field_id", Values::I32(field_id)),
             f("FLUX", "adu", flux),
             f("MAG", "mag", mag),
             f("RESIDUAL_ARCSEC", "arcsec", residual),
-            Column {
-                name: "CATALOG_ID",
-                unit: "",
-                values: Values::Text(ids),
-            },
+            plain("CATALOG_ID", Values::Text(ids)),
         ],
         &[
             card_str("RADESYS", "ICRS", "catalog positions"),
