@@ -431,10 +431,10 @@ pub struct SolveOpts {
     /// rows are taken as brightest first); the image size from IMAGEW/IMAGEH in the header or
     /// --image-size. Solved on the CPU; --wcs-dir and --corr are written, products that need
     /// pixels are not. A folder given to batch gives its .xyls, .axy and .fits files.
-    #[arg(long, help_heading = "Input")]
+    #[arg(long, help_heading = "Input", hide_short_help = true)]
     pub xyls: bool,
     /// With --xyls: the image size of star lists whose header states none.
-    #[arg(long, value_name = "WxH", value_parser = parse_size, help_heading = "Input")]
+    #[arg(long, value_name = "WxH", value_parser = parse_size, help_heading = "Input", hide_short_help = true)]
     pub image_size: Option<(u32, u32)>,
     /// Write each solved frame with its WCS in its header into DIR (solve-field's .new).
     ///
@@ -449,14 +449,24 @@ pub struct SolveOpts {
     /// solve-field's columns (field_x, field_y, field_ra, field_dec, index_x, index_y,
     /// index_ra, index_dec, index_id, field_id, FLUX) and MAG, RESIDUAL_ARCSEC, CATALOG_ID;
     /// pixels 1-based, as astrometry.net's.
-    #[arg(long, value_name = "DIR", help_heading = "Output")]
+    #[arg(
+        long,
+        value_name = "DIR",
+        help_heading = "Output",
+        hide_short_help = true
+    )]
     pub corr: Option<PathBuf>,
     /// Write each readable frame's detections into DIR as a FITS table (solve-field's .axy).
     ///
     /// Write each readable frame's detections into DIR as x.axy, a FITS table of X, Y (FITS
     /// pixels, 1-based), FLUX, PEAK, AREA, SIGMA_PX and SATURATED, brightest first, with
     /// IMAGEW and IMAGEH in its header (what solve-field needs to solve a star list).
-    #[arg(long, value_name = "DIR", help_heading = "Output")]
+    #[arg(
+        long,
+        value_name = "DIR",
+        help_heading = "Output",
+        hide_short_help = true
+    )]
     pub axy: Option<PathBuf>,
     /// Refuse frames of more pixels than this, from their headers (a small compressed file can
     /// decode to gigabytes); raise it for larger plate scans.
