@@ -87,3 +87,20 @@ def test_new_fits_corr_and_axy_read_by_astropy(sky, tmp_path):
     xy = np.array([[0.0, 0.0], [511.0, 383.0], [100.5, 250.25]])
     assert np.allclose(result.wcs().all_pix2world(xy, 0), new.all_pix2world(xy, 0),
                        rtol=0, atol=1e-9)
+
+
+def test_stvid_cubes_are_read_as_their_mean_plane(sky, tmp_path):
+    """stvid writes each 100-frame buffer as a float32 cube of four planes (mean, spread,
+    maximum, the maximum's frame number: np.array([zavg, zstd, zmax, znum]))."""
+    mean = fits.getdata(sky / "plain" / "f1.fits").astype(np.float32)
+    rng = np.random.default_rng(5)
+    cube = np.array([mean, np.sqrt(mean) + 1, mean * 1.3 + 50,
+                     rng.integers(0, 100, mean.shape)]).astype(np.float32)
+    d = tmp_path / "stvid"
+    d.mkdir()
+    fits.PrimaryHDU(cube).writeto(d / "2024-07-30T22:44:36.123.fits")
+    [r] = batch(d)
+    [plain] = [x for x in batch(sky / "plain") if x["file"] == "f1.fits"]
+    assert r["status"] == "solved", r
+    assert any("cube" in w and "first plane" in w for w in r["warnings"]), r["warnings"]
+    assert abs(r["ra_deg"] - plain["ra_deg"]) < 1e-3 and abs(r["dec_deg"] - plain["dec_deg"]) < 1e-3
