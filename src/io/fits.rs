@@ -32,6 +32,7 @@ use fitsrs::hdu::header::Header;
 use fitsrs::hdu::header::extension::image::Image;
 use std::collections::BTreeMap;
 
+mod bintable;
 mod cards;
 pub mod copy;
 mod pixels;

@@ -12,11 +12,11 @@
 //! tile decompression, tried on astropy-written files, dropped a row of 16-bit RICE images,
 //! misplaced square tiles, failed on GZIP and panicked on 64-bit floats.
 
+use super::BLOCK;
+use super::bintable::{Cards, Column, columns};
 use super::rice::rice;
-use super::scan::{Scan, ascii, value_field};
-use super::{BLOCK, CARD};
+use super::scan::Scan;
 use crate::error::{Result, error, fail};
-use std::collections::HashMap;
 use std::io::Read;
 
 /// The plain FITS file (primary header as it is, then an IMAGE extension) holding the image a
@@ -83,59 +83,6 @@ pub(crate) fn expand(
     let note = (z.naxes.len() > 2 && z.naxes[2..].iter().any(|&n| n > 1))
         .then(|| format!("{what} is a cube ({:?}): its first plane was read", z.naxes));
     Ok((out, note))
-}
-
-/// The cards of a header in order (key, the 80 bytes), and their values by key.
-struct Cards<'a> {
-    list: Vec<(String, &'a [u8])>,
-    values: HashMap<String, String>,
-}
-
-impl<'a> Cards<'a> {
-    fn read(bytes: &'a [u8], scan: &Scan) -> Cards<'a> {
-        let mut list = Vec::new();
-        let mut values = HashMap::new();
-        for card in bytes[scan.start..scan.data_start.min(bytes.len())].chunks_exact(CARD) {
-            let key = ascii(card[..8].trim_ascii());
-            if key == "END" {
-                break;
-            }
-            if card[8..10] == *b"= " {
-                values.insert(key.clone(), value_field(&card[10..]));
-            }
-            list.push((key, card));
-        }
-        Cards { list, values }
-    }
-
-    fn text(&self, key: &str) -> Option<String> {
-        let v = self.values.get(key)?;
-        Some(match v.strip_prefix('\'') {
-            Some(s) => s.split('\'').next().unwrap_or("").trim().to_string(),
-            None => v.clone(),
-        })
-    }
-
-    fn int(&self, key: &str, what: &str) -> Result<Option<i64>> {
-        match self.values.get(key) {
-            None => Ok(None),
-            Some(v) => v
-                .parse()
-                .map(Some)
-                .map_err(|_| error!(Input, "{what}: {key} = {v} is not an integer")),
-        }
-    }
-
-    fn real(&self, key: &str, what: &str) -> Result<Option<f64>> {
-        match self.values.get(key) {
-            None => Ok(None),
-            Some(v) => v
-                .replace(['D', 'd'], "E")
-                .parse()
-                .map(Some)
-                .map_err(|_| error!(Input, "{what}: {key} = {v} is not a number")),
-        }
-    }
 }
 
 /// Keywords of the table that describe the compression, not the image: left out of the
@@ -332,16 +279,6 @@ impl Compressed {
     }
 }
 
-/// A column's place in a row and its element type.
-#[derive(Clone, Copy)]
-struct Column {
-    offset: usize,
-    /// 'P' or 'Q' (array descriptors) or the scalar type letter.
-    kind: u8,
-    /// Bytes per element of the array (descriptors) or of the scalar.
-    element: usize,
-}
-
 /// The columns of the compressed table that hold a tile's data and parameters.
 struct Columns {
     row_bytes: usize,
@@ -357,79 +294,9 @@ struct Columns {
 
 impl Columns {
     fn read(cards: &Cards, table: &Scan, what: &str) -> Result<Columns> {
-        let fields = cards.int("TFIELDS", what)?.unwrap_or(0);
-        if !(1..=999).contains(&fields) {
-            fail!(Input, "{what}: TFIELDS = {fields}");
-        }
-        let mut offset = 0usize;
-        let mut found: HashMap<String, Column> = HashMap::new();
-        for n in 1..=fields {
-            let form = cards.text(&format!("TFORM{n}")).unwrap_or_default();
-            let bad = || error!(Input, "{what}: TFORM{n} = {form:?} is not read");
-            let digits = form.bytes().take_while(u8::is_ascii_digit).count();
-            let repeat: usize = if digits == 0 {
-                1
-            } else {
-                form[..digits].parse().map_err(|_| bad())?
-            };
-            let letter = *form.as_bytes().get(digits).ok_or_else(bad)?;
-            let size = |t: u8| -> Option<usize> {
-                Some(match t {
-                    b'L' | b'B' | b'A' => 1,
-                    b'I' => 2,
-                    b'J' | b'E' => 4,
-                    b'K' | b'D' | b'C' => 8,
-                    b'M' => 16,
-                    _ => return None,
-                })
-            };
-            let (width, column) = match letter {
-                b'P' | b'Q' => {
-                    let t = *form.as_bytes().get(digits + 1).ok_or_else(bad)?;
-                    let element = size(t).ok_or_else(bad)?;
-                    let d = if letter == b'P' { 8 } else { 16 };
-                    (
-                        d * repeat,
-                        Column {
-                            offset,
-                            kind: letter,
-                            element,
-                        },
-                    )
-                }
-                b'X' => (
-                    repeat.div_ceil(8),
-                    Column {
-                        offset,
-                        kind: b'X',
-                        element: 1,
-                    },
-                ),
-                t => {
-                    let s = size(t).ok_or_else(bad)?;
-                    (
-                        s.checked_mul(repeat).ok_or_else(bad)?,
-                        Column {
-                            offset,
-                            kind: t,
-                            element: s,
-                        },
-                    )
-                }
-            };
-            if let Some(name) = cards.text(&format!("TTYPE{n}")) {
-                found.insert(name.to_ascii_uppercase(), column);
-            }
-            offset = offset.checked_add(width).ok_or_else(bad)?;
-        }
+        let found = columns(cards, table, what)?;
         let row_bytes = table.naxis[0] as usize;
         let rows = table.naxis[1] as usize;
-        if offset != row_bytes {
-            fail!(
-                Input,
-                "{what}: the columns take {offset} bytes a row, NAXIS1 says {row_bytes}"
-            );
-        }
         let main = row_bytes * rows;
         let heap = cards.int("THEAP", what)?.unwrap_or(main as i64);
         let data_len = table.data_len as usize;
