@@ -1,4 +1,7 @@
 //! Argument types shared by the commands, with the range parsers that refuse bad values.
+//!
+//! Over 700 lines on purpose: each option's short and long help lives on its field (clap
+//! derive), so `--help-all` and the code cannot drift apart; the text is most of the file.
 
 use clap::{Args, Subcommand};
 use gpustar::catalog::DoubleStars;
