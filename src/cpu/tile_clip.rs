@@ -33,30 +33,37 @@ pub const BODY_OFFSETS: u32 = 4;
 /// The sky about each tile: the lower medians of the backgrounds and of the offsets of the
 /// tiles within [`CLIP_REACH`] (those inside the frame). Kernel 1 of the stage.
 pub fn tile_clip_sky(tiles: &[TileStats], p: &DetectParams) -> Vec<TileStats> {
+    let mut scratch = Scratch::default();
+    (0..p.tiles_y as i32)
+        .flat_map(|y| (0..p.tiles_x as i32).map(move |x| (x, y)))
+        .map(|(x, y)| sky_about(tiles, p, x, y, &mut scratch))
+        .collect()
+}
+
+#[derive(Default)]
+struct Scratch {
+    bg: Vec<u32>,
+    off: Vec<u32>,
+}
+
+/// The sky about tile (x, y): [`tile_clip_sky`]'s value for it.
+fn sky_about(tiles: &[TileStats], p: &DetectParams, x: i32, y: i32, s: &mut Scratch) -> TileStats {
     let (tx, ty) = (p.tiles_x as i32, p.tiles_y as i32);
-    let mut out = Vec::with_capacity(tiles.len());
-    let mut bg = Vec::with_capacity(49);
-    let mut off = Vec::with_capacity(49);
-    for y in 0..ty {
-        for x in 0..tx {
-            bg.clear();
-            off.clear();
-            for ny in (y - CLIP_REACH).max(0)..=(y + CLIP_REACH).min(ty - 1) {
-                for nx in (x - CLIP_REACH).max(0)..=(x + CLIP_REACH).min(tx - 1) {
-                    let t = tiles[(ny * tx + nx) as usize];
-                    bg.push(t.background);
-                    off.push(t.offset);
-                }
-            }
-            bg.sort_unstable();
-            off.sort_unstable();
-            out.push(TileStats {
-                background: bg[(bg.len() - 1) / 2],
-                offset: off[(off.len() - 1) / 2],
-            });
+    s.bg.clear();
+    s.off.clear();
+    for ny in (y - CLIP_REACH).max(0)..=(y + CLIP_REACH).min(ty - 1) {
+        for nx in (x - CLIP_REACH).max(0)..=(x + CLIP_REACH).min(tx - 1) {
+            let t = tiles[(ny * tx + nx) as usize];
+            s.bg.push(t.background);
+            s.off.push(t.offset);
         }
     }
-    out
+    // The lower median by selection: the value sorting would put there, in linear time.
+    let k = (s.bg.len() - 1) / 2;
+    TileStats {
+        background: *s.bg.select_nth_unstable(k).1,
+        offset: *s.off.select_nth_unstable(k).1,
+    }
 }
 
 /// Whether a tile's level stands more than [`CLIP_OFFSETS`] of its sky's offsets above its
@@ -98,9 +105,48 @@ pub fn tile_clip_with(tiles: &[TileStats], sky: &[TileStats], p: &DetectParams) 
     out
 }
 
-/// The stage: [`tile_clip_sky`], then [`tile_clip_with`].
+/// The stage: the tiles [`tile_clip_with`] makes of [`tile_clip_sky`]'s, with the sky taken
+/// only about the tiles that could use it. Every tile's sky is at least the frame's least
+/// background and least offset (a lower median of values no lower), so a tile whose level is
+/// within that least sky's clip bound neither stands out nor is a body; on a star field that is
+/// nearly every tile, and the 49-tile medians were a fifth of a frame's CPU time.
 pub fn tile_clip(tiles: &[TileStats], p: &DetectParams) -> Vec<TileStats> {
-    tile_clip_with(tiles, &tile_clip_sky(tiles, p), p)
+    let (tx, ty) = (p.tiles_x as i32, p.tiles_y as i32);
+    let at = |x: i32, y: i32| (y * tx + x) as usize;
+    let least = TileStats {
+        background: tiles.iter().map(|t| t.background).min().unwrap_or(0),
+        offset: tiles.iter().map(|t| t.offset).min().unwrap_or(0),
+    };
+    let clip_bound = least.background + (1 + CLIP_OFFSETS) * least.offset;
+    let body_bound = least.background + BODY_OFFSETS * least.offset;
+    let mut sky: Vec<Option<TileStats>> = vec![None; tiles.len()];
+    let mut scratch = Scratch::default();
+    let mut sky_at = |x: i32, y: i32| {
+        *sky[at(x, y)].get_or_insert_with(|| sky_about(tiles, p, x, y, &mut scratch))
+    };
+    let mut out = tiles.to_vec();
+    for y in 0..ty {
+        for x in 0..tx {
+            let t = tiles[at(x, y)];
+            if t.background + t.offset <= clip_bound || !stands_out(t, sky_at(x, y)) {
+                continue;
+            }
+            let mut near_body = false;
+            'around: for ny in (y - 1).max(0)..=(y + 1).min(ty - 1) {
+                for nx in (x - 1).max(0)..=(x + 1).min(tx - 1) {
+                    let n = tiles[at(nx, ny)];
+                    if n.background > body_bound && body(n, sky_at(nx, ny)) {
+                        near_body = true;
+                        break 'around;
+                    }
+                }
+            }
+            if near_body {
+                out[at(x, y)] = sky_at(x, y);
+            }
+        }
+    }
+    out
 }
 
 /// The tiles detection thresholds against, as the GPU leaves them: [`tile_stats`] of the
@@ -112,6 +158,41 @@ pub fn clipped_tile_stats(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn the_stage_takes_the_sky_only_where_needed_and_gives_what_both_kernels_give() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut clipped = 0;
+        for case in 0..200 {
+            let (tx, ty) = (rng.random_range(1..12), rng.random_range(1..10));
+            let p = params(tx, ty);
+            // Sky with a gradient, scattered stars, bodies and flat (offset 0) tiles.
+            let tiles: Vec<TileStats> = (0..tx * ty)
+                .map(|i| {
+                    let sky = 1000 + 15 * (i % tx) + rng.random_range(0..20);
+                    match rng.random_range(0..10) {
+                        0 => TileStats {
+                            background: sky + rng.random_range(0..40000),
+                            offset: rng.random_range(0..2000),
+                        },
+                        1 if case % 3 == 0 => TileStats {
+                            background: rng.random_range(0..70000),
+                            offset: 0,
+                        },
+                        _ => TileStats {
+                            background: sky,
+                            offset: rng.random_range(20..40),
+                        },
+                    }
+                })
+                .collect();
+            let want = tile_clip_with(&tiles, &tile_clip_sky(&tiles, &p), &p);
+            assert_eq!(tile_clip(&tiles, &p), want, "case {case}");
+            clipped += usize::from(want != tiles);
+        }
+        assert!(clipped > 20, "only {clipped} cases clip a tile");
+    }
 
     fn params(tx: u32, ty: u32) -> DetectParams {
         DetectParams::new(tx * 32, ty * 32, 32, 5.0, 65535)
