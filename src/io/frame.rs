@@ -409,18 +409,13 @@ fn read_grey_png(
             "cannot decode {shown}: the image is {w}x{h}, too large"
         )
     })?;
-    let mut buf = Vec::new();
-    if buf
-        .try_reserve_exact(size + 2 * (w as usize) * (h as usize))
-        .is_err()
-    {
-        fail!(
+    let no_memory = || {
+        error!(
             Input,
             "cannot decode {shown}: not enough memory for a {w}x{h} image"
-        );
-    }
-    buf.resize(size, 0);
-    reader.next_frame(&mut buf).map_err(|e| match e {
+        )
+    };
+    let decode_error = |e| match e {
         png::DecodingError::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
             error!(
                 Input,
@@ -428,16 +423,26 @@ fn read_grey_png(
             )
         }
         e => error!(Input, "cannot decode {shown}: {e}"),
-    })?;
+    };
     let (pixels, saturation) = if depth == png::BitDepth::Eight {
+        let mut buf = Vec::new();
+        buf.try_reserve_exact(size + 2 * (w as usize) * (h as usize))
+            .map_err(|_| no_memory())?;
+        buf.resize(size, 0);
+        reader.next_frame(&mut buf).map_err(decode_error)?;
         (buf.into_iter().map(u16::from).collect::<Vec<u16>>(), 255)
     } else {
-        (
-            buf.chunks_exact(2)
-                .map(|b| u16::from_be_bytes([b[0], b[1]]))
-                .collect(),
-            u16::MAX,
-        )
+        // Decoded into the pixels' own bytes and swapped in place: no second buffer.
+        let mut px: Vec<u16> = Vec::new();
+        px.try_reserve_exact(size / 2).map_err(|_| no_memory())?;
+        px.resize(size / 2, 0);
+        reader
+            .next_frame(bytemuck::cast_slice_mut(&mut px))
+            .map_err(decode_error)?;
+        for v in &mut px {
+            *v = u16::from_be(*v);
+        }
+        (px, u16::MAX)
     };
     Ok(Some(Frame {
         width: w,
