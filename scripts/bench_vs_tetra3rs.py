@@ -1,19 +1,20 @@
 #!/usr/bin/env python3
-"""Benchmark gpustar against tetra3rs side by side on the same frames: whole-process wall time.
+"""Benchmark gpustar against tetra3rs side by side on the same frames: whole-process CPU and wall time.
 
     scripts/bench_vs_tetra3rs.py --db DB [--gpustar target/release/gpustar]
-        [--t3bench bench/tetra3rs/target/release/t3bench] [--rounds 2] [--threads-all N]
+        [--t3bench target/release/t3bench] [--rounds 5] [--threads-all N]
         [--known-fov-error 0.01] [--t3-extractor default|fast] [--backend auto|cpu|gpu]
         [--out /tmp/bench_vs_tetra3rs] SET [SET ...]
 
     SET is DIR (known field: DIR/camera.toml) or DIR:LOW..HIGH (unknown field between LOW and
-    HIGH degrees). DIR is a set written by scripts/sim_frames.py: images, DIR/camera.toml and
-    DIR/truth.jsonl (per frame: file, ra_deg, dec_deg, ...).
+    HIGH degrees). DIR is a set written by scripts/sim_frames.py (FITS or 16-bit PNG), or
+    rewritten by scripts/convert_set.py (8- or 16-bit PNG by PIL or OpenCV, JPEG): images,
+    DIR/camera.toml and DIR/truth.jsonl (per frame: file, ra_deg, dec_deg, ...).
 
 Example (the database is built once, outside the repository):
 
-    (cd bench/tetra3rs && cargo build --release)
-    bench/tetra3rs/target/release/t3bench db --hip2 hip2.dat --min-fov-deg 8 --max-fov-deg 20 \\
+    (cd bench/tetra3rs && cargo build --release)   # into target/ (the repository's .cargo/config.toml)
+    target/release/t3bench db --hip2 hip2.dat --min-fov-deg 8 --max-fov-deg 20 \\
         --epoch 2025 -o /tmp/t3_hip_8-20.db
     python3 scripts/sim_frames.py --out /tmp/sets/f18 -n 200 --fov-deg 18 --seed 11
     scripts/bench_vs_tetra3rs.py --db /tmp/t3_hip_8-20.db /tmp/sets/f18 /tmp/sets/f18:8..20
@@ -30,10 +31,14 @@ What runs, per set and per thread count (1, and --threads-all, default os.cpu_co
   * Before the timed rounds, one untimed warm-up of each on the first frame (gpustar builds
     and caches its distance table then, as on any machine that has solved before; both get
     the frames and database into the page cache).
-  * --rounds R rounds, interleaved (gpustar, tetra3rs, gpustar, tetra3rs, ...). Each time is
-    time.perf_counter() around the whole subprocess: process start, catalog or database
-    load, decoding, detection, identification, writing the records. The best (shortest) of
-    the rounds counts; the records scored are those of that round.
+  * --rounds R rounds, interleaved (gpustar, tetra3rs, gpustar, tetra3rs, ...). Each round
+    measures the whole subprocess: process start, catalog or database load, decoding,
+    detection, identification, writing the records; its CPU time (user + system, from
+    os.times() of the waited-for child) and its wall time (time.perf_counter()). The median
+    of the rounds counts, CPU time first: wall time on a shared machine swings 2x while CPU
+    time moves little. The records scored are those of the round with the median CPU time.
+  * Per stage, from the records of that round: the median over frames of gpustar's
+    timing_ms (decode, detect, identify) and of t3bench's decode_ms, extract_ms, solve_ms.
 
 Scoring against DIR/truth.jsonl (the same for both): a frame is solved when gpustar's
 `status` is "solved" or t3bench's `solved` is true; a solution is wrong when its boresight
@@ -43,9 +48,10 @@ is more than 0.1 deg from the true one. Availability = solved / frames
 is over the solutions that are not wrong.
 
 Prints a markdown table (also written to OUT/report.md, with every record and time in
-OUT/results.json): per set and thread count, frames, images/s of each, the ratio (gpustar
-images/s / tetra3rs images/s; above 1 means gpustar is faster), availability, wrong
-solutions and median boresight error of each. Exits non-zero when a run fails (a solver
+OUT/results.json): per set and thread count, frames, CPU ms a frame of each and their ratio
+(tetra3rs CPU / gpustar CPU; above 1 means gpustar is faster), the same ratio of wall times,
+images/s by wall time, availability, wrong solutions and median boresight error of each; then
+the per-stage medians. Exits non-zero when a run fails (a solver
 exits with an error, or its records do not cover exactly the frames of truth.jsonl).
 
 Uses only the Python standard library.
@@ -135,6 +141,20 @@ def run_timed(cmd, stdout_path=None):
 
 class RunFailed(Exception):
     pass
+
+
+STAGES = {"gpustar": (("timing_ms", "decode"), ("timing_ms", "detect"), ("timing_ms", "identify")),
+          "tetra3rs": ((None, "decode_ms"), (None, "extract_ms"), (None, "solve_ms"))}
+
+
+def stage_medians(name, records):
+    """Median over frames of each stage's milliseconds: decode, detect/extract, identify/solve."""
+    out = []
+    for group, key in STAGES[name]:
+        vals = [(r.get(group) or {}).get(key) if group else r.get(key) for r in records]
+        vals = [v for v in vals if isinstance(v, (int, float))]
+        out.append(statistics.median(vals) if vals else None)
+    return out
 
 
 def parse_set(spec):
@@ -254,22 +274,30 @@ def bench_set(args, frames, field, threads, work):
             print(f", tetra3rs {wall:.3f} s", flush=True)
 
         row = {"set": str(frames), "field": desc, "threads": T, "frames": len(truth_files)}
+        n = len(truth_files)
         for name, solved_fn in (("gpustar", gpustar_solved), ("tetra3rs", t3_solved)):
-            best = min(runs[name], key=lambda r: r["wall_s"])
-            s = score(best["records"], truth, solved_fn)
+            # The round with the median CPU time (the lower middle one for an even count).
+            by_cpu = sorted(runs[name], key=lambda r: r["cpu_s"])
+            mid = by_cpu[(len(by_cpu) - 1) // 2]
+            wall = statistics.median(r["wall_s"] for r in runs[name])
+            cpu = statistics.median(r["cpu_s"] for r in runs[name])
+            s = score(mid["records"], truth, solved_fn)
             availabilities = sorted({score(r["records"], truth, solved_fn)["solved"] for r in runs[name]})
             row[name] = {
-                "wall_s": best["wall_s"], "walls_s": [r["wall_s"] for r in runs[name]],
-                "cpu_s": best["cpu_s"],
-                "images_per_s": len(truth_files) / best["wall_s"],
-                "availability": s["solved"] / len(truth_files), **s,
-                "solved_counts_over_rounds": availabilities, "records_file": best["out"],
+                "wall_s": wall, "walls_s": [r["wall_s"] for r in runs[name]],
+                "cpu_s": cpu, "cpus_s": [r["cpu_s"] for r in runs[name]],
+                "cpu_ms_per_frame": 1e3 * cpu / n, "wall_ms_per_frame": 1e3 * wall / n,
+                "images_per_s": n / wall,
+                "availability": s["solved"] / n, **s,
+                "stages_ms": stage_medians(name, mid["records"]),
+                "solved_counts_over_rounds": availabilities, "records_file": mid["out"],
             }
             if name == "gpustar":
-                row[name]["backends"] = sorted({str(r.get("backend")) for r in best["records"]})
+                row[name]["backends"] = sorted({str(r.get("backend")) for r in mid["records"]})
             else:
-                row[name]["summary"] = best["summary"]
-        row["ratio"] = row["gpustar"]["images_per_s"] / row["tetra3rs"]["images_per_s"]
+                row[name]["summary"] = mid["summary"]
+        row["ratio_cpu"] = row["tetra3rs"]["cpu_s"] / row["gpustar"]["cpu_s"]
+        row["ratio"] = row["tetra3rs"]["wall_s"] / row["gpustar"]["wall_s"]
         rows.append(row)
     return rows
 
@@ -283,21 +311,32 @@ def fmt_err(v):
 
 
 def report(args, rows, notes):
-    lines = [f"## gpustar vs tetra3rs: whole-process wall time, best of {args.rounds} interleaved "
+    lines = [f"## gpustar vs tetra3rs: whole process, median of {args.rounds} interleaved "
              f"round(s)", ""]
-    lines += ["| set | field | threads | frames | gpustar img/s | tetra3rs img/s | ratio | "
+    lines += ["| set | field | threads | frames | gpustar CPU ms/frame | tetra3rs CPU ms/frame | "
+              "CPU ratio | wall ratio | gpustar img/s | tetra3rs img/s | "
               "gpustar avail | tetra3rs avail | gpustar wrong | tetra3rs wrong | "
               "gpustar median err \" | tetra3rs median err \" |",
-              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         g, t = r["gpustar"], r["tetra3rs"]
         lines.append(
             f"| {Path(r['set']).name} | {r['field']} | {r['threads']} | {r['frames']} "
-            f"| {g['images_per_s']:.1f} | {t['images_per_s']:.1f} | {r['ratio']:.3g}x "
+            f"| {g['cpu_ms_per_frame']:.2f} | {t['cpu_ms_per_frame']:.2f} | {r['ratio_cpu']:.2f}x "
+            f"| {r['ratio']:.2f}x | {g['images_per_s']:.1f} | {t['images_per_s']:.1f} "
             f"| {100 * g['availability']:.1f}% | {100 * t['availability']:.1f}% "
             f"| {g['wrong']} | {t['wrong']} | {fmt_err(g['median_err_arcsec'])} "
             f"| {fmt_err(t['median_err_arcsec'])} |")
-    lines += ["", "ratio = gpustar images/s ÷ tetra3rs images/s (above 1: gpustar faster). "
+    ms = lambda v: "–" if v is None else f"{v:.2f}"
+    lines += ["", "Per stage, ms a frame (median over the frames of the median round): gpustar decode / "
+              "detect / identify; tetra3rs decode / extract / solve.", "",
+              "| set | threads | gpustar | tetra3rs |", "|---|---:|---|---|"]
+    for r in rows:
+        g, t = r["gpustar"]["stages_ms"], r["tetra3rs"]["stages_ms"]
+        lines.append(f"| {Path(r['set']).name} | {r['threads']} | {' / '.join(map(ms, g))} "
+                     f"| {' / '.join(map(ms, t))} |")
+    lines += ["", "CPU ratio = tetra3rs CPU time ÷ gpustar CPU time, wall ratio the same of wall "
+              "time (above 1: gpustar faster); img/s by median wall time. "
               f"avail = solved / frames; wrong = solved with the boresight or the roll more than "
               f"{TOL_DEG}° from truth; median err = median boresight error of the solutions that are not "
               "wrong.", "", "Notes:"]
@@ -313,10 +352,10 @@ def main():
                     help="DIR (known field, DIR/camera.toml) or DIR:LOW..HIGH (unknown field, deg)")
     ap.add_argument("--gpustar", type=Path, default=REPO / "target/release/gpustar",
                     help="gpustar binary (cargo build --release)")
-    ap.add_argument("--t3bench", type=Path, default=REPO / "bench/tetra3rs/target/release/t3bench",
+    ap.add_argument("--t3bench", type=Path, default=REPO / "target/release/t3bench",
                     help="t3bench binary (cd bench/tetra3rs && cargo build --release)")
     ap.add_argument("--db", type=Path, required=True, help="tetra3 database (t3bench db ...)")
-    ap.add_argument("--rounds", type=int, default=2, help="interleaved rounds; best counts (2)")
+    ap.add_argument("--rounds", type=int, default=5, help="interleaved rounds; the median counts (5)")
     ap.add_argument("--threads-all", type=int, default=os.cpu_count() or 1,
                     help="the 'all threads' count (default os.cpu_count())")
     ap.add_argument("--known-fov-error", type=float, default=0.01,
@@ -408,9 +447,9 @@ def main():
                              f"solved count differed between rounds: {x['solved_counts_over_rounds']}.")
         notes.append(f"{Path(r['set']).name} {r['field']} {r['threads']} thread(s): wall seconds per "
                      f"round gpustar {', '.join(f'{w:.3f}' for w in g['walls_s'])}, tetra3rs "
-                     f"{', '.join(f'{w:.3f}' for w in t['walls_s'])}; CPU seconds of the best round "
-                     f"gpustar {g['cpu_s']:.3f} ({g['cpu_s'] / g['wall_s']:.2f} cores busy), tetra3rs "
-                     f"{t['cpu_s']:.3f} ({t['cpu_s'] / t['wall_s']:.2f} cores busy).")
+                     f"{', '.join(f'{w:.3f}' for w in t['walls_s'])}; CPU seconds per round "
+                     f"gpustar {', '.join(f'{c:.3f}' for c in g['cpus_s'])}, tetra3rs "
+                     f"{', '.join(f'{c:.3f}' for c in t['cpus_s'])}.")
     for f in failed:
         notes.append(f"**FAILED**: {f}".replace("\n", "\n  "))
 

@@ -12,7 +12,7 @@
 //! for everything but the FOV range and the proper-motion epoch) and saves it.
 //!
 //! `solve` loads the database, then for every image in DIR (sorted by name; `.fits`, `.fit`,
-//! `.fts`, `.png`; other files are skipped) decodes it, extracts centroids with tetra3's own
+//! `.fts`, `.png`, `.jpg`/`.jpeg`; other files are skipped) decodes it, extracts centroids with tetra3's own
 //! extractor and calls `solve_from_centroids`. One JSON line per frame on stdout, in file
 //! order; a summary line on stderr. A frame that cannot be read or solved gets
 //! `"solved": false` (and an `"error"` when it could not be read); nothing panics on a bad
@@ -35,7 +35,7 @@ usage:
       Build a tetra3 database from Hipparcos hip2.dat (tetra3's defaults otherwise) and save it.
   t3bench solve --db DB --fov-deg F [--fov-max-error-deg E] [--threads N]
                 [--extractor default|fast] [--limit N] DIR
-      Solve every image in DIR (FITS, PNG; sorted by name). One JSON line per frame on stdout,
+      Solve every image in DIR (FITS, PNG, JPEG; sorted by name). One JSON line per frame on stdout,
       a summary on stderr. --fov-max-error-deg: the solver sweeps and filters F +- E (default:
       none, tetra3's default). --threads: frames spread over N threads (default 1).
       --extractor: tetra3's default CCL extractor (default) or extract_centroids_fast.
@@ -382,6 +382,7 @@ fn list_images(dir: &Path) -> Result<Vec<String>, String> {
 enum Kind {
     Fits,
     Png,
+    Jpeg,
 }
 
 fn kind_of(name: &str) -> Option<Kind> {
@@ -390,6 +391,8 @@ fn kind_of(name: &str) -> Option<Kind> {
         Some(Kind::Fits)
     } else if lower.ends_with(".png") {
         Some(Kind::Png)
+    } else if lower.ends_with(".jpg") || lower.ends_with(".jpeg") {
+        Some(Kind::Jpeg)
     } else {
         None
     }
@@ -431,7 +434,7 @@ fn solve_frame_inner(
     let t0 = Instant::now();
     let decoded = match kind_of(name) {
         Some(Kind::Fits) => read_fits(path).map(Pixels::Raw),
-        Some(Kind::Png) => image::ImageReader::open(path)
+        Some(Kind::Png | Kind::Jpeg) => image::ImageReader::open(path)
             .map_err(|e| e.to_string())
             .and_then(|r| r.with_guessed_format().map_err(|e| e.to_string()))
             .and_then(|r| r.decode().map_err(|e| e.to_string()))
