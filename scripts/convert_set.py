@@ -2,7 +2,7 @@
 """Rewrite a simulated set (scripts/sim_frames.py, FITS) in another image format, through
 encoders that are not gpustar's or the `png` crate's: the formats archives hold.
 
-    python3 scripts/convert_set.py SRC DST --to png8|png16|jpeg [--encoder pil|opencv]
+    python3 scripts/convert_set.py SRC DST --to png8|png16|jpeg|tiff16 [--encoder pil|opencv]
         [--quality 90]
 
 SRC holds frame_NNNN.fits, camera.toml and truth.jsonl (scripts/sim_frames.py --format fits);
@@ -15,6 +15,7 @@ benchmarks score the new set against the same truth.
   frame is mapped linearly so that its sky (median) sits at 12 counts and its noise (1.4826 x the
   median absolute deviation) is 2.5 counts; stars saturate at 255. jpeg is written by PIL
   (libjpeg) at --quality (default 90), greyscale, no chroma.
+- tiff16: the 16-bit values unchanged, uncompressed, by PIL (or OpenCV: LZW).
 
 Needs numpy, astropy, pillow; opencv-python-headless for --encoder opencv.
 """
@@ -44,7 +45,7 @@ def write(img, path, fmt, encoder, quality):
         return
     from PIL import Image
 
-    if fmt == "png16":
+    if fmt in ("png16", "tiff16"):
         Image.fromarray(img.astype(np.uint16)).save(path)
     elif fmt == "png8":
         Image.fromarray(img).save(path)
@@ -56,13 +57,13 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("src")
     ap.add_argument("dst")
-    ap.add_argument("--to", required=True, choices=("png8", "png16", "jpeg"))
+    ap.add_argument("--to", required=True, choices=("png8", "png16", "jpeg", "tiff16"))
     ap.add_argument("--encoder", default="pil", choices=("pil", "opencv"))
     ap.add_argument("--quality", type=int, default=90)
     a = ap.parse_args()
     src, dst = Path(a.src), Path(a.dst)
     dst.mkdir(parents=True, exist_ok=True)
-    ext = ".jpg" if a.to == "jpeg" else ".png"
+    ext = {"jpeg": ".jpg", "tiff16": ".tif"}.get(a.to, ".png")
     frames = sorted(src.glob("*.fits"))
     if not frames:
         raise SystemExit(f"no .fits frames in {src}")
@@ -71,7 +72,7 @@ def main():
             img = np.asarray(h[0].data)
         # FITS from sim_frames.py: row 0 is the top row, as in PNG; keep the order.
         img = img.astype(np.int64)
-        out = np.clip(img, 0, 65535).astype(np.uint16) if a.to == "png16" else to_8bit(img)
+        out = np.clip(img, 0, 65535).astype(np.uint16) if a.to in ("png16", "tiff16") else to_8bit(img)
         write(out, dst / (f.stem + ext), a.to, a.encoder, a.quality)
     for name in ("camera.toml", "truth.jsonl", "camera_true.toml"):
         if (src / name).exists():

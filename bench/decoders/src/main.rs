@@ -218,6 +218,17 @@ fn zune_jpeg_luma(b: &[u8]) -> Result<Decoded, String> {
     Ok((w as u32, h as u32, Pixels::U8(v)))
 }
 
+/// The `tiff` crate straight, without `image` around it.
+fn tiff_crate(b: &[u8]) -> Result<Decoded, String> {
+    let mut d = tiff::decoder::Decoder::new(std::io::Cursor::new(b)).map_err(|e| e.to_string())?;
+    let (w, h) = d.dimensions().map_err(|e| e.to_string())?;
+    Ok(match d.read_image().map_err(|e| e.to_string())? {
+        tiff::decoder::DecodingResult::U8(v) => (w, h, Pixels::U8(v)),
+        tiff::decoder::DecodingResult::U16(v) => (w, h, Pixels::U16(v)),
+        _ => return Err("other sample type".into()),
+    })
+}
+
 fn files(args: &[String]) -> Vec<PathBuf> {
     let mut out = Vec::new();
     for a in args {
@@ -271,7 +282,11 @@ fn main() {
             ("memory copy", memcpy),
         ]
     } else {
-        vec![("image 0.25", image_crate), ("memory copy", memcpy)]
+        vec![
+            ("image 0.25 (gpustar today)", image_crate),
+            ("tiff 0.11", tiff_crate),
+            ("memory copy", memcpy),
+        ]
     };
     let reference: Vec<Decoded> = data.iter().map(|b| decoders[0].1(b).unwrap()).collect();
     let mut ok = vec![true; decoders.len()];
