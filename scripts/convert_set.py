@@ -20,6 +20,7 @@ benchmarks score the new set against the same truth.
 Needs numpy, astropy, pillow; opencv-python-headless for --encoder opencv.
 """
 import argparse
+import json
 import shutil
 from pathlib import Path
 
@@ -77,9 +78,12 @@ def main():
     for name in ("camera.toml", "truth.jsonl", "camera_true.toml"):
         if (src / name).exists():
             shutil.copy(src / name, dst / name)
-    # truth.jsonl names the FITS files; the benchmarks match records by stem.
+    # truth.jsonl names each frame's file: the new one's name.
     t = dst / "truth.jsonl"
-    t.write_text(t.read_text().replace(".fits", ext))
+    rows = [json.loads(line) for line in t.read_text().splitlines() if line.strip()]
+    for row in rows:
+        row["file"] = str(Path(row["file"]).with_suffix(ext))
+    t.write_text("".join(json.dumps(row) + "\n" for row in rows))
     print(f"{len(frames)} frames -> {dst} ({a.to}, {a.encoder})")
 
 
