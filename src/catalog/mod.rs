@@ -12,6 +12,8 @@ pub mod formats;
 mod id;
 mod import;
 pub mod patterns;
+mod refs_cache;
+mod stars;
 pub mod store;
 pub mod table;
 pub mod words;
@@ -19,6 +21,8 @@ pub mod words;
 pub use cells::{Cells, SkyIndex};
 pub use id::StarId;
 pub use import::import_hip2;
+pub use refs_cache::load_or_select;
+pub use stars::Stars;
 pub use words::Words;
 
 use crate::error::{Context, Error, IntoKind, Result, error, fail};
@@ -117,7 +121,9 @@ impl Star {
 /// binary catalog file).
 #[derive(Clone, Debug)]
 pub struct Catalog {
-    pub stars: Vec<Star>,
+    /// Shared by the catalog's clones (a solver keeps one for deeper selections); a binary
+    /// catalog file's are parsed when first read ([`Stars`]).
+    pub stars: Arc<Stars>,
     /// The ids of a user catalog ([`StarId::Name`] indexes them); empty otherwise.
     pub names: Arc<Vec<String>>,
     /// Where it came from (a path, or [`BUILTIN_NAME`]).
@@ -126,9 +132,9 @@ pub struct Catalog {
     /// checksum of the rest): part of the distance-table cache key.
     pub content_hash: u64,
     /// The stars by sky cell: read from a binary file, built on the first cone query otherwise.
-    index: OnceLock<SkyIndex>,
+    index: Arc<OnceLock<SkyIndex>>,
     /// The stars' magnitudes in ascending order, sorted on first use.
-    mags: OnceLock<Vec<f64>>,
+    mags: Arc<OnceLock<Vec<f64>>>,
 }
 
 impl Catalog {
@@ -158,13 +164,17 @@ impl Catalog {
 
     /// A catalog of these stars; the sky index is built when first needed.
     pub fn new(stars: Vec<Star>, names: Vec<String>, source: &str, content_hash: u64) -> Catalog {
+        Catalog::of_stars(stars.into(), names, source, content_hash)
+    }
+
+    fn of_stars(stars: Stars, names: Vec<String>, source: &str, content_hash: u64) -> Catalog {
         Catalog {
-            stars,
+            stars: Arc::new(stars),
             names: Arc::new(names),
             source: source.to_string(),
             content_hash,
-            index: OnceLock::new(),
-            mags: OnceLock::new(),
+            index: Arc::default(),
+            mags: Arc::default(),
         }
     }
 
@@ -175,10 +185,16 @@ impl Catalog {
             None => Ok(Catalog::builtin()),
             Some(p) => {
                 let start = std::time::Instant::now();
-                let bytes = crate::files::read_regular_file(p, "catalog")?;
                 let source = p.display().to_string();
-                if store::is_store(&bytes) {
-                    let c = store::read(&bytes, &source)?;
+                // A binary catalog is mapped; anything else (text, an empty file, a file that
+                // cannot be mapped) is read, and refused there with the reason.
+                let map = std::fs::metadata(p)
+                    .is_ok_and(|m| m.is_file() && m.len() > 0)
+                    .then(|| crate::files::map_regular_file(p, "catalog").ok())
+                    .flatten()
+                    .filter(|m| store::is_store(m));
+                if let Some(map) = map {
+                    let c = store::read_mapped(Arc::new(map), &source)?;
                     tracing::info!(
                         "{source}: {} stars loaded in {:.1} ms",
                         c.stars.len(),
@@ -186,6 +202,7 @@ impl Catalog {
                     );
                     return Ok(c);
                 }
+                let bytes = crate::files::read_regular_file(p, "catalog")?;
                 let text = String::from_utf8(bytes)
                     .into_kind(Error::Catalog)
                     .with_context(|| {
@@ -209,11 +226,28 @@ impl Catalog {
         })
     }
 
+    /// The magnitude of the `n`-th brightest star (`n` from 1, clamped to the catalog; NaN
+    /// for an empty catalog). The faintest needs no sort: a narrow field's automatic limit
+    /// takes every star, and sorting Tycho-2's 1.9 million magnitudes for it took 35 ms a run.
+    pub fn mag_of_rank(&self, n: usize) -> f64 {
+        let len = self.stars.len();
+        match self.mags.get() {
+            None if n >= len => ((0..len).map(|i| self.stars.mag(i)))
+                .max_by(f64::total_cmp)
+                .unwrap_or(f64::NAN),
+            _ => self
+                .sorted_mags()
+                .get(n.clamp(1, len.max(1)) - 1)
+                .copied()
+                .unwrap_or(f64::NAN),
+        }
+    }
+
     /// The stars' magnitudes, brightest first. Sorted once: the automatic magnitude limit
     /// reads it for every frame whose focal length was fitted (a field searched in scale).
     pub fn sorted_mags(&self) -> &[f64] {
         self.mags.get_or_init(|| {
-            let mut mags: Vec<f64> = self.stars.iter().map(|s| s.mag).collect();
+            let mut mags: Vec<f64> = (0..self.stars.len()).map(|i| self.stars.mag(i)).collect();
             // Unstable: under a total order equal values are the same bits, so the result is
             // the stable sort's, in about half the time.
             mags.sort_unstable_by(f64::total_cmp);
@@ -224,12 +258,12 @@ impl Catalog {
     /// The stars at `indices` as a catalog of their own (a hinted region's), sharing the names.
     pub fn subset(&self, indices: &[u32], source: &str) -> Catalog {
         Catalog {
-            stars: indices.iter().map(|&i| self.stars[i as usize]).collect(),
+            stars: Arc::new(indices.iter().map(|&i| self.stars[i as usize]).collect()),
             names: self.names.clone(),
             source: source.to_string(),
             content_hash: 0,
-            index: OnceLock::new(),
-            mags: OnceLock::new(),
+            index: Arc::default(),
+            mags: Arc::default(),
         }
     }
 
@@ -238,7 +272,7 @@ impl Catalog {
         let cell = OnceLock::new();
         let _ = cell.set(index);
         Catalog {
-            index: cell,
+            index: Arc::new(cell),
             ..self
         }
     }
@@ -403,8 +437,9 @@ pub struct RefStar {
 /// each by its proper motion when read.
 #[derive(Clone, Debug)]
 pub struct RefCatalog {
-    /// The stars at `stars_epoch`.
-    stars: Arc<Vec<RefStar>>,
+    /// The stars at `stars_epoch`: made by [`RefCatalog::select`], or mapped from the cache
+    /// file of an earlier run's selection ([`load_or_select`]).
+    stars: Arc<Words<RefRecord>>,
     /// The epoch `stars` hold positions for (Julian year).
     stars_epoch: f64,
     /// The largest proper motion of any star (radians per year): how far a move of a year
@@ -456,7 +491,7 @@ impl RefCatalog {
             .collect();
         // The place breaks ties: a total order, so the unstable sort gives the stable one's.
         order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-        let stars: Vec<RefStar> = order.iter().map(|o| stars[o.2]).collect();
+        let stars: Vec<RefRecord> = order.iter().map(|o| RefRecord::of(&stars[o.2])).collect();
         if stars.len() > MAX_REF_STARS {
             fail!(
                 Catalog,
@@ -476,8 +511,10 @@ impl RefCatalog {
             );
         }
         Ok(RefCatalog {
-            max_motion: stars.iter().map(|s| s.motion.norm()).fold(0.0, f64::max),
-            stars: Arc::new(stars),
+            max_motion: (stars.iter())
+                .map(|s| Vector3::from(s.motion).norm())
+                .fold(0.0, f64::max),
+            stars: Arc::new(stars.into()),
             stars_epoch: selection.epoch,
             selection,
             doubles_removed,
@@ -512,9 +549,9 @@ impl RefCatalog {
         let s = &self.stars[id];
         let dt = self.dt();
         if dt == 0.0 {
-            s.v
+            s.v.into()
         } else {
-            (s.v + s.motion * dt).normalize()
+            (Vector3::from(s.v) + Vector3::from(s.motion) * dt).normalize()
         }
     }
 
@@ -522,7 +559,7 @@ impl RefCatalog {
     pub fn star(&self, id: usize) -> RefStar {
         RefStar {
             v: self.v(id),
-            ..self.stars[id]
+            ..self.stars[id].star()
         }
     }
 
@@ -546,7 +583,7 @@ impl RefCatalog {
         };
         let near = self.cones.cone(
             self.stars.len(),
-            |id| self.stars[id].v,
+            |id| self.stars[id].v.into(),
             axis,
             reach + margin,
         );
@@ -558,7 +595,7 @@ impl RefCatalog {
 
     /// The catalog id of reference star `ref_id` as records print it (`catalog_id`).
     pub fn catalog_id(&self, ref_id: usize) -> String {
-        self.stars[ref_id].id.display(&self.names)
+        self.stars[ref_id].star().id.display(&self.names)
     }
 
     pub fn len(&self) -> usize {
@@ -567,6 +604,56 @@ impl RefCatalog {
 
     pub fn is_empty(&self) -> bool {
         self.stars.is_empty()
+    }
+}
+
+/// A [`RefStar`] as stored, in a form a cache file maps (plain numbers, no padding).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct RefRecord {
+    v: [f64; 3],
+    motion: [f64; 3],
+    mag: f64,
+    /// [`StarId::encode`]'s number and kind.
+    id: u64,
+    kind: u32,
+    /// 0: none.
+    hip: u32,
+    members: u32,
+    zero: u32,
+}
+
+impl RefRecord {
+    fn of(s: &RefStar) -> RefRecord {
+        let (kind, id) = s.id.encode();
+        RefRecord {
+            v: s.v.into(),
+            motion: s.motion.into(),
+            mag: s.mag,
+            id,
+            kind: kind.into(),
+            hip: s.hip.unwrap_or(0),
+            members: s.members,
+            zero: 0,
+        }
+    }
+
+    /// The id, if the kind and number are one (every record made here or loaded is checked).
+    fn star_id(&self) -> Option<StarId> {
+        StarId::decode(u8::try_from(self.kind).ok()?, self.id)
+    }
+
+    fn star(&self) -> RefStar {
+        RefStar {
+            id: self
+                .star_id()
+                .expect("ids are checked when records are made or loaded"),
+            hip: (self.hip != 0).then_some(self.hip),
+            v: self.v.into(),
+            motion: self.motion.into(),
+            mag: self.mag,
+            members: self.members,
+        }
     }
 }
 
@@ -648,7 +735,10 @@ fn resolve_doubles(stars: &[RefStar], selection: Selection) -> Vec<RefStar> {
 /// catalog's content hash and the selection (the distance table and the pattern index add
 /// their own parts around it).
 pub(crate) fn selection_key_text(cat: &RefCatalog, catalog_hash: u64) -> String {
-    let s = cat.selection;
+    selection_text(&cat.selection, catalog_hash)
+}
+
+fn selection_text(s: &Selection, catalog_hash: u64) -> String {
     format!(
         "{:016x}|{}|{}|{:?}|{}",
         catalog_hash, s.epoch, s.mag_limit, s.double_stars, s.double_sep_rad
@@ -715,10 +805,9 @@ mod tests {
         // Axes on the fastest stars (their moves decide the edge), and elsewhere.
         let mut fastest: Vec<usize> = (0..refs.len()).collect();
         fastest.sort_by(|&a, &b| {
-            refs.stars[b]
-                .motion
+            Vector3::from(refs.stars[b].motion)
                 .norm()
-                .total_cmp(&refs.stars[a].motion.norm())
+                .total_cmp(&Vector3::from(refs.stars[a].motion).norm())
         });
         // The scans first, then the cells (indexed after SCANS_BEFORE_INDEX searches; the
         // catalog at each epoch shares the index).
@@ -727,7 +816,7 @@ mod tests {
             let at = refs.at_epoch(epoch);
             for (k, &star) in fastest[..6].iter().enumerate() {
                 let axis = if k % 2 == 0 {
-                    refs.stars[star].v
+                    refs.stars[star].v.into()
                 } else {
                     Vector3::new(1.0, k as f64, -2.0).normalize()
                 };

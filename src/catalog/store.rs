@@ -20,15 +20,17 @@
 
 use super::cells::{Cells, SkyIndex};
 use super::id::StarId;
-use super::{Catalog, Star, fnv1a};
+use super::{Catalog, Star, Stars, fnv1a};
 use crate::error::{Result, fail};
+use std::sync::Arc;
 
 /// The file's first bytes.
 pub const MAGIC: &[u8; 8] = b"GPUSTARC";
 /// The format version this build reads and writes.
 pub const VERSION: u32 = 1;
 const HEADER: usize = 64;
-const RECORD: usize = 64;
+/// Bytes of a star's record.
+pub(super) const RECORD: usize = 64;
 
 /// Whether `bytes` start like a binary catalog file.
 pub fn is_store(bytes: &[u8]) -> bool {
@@ -104,8 +106,19 @@ fn f64_at(b: &[u8], o: usize) -> f64 {
     f64::from_le_bytes(b[o..o + 8].try_into().expect("8 bytes"))
 }
 
-/// Read a binary catalog file; a truncated, damaged or foreign file is an error that says so.
-pub fn read(bytes: &[u8], source: &str) -> Result<Catalog> {
+/// What [`check`] found of a file: its cells, its names, and where its records are.
+struct Layout {
+    cells: Cells,
+    starts: Vec<u32>,
+    names: Vec<String>,
+    /// Byte offset of the first record in the file, and the number of records.
+    records_at: usize,
+    count: usize,
+}
+
+/// Check a binary catalog file whole (header, checksum, tables, every record's id); a
+/// truncated, damaged or foreign file is an error that says so.
+fn check(bytes: &[u8], source: &str) -> Result<Layout> {
     let again = "make it again with `gpustar catalog import`";
     if !is_store(bytes) {
         fail!(Catalog, "{source}: not a gpustar catalog file");
@@ -179,31 +192,69 @@ pub fn read(bytes: &[u8], source: &str) -> Result<Catalog> {
         names.push(String::from_utf8_lossy(s).into_owned());
         o += 4 + n;
     }
-    let mut stars = Vec::with_capacity(count);
     for (k, r) in body[at..names_at].chunks_exact(RECORD).enumerate() {
-        let id = StarId::decode(r[60], u64_at(r, 48))
-            .filter(|id| !matches!(id, StarId::Name(i) if *i as usize >= names.len()));
-        let Some(id) = id else {
+        let named = |id: &StarId| !matches!(id, StarId::Name(i) if *i as usize >= names.len());
+        if !record_star(r).is_some_and(|s| named(&s.id)) {
             fail!(Catalog, "{source}: star {k}: bad id; {again}");
-        };
-        let hip = u32_at(r, 56);
-        stars.push(Star {
-            id,
-            hip: (hip != 0).then_some(hip),
-            ra_rad: f64_at(r, 0),
-            dec_rad: f64_at(r, 8),
-            pmra_mas_yr: f64_at(r, 16),
-            pmdec_mas_yr: f64_at(r, 24),
-            mag: f64_at(r, 32),
-            epoch: f64_at(r, 40),
-        });
+        }
     }
-    let index = SkyIndex {
+    Ok(Layout {
         cells,
         starts,
-        order: (0..count as u32).collect(),
-    };
-    Ok(Catalog::new(stars, names, source, fnv1a(&bytes[..HEADER])).with_index(index))
+        names,
+        records_at: HEADER + at,
+        count,
+    })
+}
+
+/// The star of a record whose id decodes.
+pub(super) fn record_star(r: &[u8]) -> Option<Star> {
+    let id = StarId::decode(r[60], u64_at(r, 48))?;
+    let hip = u32_at(r, 56);
+    Some(Star {
+        id,
+        hip: (hip != 0).then_some(hip),
+        ra_rad: f64_at(r, 0),
+        dec_rad: f64_at(r, 8),
+        pmra_mas_yr: f64_at(r, 16),
+        pmdec_mas_yr: f64_at(r, 24),
+        mag: f64_at(r, 32),
+        epoch: f64_at(r, 40),
+    })
+}
+
+/// A record's magnitude.
+pub(super) fn record_mag(r: &[u8]) -> f64 {
+    f64_at(r, 32)
+}
+
+impl Layout {
+    fn catalog(self, stars: Stars, bytes: &[u8], source: &str) -> Catalog {
+        let index = SkyIndex {
+            cells: self.cells,
+            starts: self.starts,
+            order: (0..self.count as u32).collect(),
+        };
+        Catalog::of_stars(stars, self.names, source, fnv1a(&bytes[..HEADER])).with_index(index)
+    }
+}
+
+/// Read a binary catalog file, its stars parsed now.
+pub fn read(bytes: &[u8], source: &str) -> Result<Catalog> {
+    let layout = check(bytes, source)?;
+    let records = &bytes[layout.records_at..layout.records_at + RECORD * layout.count];
+    let stars = (records.chunks_exact(RECORD))
+        .map(|r| record_star(r).expect("checked"))
+        .collect();
+    Ok(layout.catalog(stars, bytes, source))
+}
+
+/// A binary catalog file mapped, checked whole as [`read`] checks it, its stars parsed when
+/// first read ([`Stars`]).
+pub fn read_mapped(map: Arc<memmap2::Mmap>, source: &str) -> Result<Catalog> {
+    let layout = check(&map, source)?;
+    let stars = Stars::mapped(Arc::clone(&map), layout.records_at, layout.count);
+    Ok(layout.catalog(stars, &map, source))
 }
 
 #[cfg(test)]
@@ -227,10 +278,22 @@ mod tests {
         let back = read(&bytes, "f").unwrap();
         assert_eq!(back.stars.len(), cat.stars.len());
         // Stars come back in cell order; as sets they are identical, field by field.
-        for s in &cat.stars {
+        for s in cat.stars.iter() {
             let b = back.stars.iter().find(|b| b.id == s.id).unwrap();
             assert_eq!(b, s);
         }
+        // Mapped, the same stars: magnitudes read from the records before they are parsed.
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        std::io::Write::write_all(&mut f, &bytes).unwrap();
+        // SAFETY: a temporary file of this test only.
+        let map = Arc::new(unsafe { memmap2::Mmap::map(f.as_file()) }.unwrap());
+        let mapped = read_mapped(map, "f").unwrap();
+        assert_eq!(mapped.stars.len(), back.stars.len());
+        let mags: Vec<f64> = (0..mapped.stars.len()).map(|i| mapped.stars.mag(i)).collect();
+        assert_eq!(mapped.sorted_mags(), back.sorted_mags());
+        assert_eq!(mapped.stars, back.stars);
+        assert_eq!(mags, back.stars.iter().map(|s| s.mag).collect::<Vec<_>>());
+        assert_eq!(mapped.content_hash, back.content_hash);
         for i in 0..cat.stars.len() {
             let j = back
                 .stars
@@ -244,13 +307,14 @@ mod tests {
         assert_eq!(write(&back), bytes);
         assert_ne!(back.content_hash, 0);
         // A Gaia and a Tycho-2 id survive too.
-        let mut other = cat.clone();
-        other.stars[0].id = StarId::GaiaDr3(1576683529448755328);
-        other.stars[1].id = StarId::Tycho2 {
+        let mut stars = cat.stars.to_vec();
+        stars[0].id = StarId::GaiaDr3(1576683529448755328);
+        stars[1].id = StarId::Tycho2 {
             tyc1: 9537,
             tyc2: 12121,
             tyc3: 3,
         };
+        let other = Catalog::new(stars, cat.names.to_vec(), "o", 0);
         let b2 = read(&write(&other), "g").unwrap();
         assert!(b2.stars.iter().any(|s| s.id == other.stars[0].id));
         assert!(b2.stars.iter().any(|s| s.id == other.stars[1].id));

@@ -377,12 +377,13 @@ pub(crate) fn read_cache(
 /// A cache file written by [`write_cache`], its header read and checked, its body mapped
 /// read-only and handed out as the caller's columns (see [`Words`]: fresh memory's page faults
 /// were most of a load), its checksum taken on the way and checked by [`CacheReader::finish`]
-/// before anything read is used.
+/// before anything read is used (unless [`CacheReader::unchecked`]).
 pub(crate) struct CacheReader {
     map: Arc<memmap2::Mmap>,
     /// Byte offset of the next value.
     at: usize,
-    crc: crc32fast::Hasher,
+    /// None: the body's checksum is not taken.
+    crc: Option<crc32fast::Hasher>,
     /// Body words not read yet.
     pub(crate) words_left: usize,
 }
@@ -424,7 +425,7 @@ impl CacheReader {
             CacheReader {
                 map,
                 at: fixed,
-                crc,
+                crc: Some(crc),
                 words_left,
             },
         ))
@@ -440,7 +441,9 @@ impl CacheReader {
             );
         }
         let bytes = &self.map[self.at..self.at + 4 * words];
-        self.crc.update(bytes);
+        if let Some(crc) = &mut self.crc {
+            crc.update(bytes);
+        }
         let mapped = if cfg!(target_endian = "little") {
             Words::mapped(&self.map, self.at, n)
         } else {
@@ -460,13 +463,23 @@ impl CacheReader {
         Ok(values)
     }
 
+    /// The body read without its checksum: for a file whose reader checks what it uses as it
+    /// uses it (reading all of a 1.7 GB pattern index to check it took longer than a frame's
+    /// identification).
+    pub(crate) fn unchecked(self) -> Self {
+        CacheReader { crc: None, ..self }
+    }
+
     /// The whole body read, and the checksum the file ends with is that of what was read.
     pub(crate) fn finish(self) -> Result<()> {
         if self.words_left != 0 {
             fail!(Catalog, "{} words left over", self.words_left);
         }
+        let Some(taken) = self.crc else {
+            return Ok(());
+        };
         let crc = &self.map[self.at..self.at + 4];
-        if self.crc.finalize() != u32::from_le_bytes(crc.try_into().expect("4 bytes")) {
+        if taken.finalize() != u32::from_le_bytes(crc.try_into().expect("4 bytes")) {
             fail!(
                 Catalog,
                 "checksum mismatch (the file was changed or damaged)"

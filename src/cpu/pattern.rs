@@ -71,17 +71,22 @@ pub fn lower_bound(keys: &[u32], key: u32) -> u32 {
     lo
 }
 
-/// The rows of each query (one GPU thread each), `buckets` made from `keys`.
-pub fn pattern(keys: &[u32], buckets: &Buckets, queries: &[u32]) -> Vec<Rows> {
+/// The rows of each query (one GPU thread each), `buckets` made from `keys` (None: each
+/// query searches all the keys, as the kernel does).
+pub fn pattern(keys: &[u32], buckets: Option<&Buckets>, queries: &[u32]) -> Vec<Rows> {
+    let lower = |key: u32| match buckets {
+        Some(b) => b.lower_bound(keys, key),
+        None => lower_bound(keys, key),
+    };
     queries
         .iter()
         .map(|&q| {
-            let start = buckets.lower_bound(keys, q);
+            let start = lower(q);
             // Keys are 30 bits: q + 1 does not overflow, but the kernel's guard is kept alike.
             let end = if q == u32::MAX {
                 keys.len() as u32
             } else {
-                buckets.lower_bound(keys, q + 1)
+                lower(q + 1)
             };
             Rows { start, end }
         })
@@ -95,16 +100,19 @@ mod tests {
     #[test]
     fn rows_are_the_equal_keys() {
         let keys = [1, 3, 3, 3, 7, 9, 9];
-        let rows = pattern(&keys, &Buckets::new(&keys), &[0, 1, 3, 4, 9, 10, u32::MAX]);
-        let got: Vec<(u32, u32)> = rows.iter().map(|r| (r.start, r.end)).collect();
-        assert_eq!(
-            got,
-            [(0, 0), (0, 1), (1, 4), (4, 4), (5, 7), (7, 7), (7, 7)]
-        );
-        assert_eq!(
-            pattern(&[], &Buckets::new(&[]), &[5]),
-            [Rows { start: 0, end: 0 }]
-        );
+        let buckets = Buckets::new(&keys);
+        // With the table of key prefixes and without it (the kernel's search).
+        for b in [Some(&buckets), None] {
+            let rows = pattern(&keys, b, &[0, 1, 3, 4, 9, 10, u32::MAX]);
+            let got: Vec<(u32, u32)> = rows.iter().map(|r| (r.start, r.end)).collect();
+            assert_eq!(
+                got,
+                [(0, 0), (0, 1), (1, 4), (4, 4), (5, 7), (7, 7), (7, 7)]
+            );
+        }
+        for b in [Some(&Buckets::new(&[])), None] {
+            assert_eq!(pattern(&[], b, &[5]), [Rows { start: 0, end: 0 }]);
+        }
     }
 
     #[test]

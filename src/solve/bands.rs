@@ -70,7 +70,7 @@ impl Band {
             double_stars: settings.double_stars,
             double_sep_rad: settings.double_star_px * middle.ifov_rad(),
         };
-        let refs = RefCatalog::select(catalog, selection)?;
+        let refs = crate::catalog::load_or_select(catalog, selection, settings.table_cache)?;
         check_table_size(&refs, scaled(camera, lo).diagonal_rad())?;
         let table_from = (
             catalog.content_hash,

@@ -33,9 +33,8 @@ pub fn mag_limit_in(catalog: &Catalog, camera: &Camera, stars: f64, sky_sr: f64)
         .to_radians()
         .to_radians();
     let fraction = (fov_sr / sky_sr).min(1.0);
-    let mags = catalog.sorted_mags();
-    let n = ((stars / fraction).round() as usize).clamp(1, mags.len());
-    (mags[n - 1] * 10.0).round() / 10.0
+    let n = ((stars / fraction).round() as usize).clamp(1, catalog.stars.len());
+    (catalog.mag_of_rank(n) * 10.0).round() / 10.0
 }
 
 /// Average number of catalog stars in the field of the shallow pass's selection: a sensor that

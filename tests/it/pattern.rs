@@ -79,8 +79,9 @@ fn pattern_gpu_matches_cpu() {
     let on_gpu = gpu.pattern(&table, &queries).unwrap();
     let keys = &sf.index.keys;
     let buckets = gpustar::cpu::pattern::Buckets::new(keys);
-    let on_cpu = gpustar::cpu::pattern::pattern(keys, &buckets, &queries);
+    let on_cpu = gpustar::cpu::pattern::pattern(keys, Some(&buckets), &queries);
     assert_eq!(on_gpu, on_cpu);
+    assert_eq!(gpustar::cpu::pattern::pattern(keys, None, &queries), on_cpu);
     let found: u32 = on_cpu.iter().map(|r| r.end - r.start).sum();
     println!(
         "pattern GPU = CPU: {} queries, {found} patterns found, index of {} patterns ({} MiB)",

@@ -135,7 +135,7 @@ pub fn read(
                 let (c, out_of_range) = Catalog::parse_counted(t, source)?;
                 rows.out_of_range.count += out_of_range;
                 rows.unit = "star";
-                for (k, s) in c.stars.into_iter().enumerate() {
+                for (k, s) in c.stars.iter().copied().enumerate() {
                     if keep(s.mag) {
                         rows.push(s, k + 1);
                     }

@@ -59,6 +59,11 @@ impl Solver {
         (lo, hi): (f64, f64),
         perms: &[[usize; 4]],
     ) -> Option<Hypothesis> {
+        // A pattern index's quads are checked here, as they are used, not when it is mapped
+        // (patterns::read_index): a quad naming a star the selection lacks is no candidate.
+        if ids.iter().any(|&id| id as usize >= refs.len()) {
+            return None;
+        }
         let cat = ids.map(|id| refs.v(id as usize));
         let at = |s: f64| {
             let c = scaled(&self.camera, s);

@@ -1,0 +1,168 @@
+//! A run's selection of reference stars, kept in the cache directory beside the distance
+//! tables and pattern indexes it keys: a deep catalog's selection (Tycho-2's 1.9 million stars:
+//! propagated, double stars merged, sorted by brightness) took about a second of every run,
+//! half of a narrow frame's whole process; mapped from its file it takes a few milliseconds.
+
+use super::table::{CacheReader, write_cache};
+use super::{Catalog, RefCatalog, RefRecord, Selection, fnv1a, selection_text};
+use crate::error::{Result, fail};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Catalogs smaller than this are selected afresh: their selection takes milliseconds, less
+/// than a file of their own is worth.
+pub const CACHED_FROM_STARS: usize = 200_000;
+
+const MAGIC: &[u8; 8] = b"GPSREF01";
+/// Header words: stars, stars removed as doubles, the largest proper motion (f64 bits).
+const HEADS: usize = 3;
+
+/// [`RefCatalog::select`], through the cache directory
+/// ([`table::cache_dir`](super::table::cache_dir)) when `use_cache` and the catalog holds at
+/// least [`CACHED_FROM_STARS`] stars.
+pub fn load_or_select(
+    catalog: &Catalog,
+    selection: Selection,
+    use_cache: bool,
+) -> Result<RefCatalog> {
+    let dir =
+        super::table::cache_dir().filter(|_| use_cache && catalog.stars.len() >= CACHED_FROM_STARS);
+    load_or_select_in(dir.as_deref(), catalog, selection)
+}
+
+/// [`load_or_select`] with the cache in `dir` (None: none), whatever the catalog's size.
+pub(crate) fn load_or_select_in(
+    dir: Option<&Path>,
+    catalog: &Catalog,
+    selection: Selection,
+) -> Result<RefCatalog> {
+    let Some(dir) = dir else {
+        return RefCatalog::select(catalog, selection);
+    };
+    let text = format!(
+        "gpustar-refs-v1|{}|{}",
+        selection_text(&selection, catalog.content_hash),
+        catalog.stars.len()
+    );
+    let key = fnv1a(text.as_bytes());
+    let file = dir.join(format!("refs-{key:016x}.bin"));
+    if file.exists() {
+        match read_refs(&file, key, catalog, selection) {
+            Ok(refs) => return Ok(refs),
+            Err(e) => tracing::warn!(
+                "the cached star selection {} cannot be used ({e:#}): selecting again",
+                file.display()
+            ),
+        }
+    }
+    let refs = RefCatalog::select(catalog, selection)?;
+    let head = [
+        refs.stars.len() as u64,
+        refs.doubles_removed as u64,
+        refs.max_motion.to_bits(),
+    ];
+    if let Err(e) = write_cache(
+        &file,
+        MAGIC,
+        key,
+        &head,
+        bytemuck::cast_slice(&refs.stars[..]),
+    ) {
+        tracing::warn!(
+            "could not write the star selection {}: {e:#}",
+            file.display()
+        );
+    }
+    Ok(refs)
+}
+
+/// The selection of a cache file, checked whole: the checksum, then every record's id (a
+/// file that passes gives back the stars it was written with).
+fn read_refs(path: &Path, key: u64, catalog: &Catalog, selection: Selection) -> Result<RefCatalog> {
+    let (head, mut body) = CacheReader::open(path, MAGIC, key, HEADS)?;
+    let n = usize::try_from(head[0]).unwrap_or(usize::MAX);
+    let words = std::mem::size_of::<RefRecord>() / 4;
+    if n.checked_mul(words) != Some(body.words_left) {
+        fail!(
+            Catalog,
+            "{} words where {n} stars need {}",
+            body.words_left,
+            n.saturating_mul(words)
+        );
+    }
+    let stars = body.read::<RefRecord>(n)?;
+    body.finish()?;
+    let names = catalog.names.len();
+    let sound = |r: &RefRecord| match r.star_id() {
+        Some(super::StarId::Name(i)) => (i as usize) < names,
+        Some(_) => r.members >= 1 && r.zero == 0,
+        None => false,
+    };
+    if n < 3 || !stars.iter().all(sound) {
+        fail!(Catalog, "a star with no id the catalog can have");
+    }
+    let max_motion = f64::from_bits(head[2]);
+    if !(max_motion.is_finite() && max_motion >= 0.0) {
+        fail!(Catalog, "bad largest proper motion");
+    }
+    Ok(RefCatalog {
+        stars: Arc::new(stars),
+        stars_epoch: selection.epoch,
+        max_motion,
+        selection,
+        doubles_removed: usize::try_from(head[1]).unwrap_or(usize::MAX),
+        names: catalog.names.clone(),
+        cones: Arc::default(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::catalog::DoubleStars;
+    use nalgebra::Vector3;
+
+    /// The selection read back from its cache file is the one made afresh, star for star;
+    /// a damaged file is selected again, not used.
+    #[test]
+    fn a_cached_selection_is_the_fresh_one() {
+        let catalog = Catalog::builtin();
+        let selection = Selection {
+            epoch: 2026.5,
+            mag_limit: 6.5,
+            double_stars: DoubleStars::Merge,
+            double_sep_rad: 3e-4,
+        };
+        let fresh = RefCatalog::select(&catalog, selection).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let written = load_or_select_in(Some(dir.path()), &catalog, selection).unwrap();
+        let read = load_or_select_in(Some(dir.path()), &catalog, selection).unwrap();
+        for refs in [&written, &read] {
+            assert_eq!(refs.len(), fresh.len());
+            assert_eq!(&refs.stars[..], &fresh.stars[..]);
+            assert_eq!(refs.doubles_removed, fresh.doubles_removed);
+            assert_eq!(refs.max_motion.to_bits(), fresh.max_motion.to_bits());
+        }
+        assert!(fresh.doubles_removed > 0, "the test merges some doubles");
+        let file = std::fs::read_dir(dir.path())
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        let mut bytes = std::fs::read(&file).unwrap();
+        let mid = bytes.len() / 2;
+        bytes[mid] ^= 1;
+        std::fs::write(&file, &bytes).unwrap();
+        assert!(
+            read_refs(&file, 0, &catalog, selection).is_err(),
+            "another key"
+        );
+        let again = load_or_select_in(Some(dir.path()), &catalog, selection).unwrap();
+        assert_eq!(&again.stars[..], &fresh.stars[..]);
+        // A position moved by its motion reads the same from either.
+        let later = read.at_epoch(2030.0);
+        let v: Vector3<f64> = later.v(7);
+        assert_eq!(v, fresh.at_epoch(2030.0).v(7));
+    }
+}
