@@ -289,7 +289,9 @@ mod tests {
         let map = Arc::new(unsafe { memmap2::Mmap::map(f.as_file()) }.unwrap());
         let mapped = read_mapped(map, "f").unwrap();
         assert_eq!(mapped.stars.len(), back.stars.len());
-        let mags: Vec<f64> = (0..mapped.stars.len()).map(|i| mapped.stars.mag(i)).collect();
+        let mags: Vec<f64> = (0..mapped.stars.len())
+            .map(|i| mapped.stars.mag(i))
+            .collect();
         assert_eq!(mapped.sorted_mags(), back.sorted_mags());
         assert_eq!(mapped.stars, back.stars);
         assert_eq!(mags, back.stars.iter().map(|s| s.mag).collect::<Vec<_>>());

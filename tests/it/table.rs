@@ -204,10 +204,12 @@ fn damaged_cache_files_are_rebuilt() {
     }
 }
 
-/// The pattern index's cache file (read straight into the index since this session): read back
-/// it is the index built; scribbled on (a key out of order, a star beyond the catalog, the row
-/// count; with its checksum recomputed too, so that the bounds checks alone must find it) or
-/// cut short, it is never used: the index is built again and the file rewritten.
+/// The pattern index's cache file (mapped, its body not read when it is opened: a deep
+/// catalog's is gigabytes): read back it is the index built; with its header scribbled on (the
+/// row count) or cut short it is never used: the index is built again and the file rewritten.
+/// A scribbled row (a key out of order, a star beyond the catalog) is mapped as it is, whatever
+/// its checksum: a frame checks the rows it reads (`check_quad` skips a quad naming a star the
+/// selection lacks; the lookup stays within the keys).
 #[test]
 fn damaged_pattern_files_are_rebuilt() {
     use gpustar::catalog::patterns::{levels_for, load_or_build_in};
@@ -231,9 +233,24 @@ fn damaged_pattern_files_are_rebuilt() {
     // Header 24 bytes; a key per row, then four star ids per row.
     let (keys, quads) = (24, 24 + 4 * rows);
     let put = |b: &mut Vec<u8>, at: usize, v: u32| b[at..at + 4].copy_from_slice(&v.to_le_bytes());
-    let cases: Vec<(&str, Scribble)> = vec![
+    let rows_of: Vec<(&str, Scribble)> = vec![
         ("key order", Box::new(move |b| put(b, keys, u32::MAX >> 2))),
         ("star id", Box::new(move |b| put(b, quads + 12, u32::MAX))),
+    ];
+    for (what, scribble) in rows_of {
+        for recompute_crc in [false, true] {
+            let bytes = scribbled(&good, &scribble, recompute_crc);
+            std::fs::write(&file, &bytes).unwrap();
+            let (index, was_built, _) = index_at(dir.path());
+            assert!(
+                !was_built,
+                "{what} (crc recomputed: {recompute_crc}): rebuilt"
+            );
+            assert_ne!(index, built, "{what}: the scribble is not what was mapped");
+            assert_eq!(std::fs::read(&file).unwrap(), bytes, "{what}: rewritten");
+        }
+    }
+    let cases: Vec<(&str, Scribble)> = vec![
         ("row count", Box::new(|b| b[16] ^= 1)),
         ("cut short", Box::new(|b| b.truncate(b.len() - 8))),
     ];
