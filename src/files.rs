@@ -13,15 +13,7 @@ use std::path::Path;
 pub fn read_regular_file(path: &Path, what: &str) -> Result<Vec<u8>> {
     use std::io::Read;
     let shown = path.display();
-    let meta = std::fs::metadata(path).with_context(|| format!("cannot read {what} {shown}"))?;
-    if !meta.is_file() {
-        fail!(
-            Input,
-            "cannot read {what} {shown}: not a regular file but {}",
-            file_kind(&meta.file_type())
-        );
-    }
-    let file = std::fs::File::open(path).with_context(|| format!("cannot read {what} {shown}"))?;
+    let (file, meta) = open_regular(path, what)?;
     let mut bytes = Vec::new();
     if bytes
         .try_reserve_exact(usize::try_from(meta.len()).unwrap_or(usize::MAX))
@@ -45,6 +37,16 @@ pub fn read_regular_file(path: &Path, what: &str) -> Result<Vec<u8>> {
 /// refuses, when `path` is not a regular file.
 pub fn map_regular_file(path: &Path, what: &str) -> Result<memmap2::Mmap> {
     let shown = path.display();
+    let (file, _) = open_regular(path, what)?;
+    // SAFETY: mapped read-only and read while the catalog is loaded. `gpustar catalog import`
+    // replaces a catalog by rename, never in place, so the mapped file keeps its bytes; a file
+    // truncated in place by another program meanwhile is outside what gpustar can guard.
+    unsafe { memmap2::Mmap::map(&file) }.with_context(|| format!("cannot map {what} {shown}"))
+}
+
+/// `path` opened, refused before opening when it is not a regular file.
+fn open_regular(path: &Path, what: &str) -> Result<(std::fs::File, std::fs::Metadata)> {
+    let shown = path.display();
     let meta = std::fs::metadata(path).with_context(|| format!("cannot read {what} {shown}"))?;
     if !meta.is_file() {
         fail!(
@@ -54,10 +56,7 @@ pub fn map_regular_file(path: &Path, what: &str) -> Result<memmap2::Mmap> {
         );
     }
     let file = std::fs::File::open(path).with_context(|| format!("cannot read {what} {shown}"))?;
-    // SAFETY: mapped read-only and read while the catalog is loaded. `gpustar catalog import`
-    // replaces a catalog by rename, never in place, so the mapped file keeps its bytes; a file
-    // truncated in place by another program meanwhile is outside what gpustar can guard.
-    unsafe { memmap2::Mmap::map(&file) }.with_context(|| format!("cannot map {what} {shown}"))
+    Ok((file, meta))
 }
 
 /// [`read_regular_file`] of a text file: refused when it is not UTF-8.
