@@ -231,15 +231,15 @@ impl Catalog {
     /// takes every star, and sorting Tycho-2's 1.9 million magnitudes for it took 35 ms a run.
     pub fn mag_of_rank(&self, n: usize) -> f64 {
         let len = self.stars.len();
+        if len == 0 {
+            return f64::NAN;
+        }
+        let n = n.clamp(1, len);
         match self.mags.get() {
-            None if n >= len => ((0..len).map(|i| self.stars.mag(i)))
+            None if n == len => ((0..len).map(|i| self.stars.mag(i)))
                 .max_by(f64::total_cmp)
                 .unwrap_or(f64::NAN),
-            _ => self
-                .sorted_mags()
-                .get(n.clamp(1, len.max(1)) - 1)
-                .copied()
-                .unwrap_or(f64::NAN),
+            _ => self.sorted_mags()[n - 1],
         }
     }
 
@@ -832,6 +832,24 @@ mod tests {
         }
         // 4 epochs × 6 axes × 7 reaches: all but the scans and the search that made them.
         assert_eq!(zoned, 4 * 6 * 7 - cells::SCANS_BEFORE_INDEX as usize - 1);
+    }
+
+    /// A magnitude's rank is the sorted magnitudes' (the faintest found before they are
+    /// sorted, the others after).
+    #[test]
+    fn ranks_are_the_sorted_magnitudes() {
+        let sorted = Catalog::builtin().sorted_mags().to_vec();
+        let c = Catalog::builtin();
+        let len = sorted.len();
+        for n in [len + 9, len, 0, 1, 2, 17, len / 2, len - 1, len] {
+            let want = sorted[n.clamp(1, len) - 1];
+            assert_eq!(c.mag_of_rank(n).to_bits(), want.to_bits(), "rank {n}");
+        }
+        assert!(
+            Catalog::new(Vec::new(), Vec::new(), "e", 0)
+                .mag_of_rank(1)
+                .is_nan()
+        );
     }
 
     /// The built-in catalog's hash is its file's (cache keys depend on it).

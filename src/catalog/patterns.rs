@@ -358,8 +358,7 @@ pub fn load_or_build_in(
 /// only lose candidates), a quad naming a star the selection lacks is skipped
 /// (`Solver::check_quad`), and every candidate still passes the false-match test.
 fn read_index(path: &Path, key: u64, levels: &[f64]) -> Result<PatternIndex> {
-    let (head, body) = CacheReader::open(path, MAGIC, key, 1)?;
-    let mut body = body.unchecked();
+    let (head, mut body) = CacheReader::open_unchecked(path, MAGIC, key, 1)?;
     let rows = usize::try_from(head[0]).into_kind(Error::Catalog)?;
     if rows.checked_mul(5) != Some(body.words_left) {
         fail!(

@@ -377,7 +377,7 @@ pub(crate) fn read_cache(
 /// A cache file written by [`write_cache`], its header read and checked, its body mapped
 /// read-only and handed out as the caller's columns (see [`Words`]: fresh memory's page faults
 /// were most of a load), its checksum taken on the way and checked by [`CacheReader::finish`]
-/// before anything read is used (unless [`CacheReader::unchecked`]).
+/// before anything read is used (unless opened with [`CacheReader::open_unchecked`]).
 pub(crate) struct CacheReader {
     map: Arc<memmap2::Mmap>,
     /// Byte offset of the next value.
@@ -394,6 +394,28 @@ impl CacheReader {
         magic: &[u8; 8],
         key: u64,
         heads: usize,
+    ) -> Result<(Vec<u64>, Self)> {
+        Self::open_mapped(path, magic, key, heads, true)
+    }
+
+    /// [`CacheReader::open`] for a file whose reader checks what it uses as it uses it, its
+    /// checksum not taken: reading all of a 1.7 GB pattern index to check it took longer than
+    /// a frame's identification.
+    pub(crate) fn open_unchecked(
+        path: &Path,
+        magic: &[u8; 8],
+        key: u64,
+        heads: usize,
+    ) -> Result<(Vec<u64>, Self)> {
+        Self::open_mapped(path, magic, key, heads, false)
+    }
+
+    fn open_mapped(
+        path: &Path,
+        magic: &[u8; 8],
+        key: u64,
+        heads: usize,
+        checked: bool,
     ) -> Result<(Vec<u64>, Self)> {
         let file = std::fs::File::open(path)?;
         let len = file.metadata()?.len();
@@ -425,7 +447,7 @@ impl CacheReader {
             CacheReader {
                 map,
                 at: fixed,
-                crc: Some(crc),
+                crc: checked.then_some(crc),
                 words_left,
             },
         ))
@@ -461,13 +483,6 @@ impl CacheReader {
         self.at += 4 * words;
         self.words_left -= words;
         Ok(values)
-    }
-
-    /// The body read without its checksum: for a file whose reader checks what it uses as it
-    /// uses it (reading all of a 1.7 GB pattern index to check it took longer than a frame's
-    /// identification).
-    pub(crate) fn unchecked(self) -> Self {
-        CacheReader { crc: None, ..self }
     }
 
     /// The whole body read, and the checksum the file ends with is that of what was read.

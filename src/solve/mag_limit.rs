@@ -33,7 +33,7 @@ pub fn mag_limit_in(catalog: &Catalog, camera: &Camera, stars: f64, sky_sr: f64)
         .to_radians()
         .to_radians();
     let fraction = (fov_sr / sky_sr).min(1.0);
-    let n = ((stars / fraction).round() as usize).clamp(1, catalog.stars.len());
+    let n = ((stars / fraction).round() as usize).max(1);
     (catalog.mag_of_rank(n) * 10.0).round() / 10.0
 }
 
