@@ -80,12 +80,27 @@ enum RoundEnd {
     Nothing,
 }
 
+/// The catalog patterns a frame's scale-free pass has checked ([`MAX_PATTERNS`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Checked {
+    pub patterns: u64,
+    /// A round was left unchecked: the pass is over.
+    pub spent: bool,
+}
+
 /// Queries (key bins) one image quad may take; a quad whose ratios are vaguer is not looked up.
 pub const MAX_QUERIES: usize = 32;
 
 /// At most this many quad hypotheses are refined per frame (the first, in brightness order);
 /// the false-match test counts them all.
 pub const MAX_REFINED: usize = 100;
+
+/// Catalog patterns a frame's pass checks at most, over its rounds: a round that would take
+/// it past this is not checked. The pass checks about two million a second; a frame that
+/// needs more has no quad the index knows among its brightest stars. On 35 real frames of
+/// 0.2–4.5° against Tycho-2 the solved ones took at most 1.9 million (2MASS J, in its fourth
+/// round), while a 200-pixel crop with 94 detections went on to 23 million (12.7 s) unsolved.
+pub const MAX_PATTERNS: u64 = 4_000_000;
 
 /// With a known scale, at most this many quad hypotheses are refined per frame, over all
 /// rounds: an easy frame's first quads are right, and one whose first are not (false stars
@@ -408,11 +423,14 @@ impl Solver {
         epoch: Option<f64>,
     ) -> Option<Outcome> {
         let sf = self.scale_free.as_ref()?;
+        let mut checked = Checked::default();
         for round in 0..self.scale_free_rounds(detections.len()) {
             let lookup = self.scale_free_lookup(detections, round..round + 1)?;
             let rows = rows_cpu(sf, &lookup);
-            if let Some(o) = self.finish_scale_free(detections, &lookup, &rows, epoch) {
-                return Some(o);
+            let found =
+                self.finish_scale_free_within(detections, &lookup, &rows, epoch, &mut checked);
+            if found.is_some() || checked.spent {
+                return found;
             }
         }
         None
@@ -518,6 +536,19 @@ impl Solver {
         rows: &[Rows],
         epoch: Option<f64>,
     ) -> Option<Outcome> {
+        self.finish_scale_free_within(detections, lookup, rows, epoch, &mut Checked::default())
+    }
+
+    /// [`Solver::finish_scale_free`] of a lookup holding some of a frame's rounds, `checked`
+    /// counting the patterns its earlier rounds checked ([`MAX_PATTERNS`]).
+    pub fn finish_scale_free_within(
+        &self,
+        detections: &[Detection],
+        lookup: &Lookup,
+        rows: &[Rows],
+        epoch: Option<f64>,
+        checked: &mut Checked,
+    ) -> Option<Outcome> {
         let perms = permutations();
         let rounds = self.scale_free_rounds(detections.len());
         let sf = self.scale_free.as_ref()?;
@@ -530,6 +561,19 @@ impl Solver {
             if refinable == 0 {
                 break;
             }
+            let found: u64 = (quads.clone())
+                .flat_map(|q| &rows[q.queries.clone()])
+                .map(|r| u64::from(r.end.saturating_sub(r.start)))
+                .sum();
+            if checked.patterns.saturating_add(found) > MAX_PATTERNS {
+                tracing::debug!(
+                    "scale-free pass stopped: round {round}'s {found} patterns after {} checked",
+                    checked.patterns
+                );
+                checked.spent = true;
+                break;
+            }
+            checked.patterns += found;
             match self.scale_free_round(
                 detections,
                 quads,

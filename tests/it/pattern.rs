@@ -106,6 +106,13 @@ fn pass_alone(
     let Some(Outcome::Solved(r, _)) = solver.finish_scale_free(&dets, &lookup, &rows, None) else {
         return None;
     };
+    // A frame whose pass has checked its share of patterns already checks no more.
+    let mut spent = scale_free::Checked {
+        patterns: scale_free::MAX_PATTERNS,
+        spent: false,
+    };
+    let over = solver.finish_scale_free_within(&dets, &lookup, &rows, None, &mut spent);
+    assert!(over.is_none() && spent.spent && spent.patterns == scale_free::MAX_PATTERNS);
     let err = gpustar::solve::attitude::attitude_error(
         &r.r,
         &nalgebra::Matrix3::from_fn(|i, j| truth.rotation_matrix[i][j]),
