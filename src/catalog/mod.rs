@@ -21,7 +21,7 @@ pub mod words;
 pub use cells::{Cells, SkyIndex};
 pub use id::StarId;
 pub use import::import_hip2;
-pub use refs_cache::load_or_select;
+pub use refs_cache::{load_or_select, load_sorted_mags};
 pub use stars::Stars;
 pub use words::Words;
 

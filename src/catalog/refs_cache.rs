@@ -76,6 +76,74 @@ pub(crate) fn load_or_select_in(
     Ok(refs)
 }
 
+/// The catalog's sorted magnitudes ([`Catalog::sorted_mags`], which the automatic magnitude
+/// limit reads) from the cache directory when `use_cache` and the catalog holds at least
+/// [`CACHED_FROM_STARS`] stars, or sorted now and stored there: sorting Tycho-2's 1.9 million
+/// from the mapped records took a sixth of a narrow frame's run.
+pub fn load_sorted_mags(catalog: &Catalog, use_cache: bool) {
+    let dir = super::table::cache_dir();
+    if let Some(dir) = dir.filter(|_| use_cache && catalog.stars.len() >= CACHED_FROM_STARS) {
+        load_sorted_mags_in(&dir, catalog);
+    }
+}
+
+/// [`load_sorted_mags`] with the cache in `dir`, whatever the catalog's size.
+pub(crate) fn load_sorted_mags_in(dir: &Path, catalog: &Catalog) {
+    if catalog.mags.get().is_some() {
+        return;
+    }
+    let text = format!(
+        "gpustar-mags-v1|{:016x}|{}",
+        catalog.content_hash,
+        catalog.stars.len()
+    );
+    let key = fnv1a(text.as_bytes());
+    let file = dir.join(format!("mags-{key:016x}.bin"));
+    if file.exists() {
+        match read_mags(&file, key, catalog.stars.len()) {
+            Ok(mags) => {
+                let _ = catalog.mags.set(mags);
+                return;
+            }
+            Err(e) => tracing::warn!(
+                "the cached magnitudes {} cannot be used ({e:#}): sorting again",
+                file.display()
+            ),
+        }
+    }
+    let mags = catalog.sorted_mags();
+    if let Err(e) = write_cache(
+        &file,
+        MAGS_MAGIC,
+        key,
+        &[mags.len() as u64],
+        bytemuck::cast_slice(mags),
+    ) {
+        tracing::warn!("could not write the magnitudes {}: {e:#}", file.display());
+    }
+}
+
+const MAGS_MAGIC: &[u8; 8] = b"GPSMAG01";
+
+/// Sorted magnitudes of a cache file, checked whole: the checksum, the count, the order.
+fn read_mags(path: &Path, key: u64, stars: usize) -> Result<Vec<f64>> {
+    let (head, mut body) = CacheReader::open(path, MAGS_MAGIC, key, 1)?;
+    if head[0] != stars as u64 || body.words_left != 2 * stars {
+        fail!(
+            Catalog,
+            "{} words where {stars} magnitudes need {}",
+            body.words_left,
+            2 * stars
+        );
+    }
+    let mags = body.read::<f64>(stars)?.into_vec();
+    body.finish()?;
+    if !mags.windows(2).all(|w| w[0].total_cmp(&w[1]).is_le()) {
+        fail!(Catalog, "magnitudes not sorted");
+    }
+    Ok(mags)
+}
+
 /// The selection of a cache file, checked whole: the checksum, then every record's id (a
 /// file that passes gives back the stars it was written with).
 fn read_refs(path: &Path, key: u64, catalog: &Catalog, selection: Selection) -> Result<RefCatalog> {
@@ -160,6 +228,29 @@ mod tests {
         );
         let again = load_or_select_in(Some(dir.path()), &catalog, selection).unwrap();
         assert_eq!(&again.stars[..], &fresh.stars[..]);
+        // The sorted magnitudes, written, read back, and sorted again when damaged: the same
+        // bits each time.
+        let sorted = Catalog::builtin().sorted_mags().to_vec();
+        let mags_dir = tempfile::tempdir().unwrap();
+        for round in 0..3 {
+            if round == 2 {
+                let file = std::fs::read_dir(mags_dir.path()).unwrap().next().unwrap();
+                let file = file.unwrap().path();
+                let mut bytes = std::fs::read(&file).unwrap();
+                let at = bytes.len() / 3;
+                bytes[at] ^= 0x40;
+                std::fs::write(&file, &bytes).unwrap();
+            }
+            let c = Catalog::builtin();
+            load_sorted_mags_in(mags_dir.path(), &c);
+            let got = c.mags.get().expect("loaded or sorted");
+            assert_eq!(got.len(), sorted.len(), "round {round}");
+            assert!(
+                got.iter()
+                    .zip(&sorted)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+        }
         // A position moved by its motion reads the same from either.
         let later = read.at_epoch(2030.0);
         let v: Vector3<f64> = later.v(7);

@@ -62,6 +62,9 @@ impl Band {
         lazy: bool,
     ) -> Result<Band> {
         let middle = scaled(camera, middle);
+        if mag_limit.or(settings.mag_limit).is_none() {
+            crate::catalog::load_sorted_mags(catalog, settings.table_cache);
+        }
         let selection = Selection {
             epoch: settings.epoch,
             mag_limit: mag_limit
