@@ -2,6 +2,8 @@
 //! tables and pattern indexes it keys: a deep catalog's selection (Tycho-2's 1.9 million stars:
 //! propagated, double stars merged, sorted by brightness) took about a second of every run,
 //! half of a narrow frame's whole process; mapped from its file it takes a few milliseconds.
+//! The catalog's sorted magnitudes, which choose the selection's magnitude limit, are kept
+//! beside it.
 
 use super::table::{CacheReader, write_cache};
 use super::{Catalog, RefCatalog, RefRecord, Selection, fnv1a, selection_text};
