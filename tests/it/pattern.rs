@@ -247,3 +247,21 @@ fn unknown_fields_give_the_same_records_on_both_backends() {
     }
     assert_eq!(solved, 4, "{solved} of 4 solved");
 }
+
+/// A pattern index is mapped without being read whole (a deep catalog's is gigabytes), so a
+/// damaged one reaches the pass: quads naming stars the selection lacks are no candidates,
+/// and a frame the pass solves with the true index finds nothing with them, without a panic.
+#[test]
+fn quads_naming_stars_the_selection_lacks_are_skipped() {
+    let camera = Camera::from_fov(1024, 1024, 15.0).unwrap();
+    let mut solver = Solver::new(&Catalog::builtin(), camera, settings()).unwrap();
+    let stars = solver.bands[solver.scale_free.as_ref().unwrap().band].refs.len() as u32;
+    let (frame, truth) = common::rendered(&sim(15.0, 62), 1).remove(0);
+    assert!(pass_alone(&solver, &frame, &truth).is_some(), "solved with the true index");
+    let sf = solver.scale_free.as_mut().unwrap();
+    let beyond: Vec<[u32; 4]> = (sf.index.quads.iter())
+        .map(|q| [q[0], q[1], q[2], stars + q[3]])
+        .collect();
+    sf.index.quads = beyond.into();
+    assert!(pass_alone(&solver, &frame, &truth).is_none());
+}
