@@ -255,9 +255,14 @@ fn unknown_fields_give_the_same_records_on_both_backends() {
 fn quads_naming_stars_the_selection_lacks_are_skipped() {
     let camera = Camera::from_fov(1024, 1024, 15.0).unwrap();
     let mut solver = Solver::new(&Catalog::builtin(), camera, settings()).unwrap();
-    let stars = solver.bands[solver.scale_free.as_ref().unwrap().band].refs.len() as u32;
+    let stars = solver.bands[solver.scale_free.as_ref().unwrap().band]
+        .refs
+        .len() as u32;
     let (frame, truth) = common::rendered(&sim(15.0, 62), 1).remove(0);
-    assert!(pass_alone(&solver, &frame, &truth).is_some(), "solved with the true index");
+    assert!(
+        pass_alone(&solver, &frame, &truth).is_some(),
+        "solved with the true index"
+    );
     let sf = solver.scale_free.as_mut().unwrap();
     let beyond: Vec<[u32; 4]> = (sf.index.quads.iter())
         .map(|q| [q[0], q[1], q[2], stars + q[3]])
