@@ -12,6 +12,7 @@ pub mod formats;
 mod id;
 mod import;
 pub mod patterns;
+mod ref_record;
 mod refs_cache;
 mod stars;
 pub mod store;
@@ -23,6 +24,8 @@ pub use id::StarId;
 pub use import::import_hip2;
 pub use refs_cache::{load_or_select, load_sorted_mags};
 pub use stars::Stars;
+
+use ref_record::RefRecord;
 pub use words::Words;
 
 use crate::error::{Context, Error, IntoKind, Result, error, fail};
@@ -186,12 +189,10 @@ impl Catalog {
             Some(p) => {
                 let start = std::time::Instant::now();
                 let source = p.display().to_string();
-                // A binary catalog is mapped; anything else (text, an empty file, a file that
-                // cannot be mapped) is read, and refused there with the reason.
-                let map = std::fs::metadata(p)
-                    .is_ok_and(|m| m.is_file() && m.len() > 0)
-                    .then(|| crate::files::map_regular_file(p, "catalog").ok())
-                    .flatten()
+                // A binary catalog is mapped; anything else (text, a file that is not regular
+                // or cannot be mapped) is read, and refused there with the reason.
+                let map = crate::files::map_regular_file(p, "catalog")
+                    .ok()
                     .filter(|m| store::is_store(m));
                 if let Some(map) = map {
                     let c = store::read_mapped(Arc::new(map), &source)?;
@@ -604,56 +605,6 @@ impl RefCatalog {
 
     pub fn is_empty(&self) -> bool {
         self.stars.is_empty()
-    }
-}
-
-/// A [`RefStar`] as stored, in a form a cache file maps (plain numbers, no padding).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-struct RefRecord {
-    v: [f64; 3],
-    motion: [f64; 3],
-    mag: f64,
-    /// [`StarId::encode`]'s number and kind.
-    id: u64,
-    kind: u32,
-    /// 0: none.
-    hip: u32,
-    members: u32,
-    zero: u32,
-}
-
-impl RefRecord {
-    fn of(s: &RefStar) -> RefRecord {
-        let (kind, id) = s.id.encode();
-        RefRecord {
-            v: s.v.into(),
-            motion: s.motion.into(),
-            mag: s.mag,
-            id,
-            kind: kind.into(),
-            hip: s.hip.unwrap_or(0),
-            members: s.members,
-            zero: 0,
-        }
-    }
-
-    /// The id, if the kind and number are one (every record made here or loaded is checked).
-    fn star_id(&self) -> Option<StarId> {
-        StarId::decode(u8::try_from(self.kind).ok()?, self.id)
-    }
-
-    fn star(&self) -> RefStar {
-        RefStar {
-            id: self
-                .star_id()
-                .expect("ids are checked when records are made or loaded"),
-            hip: (self.hip != 0).then_some(self.hip),
-            v: self.v.into(),
-            motion: self.motion.into(),
-            mag: self.mag,
-            members: self.members,
-        }
     }
 }
 

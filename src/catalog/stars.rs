@@ -68,10 +68,7 @@ impl Deref for Stars {
     type Target = [Star];
     fn deref(&self) -> &[Star] {
         self.parsed.get_or_init(|| match &self.mapped {
-            Some((map, at)) => (map[*at..*at + store::RECORD * self.len])
-                .chunks_exact(store::RECORD)
-                .map(|r| store::record_star(r).expect("records are checked when mapped"))
-                .collect(),
+            Some((map, at)) => store::parse_records(&map[*at..*at + store::RECORD * self.len]),
             None => Vec::new(),
         })
     }

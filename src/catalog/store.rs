@@ -223,6 +223,13 @@ pub(super) fn record_star(r: &[u8]) -> Option<Star> {
     })
 }
 
+/// The stars of records checked by [`check`].
+pub(super) fn parse_records(records: &[u8]) -> Vec<Star> {
+    (records.chunks_exact(RECORD))
+        .map(|r| record_star(r).expect("records are checked when read or mapped"))
+        .collect()
+}
+
 /// A record's magnitude.
 pub(super) fn record_mag(r: &[u8]) -> f64 {
     f64_at(r, 32)
@@ -243,10 +250,7 @@ impl Layout {
 pub fn read(bytes: &[u8], source: &str) -> Result<Catalog> {
     let layout = check(bytes, source)?;
     let records = &bytes[layout.records_at..layout.records_at + RECORD * layout.count];
-    let stars = (records.chunks_exact(RECORD))
-        .map(|r| record_star(r).expect("checked"))
-        .collect();
-    Ok(layout.catalog(stars, bytes, source))
+    Ok(layout.catalog(parse_records(records).into(), bytes, source))
 }
 
 /// A binary catalog file mapped, checked whole as [`read`] checks it, its stars parsed when

@@ -395,28 +395,6 @@ impl CacheReader {
         key: u64,
         heads: usize,
     ) -> Result<(Vec<u64>, Self)> {
-        Self::open_mapped(path, magic, key, heads, true)
-    }
-
-    /// [`CacheReader::open`] for a file whose reader checks what it uses as it uses it, its
-    /// checksum not taken: reading all of a 1.7 GB pattern index to check it took longer than
-    /// a frame's identification.
-    pub(crate) fn open_unchecked(
-        path: &Path,
-        magic: &[u8; 8],
-        key: u64,
-        heads: usize,
-    ) -> Result<(Vec<u64>, Self)> {
-        Self::open_mapped(path, magic, key, heads, false)
-    }
-
-    fn open_mapped(
-        path: &Path,
-        magic: &[u8; 8],
-        key: u64,
-        heads: usize,
-        checked: bool,
-    ) -> Result<(Vec<u64>, Self)> {
         let file = std::fs::File::open(path)?;
         let len = file.metadata()?.len();
         let fixed = 16 + 8 * heads as u64;
@@ -447,8 +425,27 @@ impl CacheReader {
             CacheReader {
                 map,
                 at: fixed,
-                crc: checked.then_some(crc),
+                crc: Some(crc),
                 words_left,
+            },
+        ))
+    }
+
+    /// [`CacheReader::open`] for a file whose reader checks what it uses as it uses it, its
+    /// checksum not taken: reading all of a 1.7 GB pattern index to check it took longer than
+    /// a frame's identification.
+    pub(crate) fn open_unchecked(
+        path: &Path,
+        magic: &[u8; 8],
+        key: u64,
+        heads: usize,
+    ) -> Result<(Vec<u64>, Self)> {
+        let (head, reader) = Self::open(path, magic, key, heads)?;
+        Ok((
+            head,
+            CacheReader {
+                crc: None,
+                ..reader
             },
         ))
     }
