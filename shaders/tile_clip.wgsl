@@ -1,7 +1,8 @@
 // Stage tile_clip, kernel 2 of 2 (CPU twin: src/cpu/tile_clip.rs tile_clip_with): a tile whose
 // level (background + offset) stands more than CLIP_OFFSETS of its sky's offsets above its
 // sky's level takes its sky when it, or one of the 8 tiles about it, is a bloated star's body
-// (median more than BODY_OFFSETS of its sky's offsets above its sky). One invocation per tile;
+// (median more than BODY_OFFSETS of its sky's offsets above its sky); neither margin more than
+// half the headroom between the sky and saturation. One invocation per tile;
 // dispatch (tiles, images), striding.
 
 @group(0) @binding(0) var<uniform> u: DetectUniform;
@@ -12,12 +13,21 @@
 const CLIP_OFFSETS: u32 = 3u;
 const BODY_OFFSETS: u32 = 4u;
 
+// At most half the headroom from the sky to saturation (CPU twin: margin).
+fn margin(offsets: u32, s: TileStats) -> u32 {
+    var headroom = 0u;
+    if (u.p.saturation > s.background) {
+        headroom = u.p.saturation - s.background;
+    }
+    return min(offsets * s.offset, headroom / 2u);
+}
+
 fn stands_out(t: TileStats, s: TileStats) -> bool {
-    return t.background + t.offset > s.background + (1u + CLIP_OFFSETS) * s.offset;
+    return t.background + t.offset > s.background + s.offset + margin(CLIP_OFFSETS, s);
 }
 
 fn body(t: TileStats, s: TileStats) -> bool {
-    return t.background > s.background + BODY_OFFSETS * s.offset;
+    return t.background > s.background + margin(BODY_OFFSETS, s);
 }
 
 @compute @workgroup_size(256)

@@ -8,7 +8,10 @@
 //! The sky about a tile is the lower medians of the backgrounds and offsets of the 7 × 7 tiles
 //! about it. A tile *stands out* when its level (background + offset) is more than
 //! [`CLIP_OFFSETS`] of its sky's offsets above its sky's level; it is a star's *body* when its
-//! median is more than [`BODY_OFFSETS`] of them above its sky's background. A tile that stands
+//! median is more than [`BODY_OFFSETS`] of them above its sky's background. Neither margin
+//! exceeds half the headroom between the sky and saturation ([`margin`]): on a grainy 8-bit
+//! scan (σ ≈ 12 ADU, sky 117) 20σ above the sky is past 255, and the saturated flat tops of the
+//! brightest stars would be no body, their tiles' thresholds above their own peaks. A tile that stands
 //! out takes its sky when it or one of its 8 neighbours is a body: the body and its rim, whose
 //! MAD the star's slope inflates. The edge of a lit tree or roof stands out by its spread, but
 //! is no body, and keeps its statistics. Integers only: the GPU computes the same.
@@ -66,17 +69,26 @@ fn sky_about(tiles: &[TileStats], p: &DetectParams, x: i32, y: i32, s: &mut Scra
     }
 }
 
-/// Whether a tile's level stands more than [`CLIP_OFFSETS`] of its sky's offsets above its
-/// sky's level. Backgrounds ≤ 65535 and offsets ≤ 7.42 · 65535: no sum here overflows.
-fn stands_out(t: TileStats, sky: TileStats) -> bool {
-    t.background + t.offset > sky.background + (1 + CLIP_OFFSETS) * sky.offset
+/// How far above its sky a tile must stand, for `offsets` of the sky's offsets: that many, but
+/// no more than half the headroom from the sky's background to `saturation`, so that a flat
+/// top at the format's ceiling is a body however noisy the sky. Nondecreasing in the sky's
+/// background and offset (`tile_clip`'s early bounds rely on it). Backgrounds ≤ 65535 and
+/// offsets ≤ 7.42 · 65535: no sum here overflows.
+pub fn margin(offsets: u32, sky: TileStats, saturation: u32) -> u32 {
+    (offsets * sky.offset).min(saturation.saturating_sub(sky.background) / 2)
+}
+
+/// Whether a tile's level stands more than [`CLIP_OFFSETS`] of its sky's offsets (at most
+/// half the headroom, [`margin`]) above its sky's level.
+fn stands_out(t: TileStats, sky: TileStats, saturation: u32) -> bool {
+    t.background + t.offset > sky.background + sky.offset + margin(CLIP_OFFSETS, sky, saturation)
 }
 
 /// Whether a tile is a bloated star's body: its median, more than half its pixels, stands
-/// [`BODY_OFFSETS`] of its sky's offsets (about 20σ) above its sky. A lit tree's or roof's
-/// edge stands out by its spread more than by its median.
-fn body(t: TileStats, sky: TileStats) -> bool {
-    t.background > sky.background + BODY_OFFSETS * sky.offset
+/// [`BODY_OFFSETS`] of its sky's offsets (about 20σ; at most half the headroom, [`margin`])
+/// above its sky. A lit tree's or roof's edge stands out by its spread more than by its median.
+fn body(t: TileStats, sky: TileStats, saturation: u32) -> bool {
+    t.background > sky.background + margin(BODY_OFFSETS, sky, saturation)
 }
 
 /// The tiles of one frame, clipped (see the module documentation): a tile that stands out
@@ -90,12 +102,12 @@ pub fn tile_clip_with(tiles: &[TileStats], sky: &[TileStats], p: &DetectParams) 
     for y in 0..ty {
         for x in 0..tx {
             let i = at(x, y);
-            if !stands_out(tiles[i], sky[i]) {
+            if !stands_out(tiles[i], sky[i], p.saturation) {
                 continue;
             }
             let near_body = ((y - 1).max(0)..=(y + 1).min(ty - 1)).any(|ny| {
                 ((x - 1).max(0)..=(x + 1).min(tx - 1))
-                    .any(|nx| body(tiles[at(nx, ny)], sky[at(nx, ny)]))
+                    .any(|nx| body(tiles[at(nx, ny)], sky[at(nx, ny)], p.saturation))
             });
             if near_body {
                 out[i] = sky[i];
@@ -117,8 +129,9 @@ pub fn tile_clip(tiles: &[TileStats], p: &DetectParams) -> Vec<TileStats> {
         background: tiles.iter().map(|t| t.background).min().unwrap_or(0),
         offset: tiles.iter().map(|t| t.offset).min().unwrap_or(0),
     };
-    let clip_bound = least.background + (1 + CLIP_OFFSETS) * least.offset;
-    let body_bound = least.background + BODY_OFFSETS * least.offset;
+    let sat = p.saturation;
+    let clip_bound = least.background + least.offset + margin(CLIP_OFFSETS, least, sat);
+    let body_bound = least.background + margin(BODY_OFFSETS, least, sat);
     let mut sky: Vec<Option<TileStats>> = vec![None; tiles.len()];
     let mut scratch = Scratch::default();
     let mut sky_at = |x: i32, y: i32| {
@@ -128,14 +141,14 @@ pub fn tile_clip(tiles: &[TileStats], p: &DetectParams) -> Vec<TileStats> {
     for y in 0..ty {
         for x in 0..tx {
             let t = tiles[at(x, y)];
-            if t.background + t.offset <= clip_bound || !stands_out(t, sky_at(x, y)) {
+            if t.background + t.offset <= clip_bound || !stands_out(t, sky_at(x, y), sat) {
                 continue;
             }
             let mut near_body = false;
             'around: for ny in (y - 1).max(0)..=(y + 1).min(ty - 1) {
                 for nx in (x - 1).max(0)..=(x + 1).min(tx - 1) {
                     let n = tiles[at(nx, ny)];
-                    if n.background > body_bound && body(n, sky_at(nx, ny)) {
+                    if n.background > body_bound && body(n, sky_at(nx, ny), sat) {
                         near_body = true;
                         break 'around;
                     }

@@ -15,6 +15,19 @@ const CENTRE: (f64, f64) = (251.3, 190.7);
 /// Sky 1000 ± 20 (uniform noise), a bloated star flat-topped at the saturation of 60000 (a
 /// Gaussian of σ 12 px and peak 100000, clipped), and three small stars.
 fn plate() -> Frame<'static> {
+    plate_with(1000.0, 60000.0, 65535, 1.0)
+}
+
+/// A grainy 8-bit scan (m44-1975-01-18.jpg of astrometry.net's demos): sky 117 ± 20, so that
+/// 20σ above the sky is past the format's 255, the bloated star's top flat at 255 and the
+/// small stars' peaks 120–200 ADU above the sky.
+fn grainy_scan() -> Frame<'static> {
+    plate_with(117.0, 255.0, 255, 0.04)
+}
+
+/// The plate's stars on a sky of `sky` ± 20, clipped at `top` in a format saturating at
+/// `saturation`, the small stars' amplitudes times `small`.
+fn plate_with(sky: f64, top: f64, saturation: u16, small: f64) -> Frame<'static> {
     let (w, h) = (512u32, 384u32);
     let mut state = 0x2545_f491u32;
     let mut noise = move || {
@@ -25,9 +38,9 @@ fn plate() -> Frame<'static> {
     };
     let stars = [
         (CENTRE.0, CENTRE.1, 100_000.0, 12.0),
-        (60.2, 70.9, 5000.0, 1.5),
-        (420.6, 300.1, 3000.0, 1.5),
-        (400.4, 60.3, 4000.0, 1.5),
+        (60.2, 70.9, 5000.0 * small, 1.5),
+        (420.6, 300.1, 3000.0 * small, 1.5),
+        (400.4, 60.3, 4000.0 * small, 1.5),
     ];
     let pixels = (0..w * h)
         .map(|i| {
@@ -38,14 +51,14 @@ fn plate() -> Frame<'static> {
                     a * (-((x - sx).powi(2) + (y - sy).powi(2)) / (2.0 * s * s)).exp()
                 })
                 .sum();
-            (1000.0 + noise() + light).min(60000.0) as u16
+            (sky + noise() + light).min(top) as u16
         })
         .collect::<Vec<u16>>();
     Frame {
         width: w,
         height: h,
         pixels: pixels.into(),
-        saturation: 65535,
+        saturation,
     }
 }
 
@@ -88,6 +101,29 @@ fn a_bloated_star_is_detected_whole_at_its_centre() {
 }
 
 #[test]
+fn a_grainy_scan_s_saturated_star_is_detected_whole() {
+    // 20σ above this sky is past 255: only the margins' cap at half the headroom
+    // (`tile_clip::margin`) makes the flat top a body. Without it the star's tiles keep
+    // their own median, 255, and the star is not detected at all.
+    let f = grainy_scan();
+    let p = params(&f);
+    let raw = tile_stats(&f.pixels, &p);
+    assert!(
+        raw.iter()
+            .all(|t| t.background + 4 * t.offset > 255 || t.offset == 0)
+    );
+    assert_ne!(tile_clip::tile_clip(&raw, &p), raw, "some tiles clipped");
+    let d = detect(&f, &DetectSettings::default());
+    assert_eq!(d.len(), 4, "{d:?}");
+    assert!(
+        (d[0].x - CENTRE.0).hypot(d[0].y - CENTRE.1) < 0.6,
+        "{:?}",
+        d[0]
+    );
+    assert!(d[0].saturated && d[0].area > 1000, "{:?}", d[0]);
+}
+
+#[test]
 fn gpu_equals_cpu_on_a_bloated_star() {
     let Some(g) = common::gpu("gpu_equals_cpu_on_a_bloated_star") else {
         return;
@@ -104,7 +140,7 @@ fn gpu_equals_cpu_on_a_bloated_star() {
         saturation: 255,
         ..f.clone()
     };
-    for frame in [f, eight] {
+    for frame in [f, eight, grainy_scan()] {
         let p = params(&frame);
         let raw = tile_stats(&frame.pixels, &p);
         assert_ne!(tile_clip::tile_clip(&raw, &p), raw, "some tiles clipped");
