@@ -8,6 +8,7 @@ use crate::error::fail;
 use crate::io::frame::Frame;
 use serde::Serialize;
 
+pub mod caption;
 pub mod deblend;
 
 /// Settings of detection.
@@ -162,7 +163,8 @@ pub fn stars(frame: &Frame, blobs: &[Blob], s: &DetectSettings) -> Vec<Detection
     out.pop().unwrap_or_default()
 }
 
-/// The star lists of a batch of frames (with their blobs), deblended when the settings say
+/// The star lists of a batch of frames (with their blobs), without burned-in captions
+/// (`caption`), deblended when the settings say
 /// (`deblend`, on the CPU for both backends), each position measured as the settings say: with
 /// `--centroid ml` every unsaturated star's window goes to `fit` in one call (the CPU twin, or
 /// the GPU kernel in one submission for the batch); a star whose window leaves the frame, or
@@ -174,6 +176,9 @@ pub fn stars_with(
     fit: impl FnOnce(&[Window]) -> crate::error::Result<Vec<Option<PsfFit>>>,
 ) -> crate::error::Result<Vec<Vec<Detection>>> {
     let mut lists: Vec<Vec<Detection>> = blobs.iter().map(|b| star_list(b, s)).collect();
+    for (list, frame) in lists.iter_mut().zip(frames) {
+        caption::drop_caption_rows(list, frame.height);
+    }
     if s.deblend {
         for (list, frame) in lists.iter_mut().zip(frames) {
             *list = deblend::deblend(frame, list, s.k_sigma as f64, s.max_stars);
