@@ -8,6 +8,7 @@
 //! which `--catalog` reads as it reads the CSV.
 
 pub mod cells;
+mod checked;
 pub mod formats;
 mod id;
 mod import;
@@ -184,6 +185,13 @@ impl Catalog {
     /// The built-in catalog, or the file at `path` when given: a binary catalog file
     /// ([`store`], told by its magic number) or gpustar's catalog CSV.
     pub fn load(path: Option<&Path>) -> Result<Catalog> {
+        Catalog::load_with(path, false)
+    }
+
+    /// [`Catalog::load`]; with `use_cache`, a binary catalog that passed its whole check in an
+    /// earlier run and has not changed since (`checked`: a stamp in the cache directory) is
+    /// mapped with only its header and tables checked.
+    pub fn load_with(path: Option<&Path>, use_cache: bool) -> Result<Catalog> {
         match path {
             None => Ok(Catalog::builtin()),
             Some(p) => {
@@ -195,7 +203,12 @@ impl Catalog {
                     .ok()
                     .filter(|m| store::is_store(m));
                 if let Some(map) = map {
-                    let c = store::read_mapped(Arc::new(map), &source)?;
+                    let dir = table::cache_dir().filter(|_| use_cache);
+                    let before = dir.as_deref().is_some_and(|d| checked::passed(d, p));
+                    let c = store::read_mapped(Arc::new(map), &source, before)?;
+                    if let (Some(d), false) = (dir.as_deref(), before) {
+                        checked::mark(d, p);
+                    }
                     tracing::info!(
                         "{source}: {} stars loaded in {:.1} ms",
                         c.stars.len(),

@@ -119,6 +119,13 @@ struct Layout {
 /// Check a binary catalog file whole (header, checksum, tables, every record's id); a
 /// truncated, damaged or foreign file is an error that says so.
 fn check(bytes: &[u8], source: &str) -> Result<Layout> {
+    check_with(bytes, source, true)
+}
+
+/// [`check`], or with `whole` false only the header and the tables (not the checksum and the
+/// records' ids): for a file that passed the whole check before and has not changed since
+/// (`checked`).
+fn check_with(bytes: &[u8], source: &str, whole: bool) -> Result<Layout> {
     let again = "make it again with `gpustar catalog import`";
     if !is_store(bytes) {
         fail!(Catalog, "{source}: not a gpustar catalog file");
@@ -148,7 +155,7 @@ fn check(bytes: &[u8], source: &str) -> Result<Layout> {
         );
     }
     let body = &bytes[HEADER..];
-    if crc32fast::hash(body) != u32_at(bytes, 48) {
+    if whole && crc32fast::hash(body) != u32_at(bytes, 48) {
         fail!(
             Catalog,
             "{source}: damaged gpustar catalog file (checksum mismatch); {again}"
@@ -192,7 +199,8 @@ fn check(bytes: &[u8], source: &str) -> Result<Layout> {
         names.push(String::from_utf8_lossy(s).into_owned());
         o += 4 + n;
     }
-    for (k, r) in body[at..names_at].chunks_exact(RECORD).enumerate() {
+    let records = if whole { &body[at..names_at] } else { &[] };
+    for (k, r) in records.chunks_exact(RECORD).enumerate() {
         let named = |id: &StarId| !matches!(id, StarId::Name(i) if *i as usize >= names.len());
         if !record_star(r).is_some_and(|s| named(&s.id)) {
             fail!(Catalog, "{source}: star {k}: bad id; {again}");
@@ -253,10 +261,10 @@ pub fn read(bytes: &[u8], source: &str) -> Result<Catalog> {
     Ok(layout.catalog(parse_records(records).into(), bytes, source))
 }
 
-/// A binary catalog file mapped, checked whole as [`read`] checks it, its stars parsed when
-/// first read ([`Stars`]).
-pub fn read_mapped(map: Arc<memmap2::Mmap>, source: &str) -> Result<Catalog> {
-    let layout = check(&map, source)?;
+/// A binary catalog file mapped, checked as [`read`] checks it (only its header and tables
+/// when `checked_before`: see [`check_with`]), its stars parsed when first read ([`Stars`]).
+pub fn read_mapped(map: Arc<memmap2::Mmap>, source: &str, checked_before: bool) -> Result<Catalog> {
+    let layout = check_with(&map, source, !checked_before)?;
     let stars = Stars::mapped(Arc::clone(&map), layout.records_at, layout.count);
     Ok(layout.catalog(stars, &map, source))
 }
@@ -291,7 +299,7 @@ mod tests {
         std::io::Write::write_all(&mut f, &bytes).unwrap();
         // SAFETY: a temporary file of this test only.
         let map = Arc::new(unsafe { memmap2::Mmap::map(f.as_file()) }.unwrap());
-        let mapped = read_mapped(map, "f").unwrap();
+        let mapped = read_mapped(map, "f", false).unwrap();
         assert_eq!(mapped.stars.len(), back.stars.len());
         let mags: Vec<f64> = (0..mapped.stars.len())
             .map(|i| mapped.stars.mag(i))

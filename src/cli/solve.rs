@@ -156,7 +156,7 @@ pub(crate) fn run_solve(
     }
     let header_only = o.streaks.streaks && o.streaks.astrometry == Astrometry::Header;
     let (camera, camera_mag, scale_range) = camera_source(&o.camera, header_only)?;
-    let catalog = Catalog::load(o.catalog.catalog.as_deref())?;
+    let catalog = Catalog::load_with(o.catalog.catalog.as_deref(), !o.catalog.no_cache)?;
     let mut s = settings(&o.catalog, camera_mag);
     s.detect.k_sigma = o.sigma;
     s.detect.matched_filter = o.detect_filter == DetectFilter::Binomial;
