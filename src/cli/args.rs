@@ -308,7 +308,7 @@ pub struct CatalogOpts {
     /// Stars closer than this many pixels count as one.
     #[arg(long, default_value_t = 2.0, value_parser = within(0.0, 100.0), help_heading = "Camera and sky", hide_short_help = true)]
     pub double_star_px: f64,
-    /// Do not read or write the on-disk caches (distance tables, pattern indexes, star selections).
+    /// Do not read or write the on-disk caches (distance tables, pattern indexes, star selections, the stamps of catalogs already checked whole).
     #[arg(long, help_heading = "Run", hide_short_help = true)]
     pub no_cache: bool,
 }
