@@ -6,6 +6,8 @@
 //! set back, so a file changed since is checked whole again. As git does with its index
 //! ("racy git"), a file changed within [`SETTLED_S`] of the check gets no stamp: timestamps
 //! are coarse (a few ms), and a write within the same tick would leave the stamp as it was.
+//! (`io::guard` keeps stamps of the IOD files gpustar wrote, for another question: whether
+//! another program has written them since.)
 
 use super::fnv1a;
 use std::path::{Path, PathBuf};
@@ -17,7 +19,9 @@ pub const SETTLED_S: u64 = 2;
 /// The stamp file of `path` in `dir`.
 fn stamp_path(dir: &Path, path: &Path) -> Option<PathBuf> {
     let full = std::fs::canonicalize(path).ok()?;
-    let key = fnv1a(format!("gpustar-checked-v1|{}", full.display()).as_bytes());
+    // The version in the key: another gpustar's checks may differ from the ones that passed.
+    let version = env!("CARGO_PKG_VERSION");
+    let key = fnv1a(format!("gpustar-checked-v1|{version}|{}", full.display()).as_bytes());
     Some(dir.join(format!("checked-{key:016x}.txt")))
 }
 
@@ -71,14 +75,12 @@ pub fn mark(dir: &Path, path: &Path) {
     if !settled {
         return;
     }
-    // Written whole under another name, then renamed: a reader sees the old stamp or the new.
-    let tmp = file.with_extension(format!("tmp{}", std::process::id()));
+    // Written whole: a reader sees the old stamp or the new.
     let done = std::fs::create_dir_all(dir)
-        .and_then(|_| std::fs::write(&tmp, &now))
-        .and_then(|_| std::fs::rename(&tmp, &file));
+        .map_err(crate::error::Error::from)
+        .and_then(|_| crate::io::guard::write_atomically(&file, now.as_bytes()));
     if let Err(e) = done {
-        let _ = std::fs::remove_file(&tmp);
-        tracing::debug!("could not stamp {} as checked: {e}", path.display());
+        tracing::debug!("could not stamp {} as checked: {e:#}", path.display());
     }
 }
 
