@@ -306,6 +306,14 @@ impl GpuRunner {
                     epochs,
                     &mut outcomes,
                 )?;
+                self.scale_free_points(
+                    solver,
+                    frames,
+                    regional,
+                    &mut detections,
+                    epochs,
+                    &mut outcomes,
+                )?;
             }
             self.vote_passes(solver, &detections, epochs, &mut outcomes)?;
         }
@@ -371,6 +379,45 @@ impl GpuRunner {
             return Ok(());
         }
         let stars = self.detect_filtered(solver, frames, &todo)?;
+        let sub_epochs: Vec<Option<f64>> = todo.iter().map(|&i| epochs[i]).collect();
+        let mut sub_outcomes = vec![Outcome::Unsolved("too_few_stars"); todo.len()];
+        self.scale_free_pass(solver, &stars, &sub_epochs, &mut sub_outcomes)?;
+        for ((&i, o), d) in todo.iter().zip(sub_outcomes).zip(stars) {
+            if matches!(o, Outcome::Solved(..)) {
+                outcomes[i] = o;
+                detections[i] = d;
+            }
+        }
+        Ok(())
+    }
+
+    /// The scale-free pass on the point sources (`detect::point_sources`: blends left out) of
+    /// the first detections of the frames without a region that neither detection stage
+    /// solved, where no walk follows (as `Solver::solve_frame_scale_free_first` on the CPU): a
+    /// frame solved there keeps those detections.
+    fn scale_free_points(
+        &mut self,
+        solver: &Solver,
+        frames: &[&Frame],
+        regional: &[Option<Solver>],
+        detections: &mut [Vec<Detection>],
+        epochs: &[Option<f64>],
+        outcomes: &mut [Outcome],
+    ) -> Result<()> {
+        if solver.settings.walks() {
+            return Ok(());
+        }
+        let s = &solver.settings.detect;
+        let (todo, stars): (Vec<usize>, Vec<Vec<Detection>>) = (0..frames.len())
+            .filter(|&i| regional[i].is_none() && !matches!(outcomes[i], Outcome::Solved(..)))
+            .filter_map(|i| {
+                let (w, h) = (frames[i].width, frames[i].height);
+                Some((i, detect::point_sources(&detections[i], w, h, s)?))
+            })
+            .unzip();
+        if todo.is_empty() {
+            return Ok(());
+        }
         let sub_epochs: Vec<Option<f64>> = todo.iter().map(|&i| epochs[i]).collect();
         let mut sub_outcomes = vec![Outcome::Unsolved("too_few_stars"); todo.len()];
         self.scale_free_pass(solver, &stars, &sub_epochs, &mut sub_outcomes)?;

@@ -448,7 +448,9 @@ impl Solver {
 
     /// Detect with this solver's settings and identify with `id`, the scale-free pass first on
     /// both detection stages (a sparse frame the pass misses may be solved by it from the
-    /// matched filter's detections, in milliseconds, where the walk takes seconds), then the
+    /// matched filter's detections, in milliseconds, where the walk takes seconds) and, where
+    /// no walk follows (`Settings::walks`), on the first stage's point sources
+    /// (`detect::point_sources`: blends left out), then the
     /// walk on each (on the matched filter's only when they hold a new star, as
     /// `solve_frame_with`). Solutions are those of `solve_frame_with` whenever the pass solves
     /// the first stage or nothing solves the frame. Returns the solution, detection and
@@ -479,26 +481,41 @@ impl Solver {
         let filtered = detector.detect_filtered();
         detect_ms += ms(t);
         let t = Instant::now();
+        // Only where no walk follows: the stage is judged as the pass is, within the half of
+        // the false-match budget that the walk would have had.
+        let points = || {
+            let s = &self.settings.detect;
+            (!id.settings.walks())
+                .then(|| detect::point_sources(&dets, frame.width, frame.height, s))
+                .flatten()
+        };
         let solution = match id.identify_scale_free(&filtered, epoch) {
             Some(outcome) => Solution {
                 detections: filtered,
                 outcome,
                 epoch,
             },
-            None => {
-                let adds = detect::adds_stars(&dets, &filtered);
-                let sol = id.identify_walk(dets, epoch);
-                if matches!(sol.outcome, Outcome::Solved(..)) || !adds {
-                    sol
-                } else {
-                    let again = id.identify_walk(filtered, epoch);
-                    if matches!(again.outcome, Outcome::Solved(..)) {
-                        again
-                    } else {
+            None => match points().and_then(|p| Some((id.identify_scale_free(&p, epoch)?, p))) {
+                Some((outcome, points)) => Solution {
+                    detections: points,
+                    outcome,
+                    epoch,
+                },
+                None => {
+                    let adds = detect::adds_stars(&dets, &filtered);
+                    let sol = id.identify_walk(dets, epoch);
+                    if matches!(sol.outcome, Outcome::Solved(..)) || !adds {
                         sol
+                    } else {
+                        let again = id.identify_walk(filtered, epoch);
+                        if matches!(again.outcome, Outcome::Solved(..)) {
+                            again
+                        } else {
+                            sol
+                        }
                     }
                 }
-            }
+            },
         };
         identify_ms += ms(t);
         (solution, detect_ms, identify_ms)
