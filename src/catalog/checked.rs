@@ -75,12 +75,15 @@ pub fn mark(dir: &Path, path: &Path) {
     if !settled {
         return;
     }
-    // Written whole: a reader sees the old stamp or the new.
+    // Written under another name and renamed, as `table::write_cache` writes: a reader sees
+    // the old stamp or the new, never a part.
+    let tmp = file.with_extension(format!("tmp{}", std::process::id()));
     let done = std::fs::create_dir_all(dir)
-        .map_err(crate::error::Error::from)
-        .and_then(|_| crate::io::guard::write_atomically(&file, now.as_bytes()));
+        .and_then(|_| std::fs::write(&tmp, &now))
+        .and_then(|_| std::fs::rename(&tmp, &file));
     if let Err(e) = done {
-        tracing::debug!("could not stamp {} as checked: {e:#}", path.display());
+        let _ = std::fs::remove_file(&tmp);
+        tracing::debug!("could not stamp {} as checked: {e}", path.display());
     }
 }
 
