@@ -372,23 +372,12 @@ impl GpuRunner {
         epochs: &[Option<f64>],
         outcomes: &mut [Outcome],
     ) -> Result<()> {
-        let todo: Vec<usize> = (0..frames.len())
-            .filter(|&i| regional[i].is_none() && !matches!(outcomes[i], Outcome::Solved(..)))
-            .collect();
+        let todo: Vec<usize> = lost_in_space_unsolved(regional, outcomes).collect();
         if todo.is_empty() {
             return Ok(());
         }
         let stars = self.detect_filtered(solver, frames, &todo)?;
-        let sub_epochs: Vec<Option<f64>> = todo.iter().map(|&i| epochs[i]).collect();
-        let mut sub_outcomes = vec![Outcome::Unsolved("too_few_stars"); todo.len()];
-        self.scale_free_pass(solver, &stars, &sub_epochs, &mut sub_outcomes)?;
-        for ((&i, o), d) in todo.iter().zip(sub_outcomes).zip(stars) {
-            if matches!(o, Outcome::Solved(..)) {
-                outcomes[i] = o;
-                detections[i] = d;
-            }
-        }
-        Ok(())
+        self.scale_free_adopting(solver, &todo, stars, detections, epochs, outcomes)
     }
 
     /// The scale-free pass on the point sources (`detect::point_sources`: blends left out) of
@@ -408,13 +397,27 @@ impl GpuRunner {
             return Ok(());
         }
         let s = &solver.settings.detect;
-        let (todo, stars): (Vec<usize>, Vec<Vec<Detection>>) = (0..frames.len())
-            .filter(|&i| regional[i].is_none() && !matches!(outcomes[i], Outcome::Solved(..)))
-            .filter_map(|i| {
-                let (w, h) = (frames[i].width, frames[i].height);
-                Some((i, detect::point_sources(&detections[i], w, h, s)?))
-            })
-            .unzip();
+        let (todo, stars): (Vec<usize>, Vec<Vec<Detection>>) =
+            lost_in_space_unsolved(regional, outcomes)
+                .filter_map(|i| {
+                    let (w, h) = (frames[i].width, frames[i].height);
+                    Some((i, detect::point_sources(&detections[i], w, h, s)?))
+                })
+                .unzip();
+        self.scale_free_adopting(solver, &todo, stars, detections, epochs, outcomes)
+    }
+
+    /// The scale-free pass on other star lists (`stars[k]` for frame `todo[k]`): a frame it
+    /// solves takes the outcome and those stars.
+    fn scale_free_adopting(
+        &mut self,
+        solver: &Solver,
+        todo: &[usize],
+        stars: Vec<Vec<Detection>>,
+        detections: &mut [Vec<Detection>],
+        epochs: &[Option<f64>],
+        outcomes: &mut [Outcome],
+    ) -> Result<()> {
         if todo.is_empty() {
             return Ok(());
         }
@@ -641,4 +644,13 @@ fn for_unsolved<T>(
         .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
         .filter_map(|(i, d)| f(d).map(|t| (i, t)))
         .collect()
+}
+
+/// The frames without a region (lost in space) not solved yet.
+fn lost_in_space_unsolved<'a>(
+    regional: &'a [Option<Solver>],
+    outcomes: &'a [Outcome],
+) -> impl Iterator<Item = usize> + 'a {
+    (0..outcomes.len())
+        .filter(|&i| regional[i].is_none() && !matches!(outcomes[i], Outcome::Solved(..)))
 }
