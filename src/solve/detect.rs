@@ -258,13 +258,15 @@ impl<'f> Detector<'f> {
 /// scale-free pass takes its quads from (`scale_free::ROUND_STARS`' last).
 pub const POINT_SOURCE_BRIGHTEST: usize = 30;
 
-/// The detections less those that are no single point source: unsaturated, their PSF window
-/// within the frame, and yet their fit did not settle (`--centroid ml`) — blends of two stars
-/// closer than the PSF, galaxies, plate defects. A blend's centre lies between its stars, and a
-/// quad that holds it matches no catalog quad: on a 200-pixel DSLR crop (`tiny.fits`, 10″/px)
-/// three of the five brightest detections were such blobs, two of them pairs of Tycho-2 stars
-/// 4 px apart. None when no detection among the brightest [`POINT_SOURCE_BRIGHTEST`] is one
-/// (the list would be the same), or with centres of gravity (no fits).
+/// The detections less those the PSF model does not fit: unsaturated, their PSF window within
+/// the frame, and yet their fit did not settle (`--centroid ml`). On a 200-pixel raw DSLR crop
+/// (`tiny.fits`, 10″/px) three of the five brightest detections were such blobs, and in the
+/// solution found without them their centres lie 16–19″ (1.6–1.8 px) from their catalog stars,
+/// where the others lie within 5″: blends of Tycho-2 pairs 4 px apart, whose centres fall
+/// between the stars, so that no quad holding them is a catalog quad. Not every blend is caught:
+/// two stars of σ 1.3 px 3.2 px apart are fitted as one. None when no detection among the
+/// brightest [`POINT_SOURCE_BRIGHTEST`] is one (the list would be the same), or with centres of
+/// gravity (no fits).
 pub fn point_sources(
     dets: &[Detection],
     width: u32,
