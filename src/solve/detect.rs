@@ -260,9 +260,9 @@ pub const POINT_SOURCE_BRIGHTEST: usize = 30;
 
 /// The detections less those the PSF model does not fit: unsaturated, their PSF window within
 /// the frame, and yet their fit did not settle (`--centroid ml`). On a 200-pixel raw DSLR crop
-/// (`tiny.fits`, 10″/px) three of the five brightest detections were such blobs, and in the
-/// solution found without them their centres lie 16–19″ (1.6–1.8 px) from their catalog stars,
-/// where the others lie within 5″: blends of Tycho-2 pairs 4 px apart, whose centres fall
+/// (`tiny.fits`, 10″/px) three of the five brightest detections were such blobs; in its
+/// solution with `--mag-limit 11.5` (which matches them too) their centres lie 16–19″
+/// (1.6–1.8 px) from their catalog stars, where the 19 others lie within 5″: blends of Tycho-2 pairs 4 px apart, whose centres fall
 /// between the stars, so that no quad holding them is a catalog quad. Not every blend is caught:
 /// two stars of σ 1.3 px 3.2 px apart are fitted as one. None when no detection among the
 /// brightest [`POINT_SOURCE_BRIGHTEST`] is one (the list would be the same), or with centres of
