@@ -254,19 +254,20 @@ impl<'f> Detector<'f> {
     }
 }
 
-/// Detections among the brightest this many are looked at by [`point_sources`]: those the
-/// scale-free pass takes its quads from (`scale_free::ROUND_STARS`' last).
-pub const POINT_SOURCE_BRIGHTEST: usize = 30;
+/// The brightest detections the scale-free pass takes its quads from (its last round,
+/// `scale_free::ROUND_STARS`): where captions ([`caption::drop_caption_rows`]) and blends
+/// ([`point_sources`]) are looked for.
+pub const QUAD_STARS: usize = 30;
 
 /// The detections less those the PSF model does not fit: unsaturated, their PSF window within
 /// the frame, and yet their fit did not settle (`--centroid ml`). On a 200-pixel raw DSLR crop
 /// (`tiny.fits`, 10″/px) three of the five brightest detections were such blobs; in its
 /// solution with `--mag-limit 11.5` (which matches them too) their centres lie 16–19″
-/// (1.6–1.8 px) from their catalog stars, where the 19 others lie within 5″: blends of Tycho-2 pairs 4 px apart, whose centres fall
-/// between the stars, so that no quad holding them is a catalog quad. Not every blend is caught:
-/// two stars of σ 1.3 px 3.2 px apart are fitted as one. None when no detection among the
-/// brightest [`POINT_SOURCE_BRIGHTEST`] is one (the list would be the same), or with centres of
-/// gravity (no fits).
+/// (1.6–1.8 px) from their catalog stars, where the 19 others lie within 5″: blends of Tycho-2
+/// pairs 4 px apart, whose centres fall between the stars, so that no quad holding them is a
+/// catalog quad. Not every blend is caught: two stars of σ 1.3 px 3.2 px apart are fitted as
+/// one. None when no detection among the brightest [`QUAD_STARS`] is one (the list would be
+/// the same), or with centres of gravity (no fits).
 pub fn point_sources(
     dets: &[Detection],
     width: u32,
@@ -283,7 +284,7 @@ pub fn point_sources(
         let inside = cx - HALF >= 0 && cy - HALF >= 0 && cx + HALF < w && cy + HALF < h;
         d.sigma_px.is_none() && !d.saturated && inside
     };
-    let n = dets.len().min(POINT_SOURCE_BRIGHTEST);
+    let n = dets.len().min(QUAD_STARS);
     if !dets[..n].iter().any(unsettled) {
         return None;
     }
@@ -363,8 +364,8 @@ mod tests {
         ];
         let kept = point_sources(&list, 100, 100, &ml).unwrap();
         assert_eq!(kept, vec![list[0], list[2], list[3], list[4]]);
-        // Only the brightest POINT_SOURCE_BRIGHTEST are looked at for one.
-        let mut long: Vec<Detection> = (0..POINT_SOURCE_BRIGHTEST)
+        // Only the brightest QUAD_STARS are looked at for one.
+        let mut long: Vec<Detection> = (0..QUAD_STARS)
             .map(|k| fitted(10.0 + k as f64, 20.0))
             .collect();
         long.push(blend);

@@ -46,7 +46,7 @@ use check::permutations;
 /// against its share of the false-match budget, so a frame that solves in the first pays
 /// nothing for the others' hypotheses, and the chance that any round accepts a wrong attitude
 /// stays within the whole.
-pub const ROUND_STARS: [usize; 4] = [10, 15, 20, 30];
+pub const ROUND_STARS: [usize; 4] = [10, 15, 20, detect::QUAD_STARS];
 
 /// The pass takes half of the false-match budget and the scale walk's passes share the other
 /// half (`Solver::passes_for`): counted as one more of the walk's thousands of passes, its

@@ -7,13 +7,9 @@
 //! many of the brightest detections on one horizontal line near the edge, which stars of
 //! uniform density do by chance less than once in ten thousand frames.
 
-use super::Detection;
+use super::{Detection, QUAD_STARS};
 
-/// The brightest detections a caption row is looked for among: those the scale-free pass
-/// takes its quads from (`scale_free::ROUND_STARS`' last).
-pub const CAPTION_BRIGHTEST: usize = 30;
-
-/// A caption row has at least this many of the [`CAPTION_BRIGHTEST`]. Stars spread uniformly
+/// A caption row has at least this many of the brightest [`QUAD_STARS`]. Stars spread uniformly
 /// put 0.6 of them in a strip of [`ROW_HALF`] either side of a line; 8 or more in one such
 /// strip happen with a probability of about 3e-6 a strip, 1e-4 a frame. The caption above held
 /// 17 in one row and 8 in the other.
@@ -32,7 +28,7 @@ pub const MAX_ROWS: usize = 4;
 
 /// Remove the detections of caption rows from `list` (brightest first), for a frame of
 /// `height` rows: while some detection near the top or bottom edge has [`CAPTION_MIN`] − 1
-/// others among the [`CAPTION_BRIGHTEST`] within [`ROW_HALF`] of its row, every detection
+/// others among the brightest [`QUAD_STARS`] within [`ROW_HALF`] of its row, every detection
 /// of that strip goes. Returns how many were removed; a frame without a caption keeps its list
 /// as it was.
 pub fn drop_caption_rows(list: &mut Vec<Detection>, height: u32) -> usize {
@@ -41,7 +37,7 @@ pub fn drop_caption_rows(list: &mut Vec<Detection>, height: u32) -> usize {
     let in_band = |d: &Detection| d.y < CAPTION_BAND * h || d.y > (1.0 - CAPTION_BAND) * h;
     let before = list.len();
     for _ in 0..MAX_ROWS {
-        let top = &list[..list.len().min(CAPTION_BRIGHTEST)];
+        let top = &list[..list.len().min(QUAD_STARS)];
         let row = top.iter().filter(|d| in_band(d)).find_map(|d| {
             let members = top.iter().filter(|o| (o.y - d.y).abs() <= half).count();
             (members >= CAPTION_MIN).then_some(d.y)
