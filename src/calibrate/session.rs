@@ -2,7 +2,7 @@
 //! camera to every solved frame's identified stars, solve again with the fitted camera (edge
 //! stars a rough camera missed come in) and fit again.
 
-use super::{Fit, FitOptions, FrameStars, Star, fit};
+use super::fit::{Fit, FitOptions, FrameStars, Star, fit};
 use crate::camera::Camera;
 use crate::catalog::{Catalog, radec_to_vector};
 use crate::error::{Result, fail};

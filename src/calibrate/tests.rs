@@ -1,4 +1,5 @@
 use super::*;
+use crate::calibrate::centre_step;
 use crate::solve::attitude::attitude_error;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -77,9 +77,6 @@ pub fn is_fits_extension(ext_lowercase: &str) -> bool {
     matches!(ext_lowercase, "fits" | "fit" | "fts" | "fz")
 }
 
-const BLOCK: usize = 2880;
-const CARD: usize = 80;
-
 /// Where the image's data end in a FITS file whose first `head` bytes hold its headers (the
 /// same checks as [`decode_fits`]): how much of a compressed stream to inflate.
 pub fn image_end(head: &[u8], max_pixels: u64) -> Result<u64> {
@@ -493,44 +490,6 @@ pub(crate) fn float_pixels(values: &[f32]) -> Result<(Vec<u16>, u16, Option<Stri
     let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_be_bytes()).collect();
     convert_float::<f32>(&bytes, Scaling::new(0.0, 1.0), values.len() as u64)
 }
-
-/// An integer stored type (BITPIX 8, 16, 32, 64), read as i64.
-trait IntSample {
-    const BYTES: usize;
-    const MIN: i64;
-    const MAX: i64;
-    /// `b` holds BYTES big-endian bytes.
-    fn read(b: &[u8]) -> i64;
-}
-
-/// A floating-point stored type (BITPIX −32, −64), read as f64.
-trait FloatSample {
-    const BYTES: usize;
-    fn read(b: &[u8]) -> f64;
-}
-
-macro_rules! sample {
-    ($trait:ident, $t:ty, $out:ty) => {
-        impl $trait for $t {
-            const BYTES: usize = size_of::<$t>();
-            sample!(@range $trait, $t);
-            fn read(b: &[u8]) -> $out {
-                <$t>::from_be_bytes(b.try_into().unwrap_or_default()) as $out
-            }
-        }
-    };
-    (@range IntSample, $t:ty) => {
-        const MIN: i64 = <$t>::MIN as i64;
-        const MAX: i64 = <$t>::MAX as i64;
-    };
-    (@range FloatSample, $t:ty) => {};
-}
-sample!(IntSample, u8, i64);
-sample!(IntSample, i16, i64);
-sample!(IntSample, i32, i64);
-sample!(IntSample, i64, i64);
-sample!(FloatSample, f32, f64);
-sample!(FloatSample, f64, f64);
 
 #[cfg(test)]
 mod tests;

@@ -1,10 +1,12 @@
 //! Where a frame's camera comes from: a camera file, `--fov-deg`, `--scale-arcsec`, or the
 //! pixel scale the frame's own header states.
 
-use super::MIN_SIDE;
 use crate::camera::Camera;
 use crate::io::fits::scale::PixelScale;
 use std::collections::BTreeMap;
+
+/// The smallest frame side gpustar solves: a few tiles of background and room for stars.
+pub const MIN_SIDE: u32 = 16;
 
 /// Where the camera model comes from.
 #[derive(Clone, Debug)]

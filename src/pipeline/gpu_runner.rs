@@ -1,9 +1,9 @@
 //! The GPU side of a batch: frames grouped by size, detected, voted and fitted in few submissions; a failure moves the rest of the run to the CPU.
 
-use super::{
-    BACKEND_CPU, CameraSource, Decoded, DetectKey, Detected, Global, SizeGroup, Solvers,
-    decoded_frame, identify_hinted, solve_with,
-};
+use super::camera_source::CameraSource;
+use super::cpu_runner::{decoded_frame, solve_with};
+use super::hints::identify_hinted;
+use super::solvers::{BACKEND_CPU, Decoded, DetectKey, Detected, Global, SizeGroup, Solvers};
 use crate::cpu::centroid::Blob;
 use crate::error::{Result, error, fail};
 use crate::gpu::Gpu;

@@ -2,8 +2,7 @@
 //! region, and identification that tries the region before lost-in-space, whose solver is
 //! built only when a frame needs it.
 
-use super::{Decoded, SharedSolver, Solvers};
-use crate::io::fits::scale::PixelScale;
+use super::solvers::{Decoded, Global, Solvers};
 use crate::io::frame::Frame;
 use crate::record::Record;
 use crate::sky::hint::{Hint, HintSource, header_hint};
@@ -58,61 +57,6 @@ impl Solvers {
                 );
                 None
             }
-        }
-    }
-}
-
-/// A frame's lost-in-space solver: at hand, or the size's, built when first needed.
-pub(crate) enum Global<'a> {
-    Ready(&'a Solver),
-    Lazy(&'a Solvers, (u32, u32), Option<PixelScale>),
-}
-
-impl Global<'_> {
-    /// The solver when it is at hand (not built on demand).
-    pub(crate) fn ready(&self) -> Option<&Solver> {
-        match self {
-            Global::Ready(s) => Some(s),
-            Global::Lazy(..) => None,
-        }
-    }
-
-    /// The solver, built now if it is lazy and was not yet; None when the size has none (the
-    /// catalog or camera cannot make one: the message is in the records of frames without a
-    /// hint).
-    pub(crate) fn solver(&self) -> Option<GlobalSolver<'_>> {
-        match self {
-            Global::Ready(s) => Some(GlobalSolver::Borrowed(s)),
-            Global::Lazy(solvers, (w, h), scale) => {
-                let shared = solvers.get_scaled(*w, *h, scale.as_ref());
-                match shared.as_ref() {
-                    Ok(_) => Some(GlobalSolver::Shared(shared)),
-                    Err(e) => {
-                        tracing::debug!("no lost-in-space search after the hint's: {e}");
-                        None
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// A lost-in-space solver at hand: borrowed, or the size's shared one (only ever a built one).
-pub(crate) enum GlobalSolver<'a> {
-    Borrowed(&'a Solver),
-    Shared(SharedSolver),
-}
-
-impl std::ops::Deref for GlobalSolver<'_> {
-    type Target = Solver;
-
-    fn deref(&self) -> &Solver {
-        match self {
-            GlobalSolver::Borrowed(s) => s,
-            GlobalSolver::Shared(shared) => shared
-                .as_ref()
-                .as_ref()
-                .expect("Global::solver wraps built solvers only"),
         }
     }
 }

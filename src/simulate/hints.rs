@@ -4,7 +4,6 @@
 //! 'HH MM SS.ss', Dec '+DD MM SS.s'), `RA`/`DEC` (degrees), `DATE-OBS` (the epoch of the star
 //! positions) and `EXPTIME`. `batch --hint header` reads them back (`sky::hint`).
 
-use super::{SimSettings, Truth};
 use crate::catalog::{radec_to_vector, vector_to_radec};
 use crate::io::fits::{card_comment, card_real, card_str};
 use nalgebra::Vector3;
@@ -39,14 +38,15 @@ pub fn frame_name(index: usize) -> String {
     format!("sim_{index:05}.fits")
 }
 
-/// The hint of frame `index`: the true centre (the truth's RA/Dec) moved by `h.offset_deg`
-/// toward a position angle drawn uniformly from a stream of the frame's own (seed, index), so
-/// that the frame's pixels are those it would have without a hint.
-pub fn hint_for(truth: &Truth, s: &SimSettings, h: &HintSim, index: usize) -> TruthHint {
-    let mut rng = ChaCha8Rng::seed_from_u64(s.seed ^ 0x4849_4E54);
+/// The hint of frame `index` of the set of `seed`: the true centre (`ra_deg`, `dec_deg`, the
+/// truth's) moved by `h.offset_deg` toward a position angle drawn uniformly from a stream of
+/// the frame's own (seed, index), so that the frame's pixels are those it would have without
+/// a hint.
+pub fn hint_for(ra_deg: f64, dec_deg: f64, seed: u64, h: &HintSim, index: usize) -> TruthHint {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4849_4E54);
     rng.set_stream(index as u64);
     let pa = rng.random_range(0.0..std::f64::consts::TAU);
-    let centre = radec_to_vector(truth.ra_deg, truth.dec_deg);
+    let centre = radec_to_vector(ra_deg, dec_deg);
     let hint = offset_towards(&centre, h.offset_deg.to_radians(), pa);
     let (ra_deg, dec_deg) = vector_to_radec(&hint);
     TruthHint {
@@ -126,6 +126,7 @@ fn sexagesimal(value: f64, decimals: u32, signed: bool) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::simulate::{SimSettings, Truth};
     use crate::sky::hint::hint_from_header;
 
     #[test]
@@ -176,7 +177,7 @@ mod tests {
                 false_stars: Vec::new(),
                 hint: None,
             };
-            let hint = hint_for(&truth, &s, &h, k);
+            let hint = hint_for(truth.ra_deg, truth.dec_deg, s.seed, &h, k);
             assert!((hint.offset_deg - 0.3).abs() < 1e-9, "{hint:?}");
             let bytes = crate::io::fits::encode_u16(
                 4,

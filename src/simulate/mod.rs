@@ -502,7 +502,7 @@ pub fn write_set(
                     let done = render(catalog, s, k).and_then(|(pixels, mut truth)| {
                         if let Some(h) = &s.hints {
                             truth.file = hints::frame_name(k);
-                            let hint = hints::hint_for(&truth, s, h, k);
+                            let hint = hints::hint_for(truth.ra_deg, truth.dec_deg, s.seed, h, k);
                             let cards = hints::header_cards(&hint, s.epoch, h.exposure_s);
                             truth.hint = Some(hint);
                             let bytes = crate::io::fits::encode_u16(

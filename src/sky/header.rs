@@ -1,6 +1,7 @@
 //! Exposure start and end from FITS header keywords, in any time scale TIMESYS names.
 
-use super::{Hms, Scale, Utc, parse_hms, parse_iso, parse_number, plausible_mjd};
+use super::keyword::{parse_number, value};
+use super::{Hms, Scale, Utc, parse_hms, parse_iso, plausible_mjd};
 
 /// Exposure start and end in UTC (shutter open and close: where a streak's ends are).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -19,13 +20,6 @@ impl Exposure {
     pub fn mid(&self) -> Utc {
         self.start.add_seconds(0.5 * self.duration_s())
     }
-}
-
-/// A header keyword's value, None when absent or blank.
-pub(crate) fn value(get: &dyn Fn(&str) -> Option<String>, key: &str) -> Option<String> {
-    get(key)
-        .map(|v| v.trim().to_string())
-        .filter(|v| !v.is_empty())
 }
 
 /// Keywords that may hold the time of day when DATE-OBS is a date alone.

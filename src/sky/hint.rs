@@ -132,7 +132,7 @@ pub fn header_hint(
     size: (u32, u32),
     radius_deg: f64,
 ) -> (Option<Hint>, Vec<String>) {
-    let value = |k: &str| super::header::value(get, k).map(|v| v.trim_matches('\'').to_string());
+    let value = |k: &str| super::value(get, k).map(|v| v.trim_matches('\'').to_string());
     let mut notes = Vec::new();
     let not_used =
         |k: &str, v: &str, why: &str| format!("--hint header: {k} = {v} not used: {why}");

@@ -14,6 +14,7 @@ pub mod azel;
 pub mod earth;
 pub mod header;
 pub mod hint;
+mod keyword;
 pub mod station;
 pub mod time;
 pub mod tle;
@@ -21,6 +22,7 @@ pub mod tle;
 pub use azel::*;
 pub use earth::*;
 pub use header::*;
+pub(crate) use keyword::{parse_number, value};
 pub use station::*;
 pub use time::*;
 

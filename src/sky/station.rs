@@ -1,6 +1,6 @@
 //! The observing station: from `--station` or from FITS header keywords.
 
-use super::value;
+use super::keyword::{parse_number, value};
 use sofars::coords::gc2gd;
 
 /// Station heights accepted, metres: below the Dead Sea shore to airborne.
@@ -61,12 +61,6 @@ pub fn parse_station(s: &str) -> crate::Result<Station> {
         return Err(crate::Error::Config(usage()));
     };
     checked_station(lat, lon, h).map_err(|e| crate::Error::Config(format!("--station '{s}': {e}")))
-}
-
-/// A FITS number ("30", "3.0E1", Fortran "3.0D1"); None unless finite.
-pub(crate) fn parse_number(s: &str) -> Option<f64> {
-    let v: f64 = s.trim().replace(['D', 'd'], "E").parse().ok()?;
-    v.is_finite().then_some(v)
 }
 
 /// Degrees as a number or sexagesimal ("+43:12:34.5", "43 12 34.5", "43:12.5"), optionally

@@ -6,10 +6,12 @@ use crate::cpu::psf_fit::{PsfFit, Window};
 use crate::cpu::threshold::{DetectParams, TileStats};
 use crate::error::fail;
 use crate::io::frame::Frame;
-use serde::Serialize;
 
 pub mod caption;
 pub mod deblend;
+mod detection;
+
+pub use detection::{Detection, QUAD_STARS};
 
 /// Settings of detection.
 #[derive(Clone, Copy, Debug)]
@@ -75,22 +77,6 @@ impl DetectSettings {
             ..self
         }
     }
-}
-
-/// A detected star.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct Detection {
-    pub x: f64,
-    pub y: f64,
-    /// Background-subtracted sum of the component (ADU).
-    pub flux: f64,
-    pub area: u32,
-    pub peak: u32,
-    /// Some pixel reached the format's maximum: the centroid is less certain.
-    pub saturated: bool,
-    /// The position's 1σ per axis (pixels) from the PSF fit's Fisher information (rms of x's
-    /// and y's); None for a centre of gravity.
-    pub sigma_px: Option<f64>,
 }
 
 /// The stage parameters for a frame under these settings.
@@ -253,11 +239,6 @@ impl<'f> Detector<'f> {
         stars(self.frame, &blobs_cpu_with(self.frame, &p, &self.tiles), s)
     }
 }
-
-/// The brightest detections the scale-free pass takes its quads from (its last round,
-/// `scale_free::ROUND_STARS`): where captions ([`caption::drop_caption_rows`]) and blends
-/// ([`point_sources`]) are looked for.
-pub const QUAD_STARS: usize = 30;
 
 /// The detections less those the PSF model does not fit: unsaturated, their PSF window within
 /// the frame, and yet their fit did not settle (`--centroid ml`). On a 200-pixel raw DSLR crop

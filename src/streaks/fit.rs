@@ -614,6 +614,12 @@ fn robust_sigma(v: &[f64]) -> Option<f64> {
     Some((1.4826 * m).max(1e-6))
 }
 
+/// The length between the ends in the frame (pixels).
+pub fn length(f: &StreakFit) -> f64 {
+    let [(x0, y0), (x1, y1)] = f.ends;
+    ((x1 - x0).powi(2) + (y1 - y0).powi(2)).sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

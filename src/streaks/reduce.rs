@@ -2,25 +2,14 @@
 //! own attitude and camera, or the FITS header's TAN/TAN-SIP WCS), their times from the
 //! header's time keywords, and topocentric Az/El for the station.
 
-use super::fit::StreakFit;
-use super::{StreakOptions, length};
+use super::fit::{StreakFit, length};
+pub use super::options::Astrometry;
+use super::options::StreakOptions;
 use crate::catalog::vector_to_radec;
 use crate::record::{StreakEnd, StreakRecord};
 use crate::sky::{self, Exposure, Utc};
 use crate::solve::{Outcome, Solution};
 use std::collections::BTreeMap;
-
-/// Where the RA/Dec of streak ends come from (`--astrometry`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Astrometry {
-    /// gpustar's solution, else the header's WCS when it has one.
-    Auto,
-    /// gpustar's solution only.
-    Solve,
-    /// The FITS header's celestial WCS only (TAN or TAN-SIP), for fields too narrow for the
-    /// catalog.
-    Header,
-}
 
 /// FWHM of a Gaussian in units of its σ.
 const FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
@@ -163,7 +152,7 @@ fn station_name(
 ) -> Option<String> {
     let name = STATION_NAME_KEYS
         .iter()
-        .find_map(|k| crate::sky::header::value(get, k));
+        .find_map(|k| crate::sky::value(get, k));
     let at = station.map(|s| {
         format!(
             "lat {:.5} lon {:.5} h {:.1} m",

@@ -2,7 +2,7 @@
 //! of a row sits. Tile-compressed images (`tiled.rs`) and star lists (`star_list.rs`) are both
 //! such tables.
 
-use super::CARD;
+use super::cards::CARD;
 use super::scan::{Scan, ascii, value_field};
 use crate::error::{Result, error, fail};
 use std::collections::HashMap;

@@ -1,6 +1,8 @@
 //! The one FITS card writer, and 16-bit FITS files written with it.
 
-use super::BLOCK;
+/// A FITS file is blocks of 2880 bytes; a header, cards of 80.
+pub(crate) const BLOCK: usize = 2880;
+pub(crate) const CARD: usize = 80;
 
 /// A FITS header card `KEYWORD = value` (value as FITS text: a string quoted, e.g.
 /// `'2024-03-15T20:00:00.000'`, or a number), 80 columns.

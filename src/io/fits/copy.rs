@@ -1,8 +1,8 @@
 //! A FITS frame copied with a new header (`--new-fits`): the image's HDU as it is stored, its
 //! header cards and its data, whatever form the file has (plain, gzipped, tile-compressed).
 
+use super::cards::{BLOCK, CARD, card_end, card_raw};
 use super::scan::{find_image_extension, scan_header};
-use super::{BLOCK, CARD, card_end, card_raw};
 use crate::error::{Context, Result, error, fail};
 use std::io::Read;
 use std::path::Path;

@@ -1,6 +1,5 @@
 //! Stored FITS values to u16 pixels: scaling, blanks and sentinels.
 
-use super::{FloatSample, IntSample};
 use crate::error::{Result, fail};
 
 /// BZERO and BSCALE. `int` holds them as integers when both are integral and small enough
@@ -264,3 +263,41 @@ pub(crate) fn fill_blanks(
         }
     }
 }
+
+/// An integer stored type (BITPIX 8, 16, 32, 64), read as i64.
+pub(crate) trait IntSample {
+    const BYTES: usize;
+    const MIN: i64;
+    const MAX: i64;
+    /// `b` holds BYTES big-endian bytes.
+    fn read(b: &[u8]) -> i64;
+}
+
+/// A floating-point stored type (BITPIX −32, −64), read as f64.
+pub(crate) trait FloatSample {
+    const BYTES: usize;
+    fn read(b: &[u8]) -> f64;
+}
+
+macro_rules! sample {
+    ($trait:ident, $t:ty, $out:ty) => {
+        impl $trait for $t {
+            const BYTES: usize = size_of::<$t>();
+            sample!(@range $trait, $t);
+            fn read(b: &[u8]) -> $out {
+                <$t>::from_be_bytes(b.try_into().unwrap_or_default()) as $out
+            }
+        }
+    };
+    (@range IntSample, $t:ty) => {
+        const MIN: i64 = <$t>::MIN as i64;
+        const MAX: i64 = <$t>::MAX as i64;
+    };
+    (@range FloatSample, $t:ty) => {};
+}
+sample!(IntSample, u8, i64);
+sample!(IntSample, i16, i64);
+sample!(IntSample, i32, i64);
+sample!(IntSample, i64, i64);
+sample!(FloatSample, f32, f64);
+sample!(FloatSample, f64, f64);

@@ -1,6 +1,6 @@
 //! The safety scan of FITS headers, and the headers fitsrs then parses.
 
-use super::{BLOCK, CARD};
+use super::cards::{BLOCK, CARD};
 use crate::error::{Result, error, fail};
 use fitsrs::hdu::header::Header;
 use fitsrs::hdu::header::extension::image::Image;

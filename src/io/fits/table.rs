@@ -1,7 +1,7 @@
 //! FITS binary tables (FITS 4.0 §7.3) as astrometry.net writes its star lists and matches
 //! (`.axy`, `.corr`): an empty primary HDU, then one BINTABLE of fixed-width columns.
 
-use super::{BLOCK, card, card_end, card_raw, card_str};
+use super::cards::{BLOCK, card, card_end, card_raw, card_str};
 
 /// One column's values.
 pub enum Values {

@@ -12,8 +12,8 @@
 //! tile decompression, tried on astropy-written files, dropped a row of 16-bit RICE images,
 //! misplaced square tiles, failed on GZIP and panicked on 64-bit floats.
 
-use super::BLOCK;
 use super::bintable::{Cards, Column, columns};
+use super::cards::BLOCK;
 use super::rice::rice;
 use super::scan::Scan;
 use crate::error::{Result, error, fail};

@@ -7,7 +7,7 @@
 //! many of the brightest detections on one horizontal line near the edge, which stars of
 //! uniform density do by chance less than once in ten thousand frames.
 
-use super::{Detection, QUAD_STARS};
+use super::detection::{Detection, QUAD_STARS};
 
 /// A caption row has at least this many of the brightest [`QUAD_STARS`]. Stars spread uniformly
 /// put 0.6 of them in a strip of [`ROW_HALF`] either side of a line; 8 or more in one such

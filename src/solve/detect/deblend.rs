@@ -20,7 +20,7 @@
 //! part's centre of gravity, sum, area and peak make its detection. A detection with one
 //! source is left as it is.
 
-use super::Detection;
+use super::detection::Detection;
 use crate::io::frame::Frame;
 
 /// Half the side of the window a detection is deblended in (pixels): sources up to about 12 px

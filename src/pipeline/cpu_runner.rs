@@ -1,0 +1,269 @@
+//! The CPU side of a batch: one frame at a time, on any thread. The GPU runner ends in the same
+//! `solve_with` and `Solvers::record`, so both build the same records.
+
+use super::camera_source::CameraSource;
+use super::hints::{hint_record, identify_hinted};
+use super::solvers::{BACKEND_CPU, Decoded, Global, Solvers};
+use crate::io::frame::Frame;
+use crate::record::{Record, Timing};
+use crate::solve::detect;
+use crate::solve::{Outcome, Solution, Solver};
+use crate::streaks::{self, fit::StreakFit};
+use std::sync::Mutex;
+use std::time::Instant;
+
+impl Solvers {
+    /// The record of a solved or unsolved frame (with its streaks under `--streaks`), and its
+    /// products when asked for.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn record(
+        &self,
+        solver: Option<&Solver>,
+        d: &Decoded,
+        frame: &Frame,
+        sol: &Solution,
+        found: Option<&[StreakFit]>,
+        timing: Timing,
+        backend: &str,
+    ) -> Record {
+        let mut r = match solver {
+            Some(s) => s.record(&d.name, sol, timing, backend),
+            // No camera: the outcome is unsolved, said as Solver::record says it.
+            None => Record {
+                reason: match sol.outcome {
+                    Outcome::Unsolved(reason) => Some(reason.to_string()),
+                    Outcome::Solved(..) => None,
+                },
+                stars_detected: Some(sol.detections.len()),
+                timing_ms: timing,
+                ..Record::empty(&d.name, backend)
+            },
+        };
+        r.warnings.extend(d.warnings.iter().cloned());
+        let (hint, notes) = self.hint_and_notes(d, frame);
+        r.warnings.extend(notes);
+        r.hint = hint.map(|h| hint_record(&h, &r));
+        // A solved frame's catalog says which tracks are chains of its stars.
+        let found = found.map(|f| streaks::catalog_chain::off_catalog_chains(f, sol));
+        let found = found.as_deref();
+        self.add_streaks(&mut r, d, (frame.width, frame.height), sol, found);
+        let drawn = found.unwrap_or_default();
+        if let Err(e) = self.products.write(&d.name, &d.path, frame, sol, drawn) {
+            // The solution stands; the user learns which file is missing and why.
+            tracing::warn!("{}: {e:#}", d.name);
+            r.warnings.push(format!("{e:#}"));
+        }
+        r
+    }
+
+    /// With `--streaks`, the frame's streaks reduced into its record (and their warnings).
+    fn add_streaks(
+        &self,
+        r: &mut Record,
+        d: &Decoded,
+        size: (u32, u32),
+        sol: &Solution,
+        found: Option<&[StreakFit]>,
+    ) {
+        if let (Some(opts), Some(found)) = (&self.streaks, found) {
+            let (records, warnings) = streaks::reduce::records(found, sol, &d.keywords, size, opts);
+            for w in &warnings {
+                tracing::warn!("{}: {w}", d.name);
+            }
+            r.warnings.extend(warnings);
+            r.streaks = Some(records);
+        }
+    }
+
+    /// Solve a decoded frame on the CPU: one record.
+    pub fn solve_cpu(&self, d: Decoded) -> Record {
+        let frame = match &d.frame {
+            Ok(f) => f,
+            Err(e) => return self.error_record(&d.name, e.clone(), BACKEND_CPU),
+        };
+        if matches!(self.camera, CameraSource::None) {
+            return self.streaks_only(&d, frame);
+        }
+        // A frame with a hint needs the lost-in-space solver (its distance table: for a deep
+        // catalog the largest thing a run builds) only when its region does not solve it.
+        let scale = self.header_scale(&d);
+        let mut record = if let Some(r) = self.regional(&d, frame) {
+            let global = Global::Lazy(self, (frame.width, frame.height), scale.clone());
+            solve_with(self, &r, Some(&r), &global, &d, frame)
+        } else {
+            let solver = self.get_scaled(frame.width, frame.height, scale.as_ref());
+            match solver.as_ref() {
+                Ok(s) => solve_with(self, s, None, &Global::Ready(s), &d, frame),
+                Err(e) => self.error_record(&d.name, e.clone(), BACKEND_CPU),
+            }
+        };
+        record.pixel_scale = scale.map(|s| crate::record::PixelScaleRecord {
+            arcsec_per_px: s.arcsec_per_px,
+            pixel_aspect: s.pixel_aspect,
+            source: s.keywords.to_string(),
+        });
+        record
+    }
+
+    /// Identify stars the caller detected in a `width` × `height` frame (`stars`: pixel
+    /// positions with fluxes; sorted here brightest first, as detection hands them on): the
+    /// record the frame would get with these detections, without hints, streaks or products,
+    /// which need the pixels.
+    pub fn solve_detections(
+        &self,
+        name: &str,
+        size: (u32, u32),
+        stars: Vec<detect::Detection>,
+        epoch: Option<f64>,
+    ) -> Record {
+        self.identify_detections(name, size, stars, epoch, 0.0).0
+    }
+
+    /// [`Solvers::solve_detections`], with the solution (None when there is no solver for
+    /// the size: the record is an error); `read_ms` is the time the stars took to read.
+    pub(crate) fn identify_detections(
+        &self,
+        name: &str,
+        (width, height): (u32, u32),
+        mut stars: Vec<detect::Detection>,
+        epoch: Option<f64>,
+        read_ms: f64,
+    ) -> (Record, Option<Solution>) {
+        let solver = self.get(width, height);
+        let solver = match solver.as_ref() {
+            Ok(s) => s,
+            Err(e) => return (self.error_record(name, e.clone(), BACKEND_CPU), None),
+        };
+        let t0 = Instant::now();
+        stars.sort_by(|a, b| b.flux.total_cmp(&a.flux));
+        let sol = solver.identify(stars, epoch);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        let timing = Timing {
+            decode: read_ms,
+            detect: 0.0,
+            identify: ms,
+            total: read_ms + ms,
+        };
+        (solver.record(name, &sol, timing, BACKEND_CPU), Some(sol))
+    }
+
+    /// A frame without a camera: its streaks through the header's WCS, its stars detected
+    /// (and kept off the streaks) but not identified.
+    fn streaks_only(&self, d: &Decoded, frame: &Frame) -> Record {
+        let t0 = Instant::now();
+        let s = &self.settings.detect;
+        let p = detect::params(frame, s);
+        let (blobs, found) = match &self.streaks {
+            Some(o) => streaks::detect_cpu(frame, &p, &o.settings, s.k_sigma),
+            None => (detect::blobs_cpu(frame, &p), Vec::new()),
+        };
+        let sol = Solution {
+            detections: detect::stars(frame, &blobs, s),
+            outcome: Outcome::Unsolved("no_camera"),
+            epoch: d.epoch,
+        };
+        let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let timing = Timing {
+            decode: d.decode_ms,
+            detect: detect_ms,
+            identify: 0.0,
+            total: d.decode_ms + detect_ms,
+        };
+        self.record(None, d, frame, &sol, Some(&found), timing, BACKEND_CPU)
+    }
+}
+
+/// Solve a decoded frame on the CPU: within its hinted region first when `regional` is given,
+/// then lost-in-space through `global`. `solver` gives detection's settings and the record.
+pub(super) fn solve_with(
+    solvers: &Solvers,
+    solver: &Solver,
+    regional: Option<&Solver>,
+    global: &Global,
+    d: &Decoded,
+    frame: &Frame,
+) -> Record {
+    let (sol, found, detect_ms, identify_ms) = match &solvers.streaks {
+        None => {
+            let (sol, detect_ms, identify_ms) = match (regional, global.ready()) {
+                // A searched scale: the scale-free pass on both detection stages first (as the
+                // GPU batch does: `scale_free_first`).
+                (None, Some(g)) if g.scale_free_first() => {
+                    solver.solve_frame_scale_free_first(frame, g, d.epoch)
+                }
+                _ => solver.solve_frame_with(frame, |dets| {
+                    identify_hinted(regional, global, dets, d.epoch)
+                }),
+            };
+            (sol, None, detect_ms, identify_ms)
+        }
+        Some(o) => {
+            let t0 = Instant::now();
+            let s = &solver.settings.detect;
+            let p = detect::params(frame, s);
+            let (blobs, found) = streaks::detect_cpu(frame, &p, &o.settings, s.k_sigma);
+            let dets = detect::stars(frame, &blobs, s);
+            let t1 = Instant::now();
+            let sol = identify_hinted(regional, global, dets, d.epoch);
+            let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+            (sol, Some(found), ms(t0, t1), ms(t1, Instant::now()))
+        }
+    };
+    let timing = Timing {
+        decode: d.decode_ms,
+        detect: detect_ms,
+        identify: identify_ms,
+        total: d.decode_ms + detect_ms + identify_ms,
+    };
+    solvers.record(
+        Some(solver),
+        d,
+        frame,
+        &sol,
+        found.as_deref(),
+        timing,
+        BACKEND_CPU,
+    )
+}
+
+/// Solve decoded frames on the CPU over `threads` threads: one record per frame, in the
+/// order given (what `batch::run` does with files, for frames a library user already holds).
+pub fn solve_cpu_many(solvers: &Solvers, frames: Vec<Decoded>, threads: usize) -> Vec<Record> {
+    let n = frames.len();
+    if n <= 1 || threads <= 1 {
+        // On the caller's thread: a thread started per call costs a one-frame solve its
+        // start-up (milliseconds on a loaded machine).
+        return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
+    }
+    let work: Vec<Mutex<Option<Decoded>>> =
+        frames.into_iter().map(|d| Mutex::new(Some(d))).collect();
+    let done: Vec<Mutex<Option<Record>>> = (0..n).map(|_| Mutex::new(None)).collect();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    std::thread::scope(|scope| {
+        for _ in 0..threads.clamp(1, n.max(1)) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    if i >= n {
+                        break;
+                    }
+                    let d = work[i].lock().unwrap_or_else(|e| e.into_inner()).take();
+                    let r = solvers.solve_cpu(d.expect("each frame taken once"));
+                    *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+                }
+            });
+        }
+    });
+    done.into_iter()
+        .map(|r| {
+            r.into_inner()
+                .unwrap_or_else(|e| e.into_inner())
+                .expect("one record per frame")
+        })
+        .collect()
+}
+
+/// The frame of a decoded input that was grouped for solving (only decoded ones are).
+pub(super) fn decoded_frame<'d>(d: &'d Decoded) -> &'d Frame<'d> {
+    d.frame.as_ref().expect("grouped frames decoded")
+}
