@@ -106,9 +106,9 @@ def skip_item(src, i):
 
 
 def without_tests(src):
-    """The source less every `#[cfg(test)]` item (attribute and item blanked)."""
+    """The source less every `#[cfg(test)]` (or `#[cfg(all(test, …))]`) item, blanked."""
     while True:
-        m = re.search(r"#\[cfg\(test\)\]", src)
+        m = re.search(r"#\[cfg\((?:test|all\(test\b[^\]]*)\)\]", src)
         if not m:
             return src
         j = m.end()

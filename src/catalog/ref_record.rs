@@ -1,7 +1,25 @@
 //! A reference star as a run's selection stores it: plain numbers that a cache file maps
 //! (`refs_cache`), turned back into a [`RefStar`] when read.
 
-use super::{RefStar, StarId};
+use super::id::StarId;
+use nalgebra::Vector3;
+
+/// A catalog star ready for matching: index = its id in the distance table.
+#[derive(Clone, Copy, Debug)]
+pub struct RefStar {
+    /// Catalog id of the star, or of the brightest star of a merged group.
+    pub id: StarId,
+    /// HIP of that same star, where it has one.
+    pub hip: Option<u32>,
+    /// ICRS unit vector at the selection's epoch.
+    pub v: Vector3<f64>,
+    /// Proper motion, radians per year along the sphere (flux-weighted for a merged group):
+    /// moves `v` to a frame's own epoch (see [`RefCatalog::at_epoch`]).
+    pub motion: Vector3<f64>,
+    pub mag: f64,
+    /// Number of catalog stars merged into this one (1 for a single star).
+    pub members: u32,
+}
 
 /// A [`RefStar`] as stored, in a form a cache file maps (plain numbers, no padding).
 #[repr(C)]

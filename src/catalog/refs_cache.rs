@@ -5,8 +5,10 @@
 //! The catalog's sorted magnitudes, which choose the selection's magnitude limit, are kept
 //! beside it.
 
+use super::ref_record::RefRecord;
+use super::reference::selection_text;
 use super::table::{CacheReader, write_cache};
-use super::{Catalog, RefCatalog, RefRecord, Selection, fnv1a, selection_text};
+use super::{Catalog, RefCatalog, Selection, fnv1a};
 use crate::error::{Result, fail};
 use std::path::Path;
 use std::sync::Arc;

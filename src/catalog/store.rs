@@ -20,7 +20,9 @@
 
 use super::cells::{Cells, SkyIndex};
 use super::id::StarId;
-use super::{Catalog, Star, Stars, fnv1a};
+use super::loaded::Catalog;
+use super::star::fnv1a;
+use super::stars::{RECORD, Stars, parse_records, record_star, u32_at, u64_at};
 use crate::error::{Result, fail};
 use std::sync::Arc;
 
@@ -29,9 +31,6 @@ pub const MAGIC: &[u8; 8] = b"GPUSTARC";
 /// The format version this build reads and writes.
 pub const VERSION: u32 = 1;
 const HEADER: usize = 64;
-/// Bytes of a star's record.
-pub(super) const RECORD: usize = 64;
-
 /// Whether `bytes` start like a binary catalog file.
 pub fn is_store(bytes: &[u8]) -> bool {
     bytes.starts_with(MAGIC)
@@ -94,16 +93,6 @@ pub fn write(catalog: &Catalog) -> Vec<u8> {
     out.extend(((HEADER + body.len()) as u64).to_le_bytes());
     out.extend(body);
     out
-}
-
-fn u32_at(b: &[u8], o: usize) -> u32 {
-    u32::from_le_bytes(b[o..o + 4].try_into().expect("4 bytes"))
-}
-fn u64_at(b: &[u8], o: usize) -> u64 {
-    u64::from_le_bytes(b[o..o + 8].try_into().expect("8 bytes"))
-}
-fn f64_at(b: &[u8], o: usize) -> f64 {
-    f64::from_le_bytes(b[o..o + 8].try_into().expect("8 bytes"))
 }
 
 /// What [`check`] found of a file: its cells, its names, and where its records are.
@@ -213,34 +202,6 @@ fn check_with(bytes: &[u8], source: &str, whole: bool) -> Result<Layout> {
         records_at: HEADER + at,
         count,
     })
-}
-
-/// The star of a record whose id decodes.
-pub(super) fn record_star(r: &[u8]) -> Option<Star> {
-    let id = StarId::decode(r[60], u64_at(r, 48))?;
-    let hip = u32_at(r, 56);
-    Some(Star {
-        id,
-        hip: (hip != 0).then_some(hip),
-        ra_rad: f64_at(r, 0),
-        dec_rad: f64_at(r, 8),
-        pmra_mas_yr: f64_at(r, 16),
-        pmdec_mas_yr: f64_at(r, 24),
-        mag: f64_at(r, 32),
-        epoch: f64_at(r, 40),
-    })
-}
-
-/// The stars of records checked by [`check`].
-pub(super) fn parse_records(records: &[u8]) -> Vec<Star> {
-    (records.chunks_exact(RECORD))
-        .map(|r| record_star(r).expect("records are checked when read or mapped"))
-        .collect()
-}
-
-/// A record's magnitude.
-pub(super) fn record_mag(r: &[u8]) -> f64 {
-    f64_at(r, 32)
 }
 
 impl Layout {

@@ -207,7 +207,7 @@ pub(crate) fn read(
     bytes: &[u8],
     source: &str,
     keep: impl Fn(f64) -> bool,
-    rows: &mut super::Rows,
+    rows: &mut super::rows::Rows,
 ) -> Result<()> {
     let hdus = hdus(bytes, source)?;
     let index_id = hdus
@@ -492,7 +492,8 @@ mod tests {
 
     /// The stars [`super::read`] keeps.
     fn read(bytes: &[u8], source: &str, keep: impl Fn(f64) -> bool) -> Result<Vec<Star>> {
-        let mut rows = crate::catalog::formats::Rows::new(crate::catalog::formats::Format::AnIndex);
+        let mut rows =
+            crate::catalog::formats::Rows::new(crate::catalog::formats::Format::AnIndex.row_unit());
         super::read(bytes, source, keep, &mut rows)?;
         Ok(rows.finish(source).0)
     }

@@ -2,7 +2,7 @@
 //! A user's catalog: `id`, `ra_deg`, `dec_deg`, `mag`, optional `pmra_mas_yr` (μα·cos δ),
 //! `pmdec_mas_yr`, `epoch` (Julian year of the position, default [`USER_EPOCH`]) and `hip`.
 
-use super::{Rows, number, number_or};
+use super::rows::{Rows, number, number_or};
 use crate::catalog::{Star, StarId};
 use crate::error::{Result, fail};
 

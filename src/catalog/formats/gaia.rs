@@ -10,7 +10,7 @@
 //! of the built-in Hipparcos-2 catalog, which holds every one of them.
 
 use super::csv::{Header, fields, rows};
-use super::{Rows, number, number_or};
+use super::rows::{Rows, number, number_or};
 use crate::catalog::{Star, StarId};
 use crate::error::{Result, fail};
 

@@ -1,6 +1,6 @@
 //! Hipparcos-2 `hip2.dat` (CDS I/311): whitespace-separated, positions ICRS at J1991.25.
 
-use super::{Rows, number};
+use super::rows::{Rows, number};
 use crate::catalog::{HIPPARCOS_EPOCH, Star, StarId};
 use crate::error::{Result, fail};
 

@@ -3,7 +3,7 @@
 //! position, at its own epoch (1990 + epRA), and no proper motion.
 //! Magnitude: Johnson V ≈ VT − 0.090 (BT − VT) (I/259 ReadMe, note 7), else VT or BT.
 
-use super::{Rows, number, number_or};
+use super::rows::{Rows, number, number_or};
 use crate::catalog::{Star, StarId};
 use crate::error::{Result, fail};
 
