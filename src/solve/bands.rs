@@ -1,9 +1,10 @@
 //! Scale bands (one distance table per band of focal-length factors), the passes and retries
 //! of identification, and the order detections are tried in.
 
-use super::Settings;
 use super::detect::Detection;
 use super::mag_limit::auto_mag_limit_in;
+use super::settings::Settings;
+pub use super::settings::{WALK_MAX_RATIO, WIDE_MIN_STARS};
 use crate::camera::Camera;
 use crate::catalog::table::{self, PairTable, TableOrigin};
 use crate::catalog::{Catalog, RefCatalog, Selection};
@@ -261,13 +262,6 @@ pub const SCALE_STEP: f64 = 0.001;
 /// of the time: 26 s instead of 45 s with `--fov-deg 10..30`, 6.5 s instead of 11.5 s with `16..20`.
 pub const WIDE_SCALE_STEP: f64 = 0.01;
 
-/// The widest searched scale (`hi / lo` of the focal-length range, here ±5 %: about 100 steps
-/// of [`SCALE_STEP`]) that is walked, scale by scale, when the scale-free pass does not solve
-/// a frame. A wider one (`--fov-deg LOW..HIGH`) is walked only when asked (`--fov-walk`): the
-/// walk of 8..20° takes 7 s to a minute a frame, and on the frames of docs/speed.md ("The end
-/// of the walk") it solved none that the pass had not.
-pub const WALK_MAX_RATIO: f64 = 1.05 / 0.95;
-
 /// The focal-length factors covering [lo, hi] at most `step` apart (relative), from the one
 /// nearest 1 outward.
 pub fn scale_hypotheses(lo: f64, hi: f64, step: f64) -> Vec<f64> {
@@ -332,15 +326,6 @@ pub const RETRY_VOTE_STARS: usize = 60;
 /// 3 px pair tolerance).
 pub const WIDE_PAIR_TOL_PX: f64 = 4.0;
 pub const WIDE_MATCH_RADIUS_PX: f64 = 5.0;
-
-/// The wide retry needs this many detections (`Settings::wide_min_stars`, `--wide-min-stars`).
-/// Its 4 px sides match thousands of catalog triangles in a sparse frame, which its triangle
-/// fallback enumerates and refines: 20-170 ms a frame. On 1,200 independent frames (ten sets
-/// of 8-18°, two with 1-1.5 px of position noise) and the 60 real ones it ran 156 times on
-/// frames of 8 detections or fewer and solved none; on frames of 9 or more it solved 178 of
-/// 213 (docs/speed.md, "The wide retry's stars"). Fewer detections than this are not tried
-/// with it, and the false-match test no longer counts its hypotheses for them.
-pub const WIDE_MIN_STARS: usize = 9;
 
 /// The stages that can accept a frame, the vote and the triangle fallback, share the
 /// false-match budget (`max_false_prob`) evenly: each judges its own hypotheses against half

@@ -8,6 +8,7 @@
 pub mod attitude;
 mod bands;
 pub mod detect;
+mod driver;
 pub mod explain;
 pub mod hinted;
 pub mod identify;
@@ -16,10 +17,12 @@ pub mod radial;
 pub mod refine;
 mod report;
 pub mod scale_free;
+mod settings;
 mod solver;
 pub mod triangle;
 
 pub use bands::*;
 pub use mag_limit::*;
 pub use report::*;
+pub use settings::{Parity, Settings};
 pub use solver::*;

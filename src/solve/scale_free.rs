@@ -20,24 +20,20 @@
 //! [`MAX_QUERIES`] per quad: quads of short edges are too vague to look up).
 
 use super::bands::Band;
-use super::bands::{SCALE_STEP, WALK_MAX_RATIO, scaled};
+use super::bands::{WALK_MAX_RATIO, scaled};
 use super::detect::{self, Detection};
-use super::refine::{self, CameraFit};
-use super::{Outcome, Prepared, Settings, Solution, Solver};
+use super::settings::Settings;
 use crate::camera::Camera;
 use crate::catalog::Catalog;
 use crate::catalog::patterns::{self, BINS, PatternIndex};
 use crate::cpu::pattern::{Buckets, Rows};
 use crate::error::Result;
-use crate::io::frame::Frame;
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::Instant;
 
 mod check;
-pub use check::Hypothesis;
-use check::permutations;
+mod stage;
 
 /// The rounds of the pass: round r looks up the quads of the brightest `ROUND_STARS[r]`
 /// detections not looked up before (210, then 1155, 3480 and 22,560 more). False stars (satellites,
@@ -71,14 +67,6 @@ pub const KNOWN_SCALE_SHARE: u64 = 1 << 16;
 /// (the default match radius misses most): identities right, attitudes 0.1° off in roll, where
 /// the wide retry matches 29. Clean frames' solutions match 55 % or more (docs/speed.md).
 pub const KNOWN_SCALE_MIN_COMPLETENESS: f64 = 0.5;
-
-/// How a round of the pass ended.
-enum RoundEnd {
-    Solved(Box<Outcome>),
-    /// A solution passed the test but matched too few stars: the frame is left to the vote.
-    LeftToVote,
-    Nothing,
-}
 
 /// The catalog patterns a frame's scale-free pass has checked ([`MAX_PATTERNS`]).
 #[derive(Clone, Copy, Debug, Default)]
@@ -391,349 +379,16 @@ pub fn lookup(
     out
 }
 
-impl Solver {
-    /// The share of the false-match budget the scale-free pass takes is `1 / share`; None
-    /// without the pass.
-    pub fn scale_free_share(&self) -> Option<u64> {
-        self.scale_free.as_ref().map(|sf| sf.limits.share)
-    }
-
-    /// The rounds of the pass for a frame of `n` detections (see [`rounds_for`],
-    /// [`PassLimits::rounds`]).
-    pub fn scale_free_rounds(&self, n: usize) -> usize {
-        let most = self
-            .scale_free
-            .as_ref()
-            .map_or(usize::MAX, |sf| sf.limits.rounds);
-        rounds_for(n).min(most)
-    }
-
-    /// The focal-length factors the pass looks quads up for: the searched range, or the
-    /// camera's own (1, 1).
-    fn pattern_range(&self) -> (f64, f64) {
-        self.settings.scale_range.unwrap_or((1.0, 1.0))
-    }
-
-    /// The scale-free pass round by round: a round's lookup only when
-    /// the ones before it did not solve (the GPU looks them all up at once; the records are
-    /// the same). The outcome when it solved.
-    pub fn identify_scale_free(
-        &self,
-        detections: &[Detection],
-        epoch: Option<f64>,
-    ) -> Option<Outcome> {
-        let sf = self.scale_free.as_ref()?;
-        let mut checked = Checked::default();
-        for round in 0..self.scale_free_rounds(detections.len()) {
-            let lookup = self.scale_free_lookup(detections, round..round + 1)?;
-            let rows = rows_cpu(sf, &lookup);
-            let found =
-                self.finish_scale_free_within(detections, &lookup, &rows, epoch, &mut checked);
-            if found.is_some() || checked.spent {
-                return found;
-            }
-        }
-        None
-    }
-
-    /// Whether a frame goes through the scale-free pass on both detection stages before any
-    /// scale walk ([`Solver::solve_frame_scale_free_first`]): with a searched scale, whose walk
-    /// takes seconds. A known scale's passes take milliseconds: each detection stage has the
-    /// pass and then the vote, as `solve_frame_with` runs them.
-    pub fn scale_free_first(&self) -> bool {
-        self.scale_free.is_some()
-            && self.settings.scale_range.is_some()
-            && self.detection_stages() > 1
-    }
-
-    /// Detect with this solver's settings and identify with `id`, the scale-free pass first on
-    /// both detection stages (a sparse frame the pass misses may be solved by it from the
-    /// matched filter's detections, in milliseconds, where the walk takes seconds) and, where
-    /// no walk follows (`Settings::walks`), on the first stage's point sources
-    /// (`detect::point_sources`: blends left out), then the
-    /// walk on each (on the matched filter's only when they hold a new star, as
-    /// `solve_frame_with`). Solutions are those of `solve_frame_with` whenever the pass solves
-    /// the first stage or nothing solves the frame. Returns the solution, detection and
-    /// identification times (ms).
-    pub fn solve_frame_scale_free_first(
-        &self,
-        frame: &Frame,
-        id: &Solver,
-        epoch: Option<f64>,
-    ) -> (Solution, f64, f64) {
-        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let detector = detect::Detector::new(frame, &self.settings.detect);
-        let dets = detector.detect();
-        let mut detect_ms = ms(t);
-        let t = Instant::now();
-        let found = id.identify_scale_free(&dets, epoch);
-        let mut identify_ms = ms(t);
-        if let Some(outcome) = found {
-            let sol = Solution {
-                detections: dets,
-                outcome,
-                epoch,
-            };
-            return (sol, detect_ms, identify_ms);
-        }
-        let t = Instant::now();
-        let filtered = detector.detect_filtered();
-        detect_ms += ms(t);
-        let t = Instant::now();
-        // Only where no walk follows: the stage is judged as the pass is, within the half of
-        // the false-match budget that the walk would have had.
-        let points = || {
-            let s = &self.settings.detect;
-            (!id.settings.walks())
-                .then(|| detect::point_sources(&dets, frame.width, frame.height, s))
-                .flatten()
-        };
-        let solution = match id.identify_scale_free(&filtered, epoch) {
-            Some(outcome) => Solution {
-                detections: filtered,
-                outcome,
-                epoch,
-            },
-            None => match points().and_then(|p| Some((id.identify_scale_free(&p, epoch)?, p))) {
-                Some((outcome, points)) => Solution {
-                    detections: points,
-                    outcome,
-                    epoch,
-                },
-                None => {
-                    let adds = detect::adds_stars(&dets, &filtered);
-                    let sol = id.identify_walk(dets, epoch);
-                    if matches!(sol.outcome, Outcome::Solved(..)) || !adds {
-                        sol
-                    } else {
-                        let again = id.identify_walk(filtered, epoch);
-                        if matches!(again.outcome, Outcome::Solved(..)) {
-                            again
-                        } else {
-                            sol
-                        }
-                    }
-                }
-            },
-        };
-        identify_ms += ms(t);
-        (solution, detect_ms, identify_ms)
-    }
-
-    /// The queries of a frame's `rounds` of the scale-free pass; None when the solver has no
-    /// pattern index (a known scale) or the frame has too few stars.
-    pub fn scale_free_lookup(
-        &self,
-        detections: &[Detection],
-        rounds: std::ops::Range<usize>,
-    ) -> Option<Lookup> {
-        self.scale_free.as_ref()?;
-        let range = self.pattern_range();
-        if detections.len() < 4 {
-            return None;
-        }
-        Some(lookup(
-            detections,
-            &self.camera,
-            range,
-            self.settings.identify.pair_tol_px,
-            rounds,
-        ))
-    }
-
-    /// The scale-free pass after the lookup (`rows[q]` answers `lookup.queries[q]`): round
-    /// by round (those the lookup holds), the quad hypotheses that pass the geometric checks, each refined in turn
-    /// (the first [`MAX_REFINED`] of a round); the first accepted concludes as the vote's
-    /// solutions do. None when none is accepted.
-    pub fn finish_scale_free(
-        &self,
-        detections: &[Detection],
-        lookup: &Lookup,
-        rows: &[Rows],
-        epoch: Option<f64>,
-    ) -> Option<Outcome> {
-        self.finish_scale_free_within(detections, lookup, rows, epoch, &mut Checked::default())
-    }
-
-    /// [`Solver::finish_scale_free`] of a lookup holding some of a frame's rounds, `checked`
-    /// counting the patterns its earlier rounds checked ([`MAX_PATTERNS`]).
-    pub fn finish_scale_free_within(
-        &self,
-        detections: &[Detection],
-        lookup: &Lookup,
-        rows: &[Rows],
-        epoch: Option<f64>,
-        checked: &mut Checked,
-    ) -> Option<Outcome> {
-        let perms = permutations();
-        let rounds = self.scale_free_rounds(detections.len());
-        let sf = self.scale_free.as_ref()?;
-        let mut refinable = sf.limits.max_refined;
-        for round in 0..rounds {
-            let mut quads = lookup.quads.iter().filter(|q| q.round == round).peekable();
-            if quads.peek().is_none() {
-                continue;
-            }
-            if refinable == 0 {
-                break;
-            }
-            let found: u64 = (quads.clone())
-                .flat_map(|q| &rows[q.queries.clone()])
-                .map(|r| u64::from(r.end.saturating_sub(r.start)))
-                .sum();
-            if checked.patterns.saturating_add(found) > MAX_PATTERNS {
-                tracing::debug!(
-                    "scale-free pass stopped: round {round}'s {found} patterns after {} checked",
-                    checked.patterns
-                );
-                checked.spent = true;
-                break;
-            }
-            checked.patterns += found;
-            match self.scale_free_round(
-                detections,
-                quads,
-                rows,
-                (rounds, &mut refinable),
-                epoch,
-                &perms,
-            ) {
-                RoundEnd::Solved(o) => return Some(*o),
-                RoundEnd::LeftToVote => return None,
-                RoundEnd::Nothing => {}
-            }
-        }
-        None
-    }
-
-    /// One round of the pass: its quads' hypotheses that pass the geometric checks, judged
-    /// against the round's share of the false-match budget; at most `refinable` of them
-    /// refined (and counted off it), of the frame's `rounds`.
-    fn scale_free_round<'a>(
-        &self,
-        detections: &[Detection],
-        quads: impl Iterator<Item = &'a Quad> + Clone,
-        rows: &[Rows],
-        (rounds, refinable): (usize, &mut usize),
-        epoch: Option<f64>,
-        perms: &[[usize; 4]],
-    ) -> RoundEnd {
-        let Some(sf) = self.scale_free.as_ref() else {
-            return RoundEnd::Nothing;
-        };
-        let share = sf.limits.share;
-        let (lo, hi) = self.pattern_range();
-        let refs = &self.bands[sf.band].refs;
-        let mut hyps: Vec<Hypothesis> = Vec::new();
-        for quad in quads.clone() {
-            // The image's chords at the camera's focal length, once a quad has a candidate.
-            let mut img1: Option<[f64; 6]> = None;
-            for r in &rows[quad.queries.clone()] {
-                for row in r.start as usize..(r.end as usize).min(sf.index.len()) {
-                    let ids = sf.index.quads[row];
-                    let img1 = *img1.get_or_insert_with(|| {
-                        let c = &self.camera;
-                        patterns::chords(
-                            &quad
-                                .stars
-                                .map(|i| c.pixel_to_vector(detections[i].x, detections[i].y)),
-                        )
-                    });
-                    if let Some(h) =
-                        self.check_quad(detections, quad.stars, &img1, ids, refs, (lo, hi), perms)
-                    {
-                        hyps.push(h);
-                    }
-                }
-            }
-        }
-        let found: u64 = quads
-            .clone()
-            .flat_map(|q| &rows[q.queries.clone()])
-            .map(|r| u64::from(r.end.saturating_sub(r.start)))
-            .sum();
-        tracing::debug!(
-            "scale-free round: {} quads, {found} patterns found, {} pass the checks",
-            quads.count(),
-            hyps.len()
-        );
-        if hyps.is_empty() {
-            return RoundEnd::Nothing;
-        }
-        // Every hypothesis of the round, times its rounds, judged against the pass's share of
-        // the budget (of each search and detection stage of the frame, as the vote's are).
-        let hypotheses = (hyps.len() as u64).saturating_mul(
-            rounds as u64
-                * share
-                * self.settings.searches
-                * self.detection_stages()
-                * self.parities(),
-        );
-        for h in hyps.iter().take(MAX_REFINED.min(*refinable)) {
-            *refinable -= 1;
-            let mut p = self.scale_free_prepared(h.scale);
-            p.camera.mirrored ^= h.mirrored;
-            let refs = self.bands[p.band].refs_at(epoch);
-            let Some(refined) =
-                refine::refine(h.r, detections, &refs, &p.camera, hypotheses, 4, &p.refine)
-            else {
-                continue;
-            };
-            tracing::debug!(
-                "scale-free quad {:?} = {:?} at scale {:.4}: {} matched of {} in view, P(false) {:.1e}",
-                h.stars,
-                h.refs,
-                h.scale,
-                refined.matches.len(),
-                refined.in_view,
-                refined.false_match_prob
-            );
-            if refined.false_match_prob <= self.settings.refine.max_false_prob {
-                let could = refined.in_view.min(detections.len());
-                if (refined.matches.len() as f64) < sf.limits.min_completeness * could as f64 {
-                    tracing::debug!(
-                        "scale-free: {} of {could} stars matched, left to the vote",
-                        refined.matches.len()
-                    );
-                    return RoundEnd::LeftToVote;
-                }
-                return RoundEnd::Solved(Box::new(self.conclude(
-                    detections,
-                    &p,
-                    (refined, hypotheses, 4),
-                    epoch,
-                )));
-            }
-        }
-        RoundEnd::Nothing
-    }
-
-    /// The pass settings at a quad's focal length, as the scale walk's at that scale: its
-    /// band, the scale step's tolerance, the focal length fitted (a searched scale), or the
-    /// vote's (a known one).
-    fn scale_free_prepared(&self, scale: f64) -> Prepared {
-        let mut s = self.settings.identify;
-        let mut rs = self.settings.refine;
-        if self.settings.scale_range.is_some() {
-            s.scale_tol += SCALE_STEP / 2.0;
-            if rs.fit == CameraFit::None {
-                rs.fit = CameraFit::Scale;
-            }
-        }
-        Prepared {
-            camera: scaled(&self.camera, scale),
-            band: self.band_of(scale),
-            vectors: Vec::new(),
-            ranges: Vec::new(),
-            n_vote: 0,
-            k: 0,
-            triangle_stars: 0,
-            identify: s,
-            refine: rs,
-            method: crate::solve::radial::Method::Vote,
-        }
-    }
+/// A quad hypothesis that passed the geometric checks: image stars `stars[i]` are reference
+/// stars `refs[i]` at focal-length factor `scale`, attitude `r`, the image a mirror image
+/// relative to the camera when `mirrored` (only where the parity is left open).
+#[derive(Clone, Copy, Debug)]
+pub struct Hypothesis {
+    pub stars: [usize; 4],
+    pub refs: [u32; 4],
+    pub scale: f64,
+    pub r: Matrix3<f64>,
+    pub mirrored: bool,
 }
 
 /// The lookup on the CPU twin: rows of every query. The table of key prefixes reads every
@@ -759,6 +414,7 @@ pub fn rows_cpu(sf: &ScaleFree, lookup: &Lookup) -> Vec<Rows> {
 
 #[cfg(test)]
 mod tests {
+    use super::check::permutations;
     use super::*;
 
     #[test]

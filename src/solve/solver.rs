@@ -10,125 +10,21 @@
 use super::attitude::wahba_parity;
 use super::bands::{
     Band, Deeper, Pass, PassKind, RETRY_VOTE_STARS, SCALE_STEP, SPREAD_TRIANGLE_STARS, STAGES,
-    WALK_MAX_RATIO, WIDE_MATCH_RADIUS_PX, WIDE_MIN_STARS, WIDE_PAIR_TOL_PX, band_for, scale_bands,
-    scale_hypotheses, scaled, spread_order,
+    WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, scale_bands, scale_hypotheses, scaled,
+    spread_order,
 };
-use super::detect::{self, DetectSettings, Detection};
+use super::detect::{DetectSettings, Detection};
 use super::identify::{self, IdentifySettings};
-use super::mag_limit::{FULL_SKY_SR, SHALLOW_STARS_IN_VIEW, mag_limit_in};
+use super::mag_limit::{SHALLOW_STARS_IN_VIEW, mag_limit_in};
 use super::refine::{self, RefineSettings, Refined};
+use super::settings::{Parity, Settings};
 use super::triangle;
 use crate::camera::Camera;
-use crate::catalog::{Catalog, DoubleStars, RefCatalog};
+use crate::catalog::{Catalog, RefCatalog};
 use crate::error::Result;
-use crate::io::frame::Frame;
 use crate::solve::radial::Method;
 use nalgebra::Vector3;
 use std::sync::Arc;
-use std::time::Instant;
-
-/// Everything that shapes a run besides the camera.
-#[derive(Clone, Copy, Debug)]
-pub struct Settings {
-    /// Observation epoch (Julian year) for proper motion.
-    pub epoch: f64,
-    /// Faintest catalog magnitude used; None = from the field of view (see
-    /// [`auto_mag_limit`](super::auto_mag_limit)).
-    pub mag_limit: Option<f64>,
-    pub double_stars: DoubleStars,
-    /// Stars closer than this many pixels count as one (double-star rule).
-    pub double_star_px: f64,
-    pub detect: DetectSettings,
-    pub identify: IdentifySettings,
-    pub refine: RefineSettings,
-    /// Use the on-disk cache of distance tables.
-    pub table_cache: bool,
-    /// When the scale is uncertain: the range of the true focal length relative to the
-    /// camera's, (lower, upper). The solver tries scales across it.
-    pub scale_range: Option<(f64, f64)>,
-    /// Look the frame's star quads up in a pattern index first (`scale_free.rs`; the vote
-    /// only): the passes then take only the frames that does not solve.
-    pub scale_free: bool,
-    /// Walk a searched scale wider than [`WALK_MAX_RATIO`] too, when the scale-free pass does
-    /// not solve a frame (`--fov-walk`).
-    pub walk_wide: bool,
-    /// Frames that do not solve are tried again: with more voting stars
-    /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`](super::SPREAD_CELLS)), then
-    /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
-    pub retry: bool,
-    /// The wide retry (with `retry`) only for frames of at least this many detections
-    /// ([`WIDE_MIN_STARS`]).
-    pub wide_min_stars: usize,
-    /// Frames that do not solve are detected again with the matched filter (fainter stars)
-    /// and tried again, when the filter is not on already and `retry` is, and it finds a star
-    /// the first detection did not ([`detect::adds_stars`]).
-    pub detect_retry: bool,
-    /// How stars are identified: the vote, or radial features + triangles.
-    pub method: crate::solve::radial::Method,
-    /// Solid angle the catalog covers: the whole sky, or a hinted region's cone (what the
-    /// automatic magnitude limit counts stars per field against).
-    pub sky_sr: f64,
-    /// Searches of one frame that share the false-match budget, each judged against its share:
-    /// 2 when a pointing hint's regional search may be followed by lost-in-space.
-    pub searches: u64,
-    /// Whether a frame may be a mirror image of the sky relative to the camera.
-    pub parity: Parity,
-}
-
-/// The parity of the frames relative to the camera model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Parity {
-    /// As the camera says ([`Camera::mirrored`]).
-    AsCamera,
-    /// Either: each hypothesis takes the parity its matched stars fit (a FITS image stored
-    /// the conventional way is a mirror image in row-0-first order, a photograph or a star
-    /// tracker's frame is not; with `--fov-deg` gpustar is not told which). Each hypothesis
-    /// then stands for two attitudes, and the false-match test counts both.
-    Either,
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Settings {
-            epoch: 2000.0,
-            mag_limit: None,
-            double_stars: DoubleStars::Merge,
-            double_star_px: 2.0,
-            detect: DetectSettings::default(),
-            identify: IdentifySettings::default(),
-            refine: RefineSettings::default(),
-            table_cache: true,
-            scale_range: None,
-            scale_free: true,
-            walk_wide: false,
-            retry: true,
-            wide_min_stars: WIDE_MIN_STARS,
-            detect_retry: true,
-            method: Method::Vote,
-            sky_sr: FULL_SKY_SR,
-            searches: 1,
-            parity: Parity::AsCamera,
-        }
-    }
-}
-
-impl Settings {
-    /// Whether frames go through the scale-free pass first ([`super::scale_free`]).
-    pub fn scale_free_on(&self) -> bool {
-        self.scale_free && self.method == Method::Vote
-    }
-
-    /// Whether a frame the scale-free pass does not solve is voted scale by scale (the walk):
-    /// always without the pass; with it, where the scale is known or searched within
-    /// [`WALK_MAX_RATIO`], or where `walk_wide` asks.
-    pub fn walks(&self) -> bool {
-        !self.scale_free_on()
-            || self.walk_wide
-            || self
-                .scale_range
-                .is_none_or(|(lo, hi)| hi / lo <= WALK_MAX_RATIO)
-    }
-}
 
 /// A camera with its catalog selections and distance tables, ready to solve frames.
 pub struct Solver {
@@ -489,70 +385,6 @@ impl Solver {
         Some((r, camera))
     }
 
-    /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
-    /// one solves.
-    pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-        if let Some(o) = self.identify_scale_free(&detections, epoch) {
-            return Solution {
-                detections,
-                outcome: o,
-                epoch,
-            };
-        }
-        self.identify_walk(detections, epoch)
-    }
-
-    /// The passes of identification after the scale-free pass: the vote (or radial features,
-    /// or triangles) at each scale of the walk, then the triangle fallbacks of the passes whose
-    /// vote failed, in the same order ([`Solver::fallback`]).
-    pub fn identify_walk(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-        let mut outcome = self.unsolved_before_walk(&detections);
-        let mut fallbacks = Vec::new();
-        for h in 0..self.passes.len() {
-            let Some(p) = self.prepare(&detections, h) else {
-                continue;
-            };
-            let band = &self.bands[p.band];
-            outcome = match (p.method, &band.radial) {
-                (Method::Triangle, _) => self.finish_triangle_method(&detections, &p, epoch),
-                (Method::Radial, Some(t)) => {
-                    let image = crate::solve::radial::image_features(&p.vectors[..p.n_vote], t);
-                    let found = crate::solve::radial::candidates_cpu(
-                        t,
-                        &image,
-                        crate::solve::radial::CANDIDATES,
-                    );
-                    self.finish_radial(&detections, &p, &found, epoch)
-                }
-                _ => {
-                    let voted =
-                        identify::vote_cpu(band.table(), &p.ranges, p.n_vote, band.refs.len(), p.k);
-                    let o = self.finish(&detections, &p, &voted, epoch);
-                    if !matches!(o, Outcome::Solved(..)) && Self::falls_back(&p) {
-                        fallbacks.push((h, p));
-                    }
-                    o
-                }
-            };
-            if matches!(outcome, Outcome::Solved(..)) {
-                tracing::debug!("solved by pass {h} ({:?})", self.passes[h].kind);
-                return Solution {
-                    detections,
-                    outcome,
-                    epoch,
-                };
-            }
-        }
-        if let Some(o) = self.fall_back(&detections, &fallbacks, epoch) {
-            outcome = o;
-        }
-        Solution {
-            detections,
-            outcome,
-            epoch,
-        }
-    }
-
     /// A frame's outcome before any pass of the walk: no consistent match when the scale-free
     /// pass looked it up (four stars or more), too few stars otherwise.
     pub fn unsolved_before_walk(&self, detections: &[Detection]) -> Outcome {
@@ -839,53 +671,6 @@ impl Solver {
             (refined.false_match_prob <= p.refine.max_false_prob)
                 .then_some((refined, hypotheses, 3))
         })
-    }
-
-    /// Solve a decoded frame on the CPU.
-    pub fn solve_frame(&self, frame: &Frame) -> (Solution, f64, f64) {
-        self.solve_frame_at(frame, None)
-    }
-
-    /// Solve a decoded frame on the CPU, with its own observation epoch if it has one.
-    pub fn solve_frame_at(&self, frame: &Frame, epoch: Option<f64>) -> (Solution, f64, f64) {
-        if self.scale_free_first() {
-            return self.solve_frame_scale_free_first(frame, self, epoch);
-        }
-        self.solve_frame_with(frame, |dets| self.identify(dets, epoch))
-    }
-
-    /// Detect, identify with `identify`, and detect again with the matched filter when that
-    /// does not solve (the detection retry), identifying again when that finds a star the
-    /// first detection did not ([`detect::adds_stars`]). Returns the solution, detection and
-    /// identification times (ms).
-    pub fn solve_frame_with(
-        &self,
-        frame: &Frame,
-        identify: impl Fn(Vec<Detection>) -> Solution,
-    ) -> (Solution, f64, f64) {
-        let t0 = Instant::now();
-        let detector = detect::Detector::new(frame, &self.settings.detect);
-        let dets = detector.detect();
-        let t1 = Instant::now();
-        let sol = identify(dets);
-        let t2 = Instant::now();
-        let (mut detect_ms, identify_ms) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
-        if matches!(sol.outcome, Outcome::Unsolved(_)) && self.detection_stages() > 1 {
-            let t3 = Instant::now();
-            let filtered = detector.detect_filtered();
-            detect_ms += t3.elapsed().as_secs_f64();
-            if !detect::adds_stars(&sol.detections, &filtered) {
-                return (sol, detect_ms * 1e3, identify_ms * 1e3);
-            }
-            let t4 = Instant::now();
-            let again = identify(filtered);
-            let identify_ms = identify_ms + t4.elapsed().as_secs_f64();
-            if matches!(again.outcome, Outcome::Solved(..)) {
-                return (again, detect_ms * 1e3, identify_ms * 1e3);
-            }
-            return (sol, detect_ms * 1e3, identify_ms * 1e3);
-        }
-        (sol, detect_ms * 1e3, identify_ms * 1e3)
     }
 
     /// How many detections a frame may be identified from: 2 when a frame that does not solve

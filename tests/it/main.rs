@@ -29,6 +29,7 @@ mod fz;
 mod gpu_pipeline;
 mod help;
 mod hint;
+mod imports;
 mod layout;
 mod noise;
 mod outputs;

@@ -5,22 +5,11 @@
 use super::super::Solver;
 use super::super::bands::{SCALE_STEP, scaled};
 use super::super::detect::Detection;
+use super::Hypothesis;
 use crate::camera::angle;
 use crate::catalog::patterns;
 use crate::solve::Parity;
-use nalgebra::{Matrix3, Vector3};
-
-/// A quad hypothesis that passed the geometric checks: image stars `stars[i]` are reference
-/// stars `refs[i]` at focal-length factor `scale`, attitude `r`, the image a mirror image
-/// relative to the camera when `mirrored` (only where the parity is left open).
-#[derive(Clone, Copy, Debug)]
-pub struct Hypothesis {
-    pub stars: [usize; 4],
-    pub refs: [u32; 4],
-    pub scale: f64,
-    pub r: Matrix3<f64>,
-    pub mirrored: bool,
-}
+use nalgebra::Vector3;
 
 /// The 24 orders of four items.
 pub(super) fn permutations() -> Vec<[usize; 4]> {

@@ -1,0 +1,267 @@
+//! The scale-free pass as a stage of a [`Solver`]: the rounds of a frame's quads looked up,
+//! checked, refined and judged against the pass's share of the false-match budget.
+
+use super::super::bands::{SCALE_STEP, scaled};
+use super::super::detect::Detection;
+use super::super::refine::{self, CameraFit};
+use super::super::solver::{Outcome, Prepared, Solver};
+use super::check::permutations;
+use super::{Checked, Hypothesis, Lookup, MAX_PATTERNS, MAX_REFINED, Quad, lookup, rounds_for};
+use crate::catalog::patterns;
+use crate::cpu::pattern::Rows;
+
+/// How a round of the pass ended.
+enum RoundEnd {
+    Solved(Box<Outcome>),
+    /// A solution passed the test but matched too few stars: the frame is left to the vote.
+    LeftToVote,
+    Nothing,
+}
+
+impl Solver {
+    /// The share of the false-match budget the scale-free pass takes is `1 / share`; None
+    /// without the pass.
+    pub fn scale_free_share(&self) -> Option<u64> {
+        self.scale_free.as_ref().map(|sf| sf.limits.share)
+    }
+
+    /// The rounds of the pass for a frame of `n` detections (see [`rounds_for`],
+    /// [`PassLimits::rounds`]).
+    pub fn scale_free_rounds(&self, n: usize) -> usize {
+        let most = self
+            .scale_free
+            .as_ref()
+            .map_or(usize::MAX, |sf| sf.limits.rounds);
+        rounds_for(n).min(most)
+    }
+
+    /// The focal-length factors the pass looks quads up for: the searched range, or the
+    /// camera's own (1, 1).
+    fn pattern_range(&self) -> (f64, f64) {
+        self.settings.scale_range.unwrap_or((1.0, 1.0))
+    }
+
+    /// Whether a frame goes through the scale-free pass on both detection stages before any
+    /// scale walk ([`Solver::solve_frame_scale_free_first`]): with a searched scale, whose walk
+    /// takes seconds. A known scale's passes take milliseconds: each detection stage has the
+    /// pass and then the vote, as `solve_frame_with` runs them.
+    pub fn scale_free_first(&self) -> bool {
+        self.scale_free.is_some()
+            && self.settings.scale_range.is_some()
+            && self.detection_stages() > 1
+    }
+
+    /// The queries of a frame's `rounds` of the scale-free pass; None when the solver has no
+    /// pattern index (a known scale) or the frame has too few stars.
+    pub fn scale_free_lookup(
+        &self,
+        detections: &[Detection],
+        rounds: std::ops::Range<usize>,
+    ) -> Option<Lookup> {
+        self.scale_free.as_ref()?;
+        let range = self.pattern_range();
+        if detections.len() < 4 {
+            return None;
+        }
+        Some(lookup(
+            detections,
+            &self.camera,
+            range,
+            self.settings.identify.pair_tol_px,
+            rounds,
+        ))
+    }
+
+    /// The scale-free pass after the lookup (`rows[q]` answers `lookup.queries[q]`): round
+    /// by round (those the lookup holds), the quad hypotheses that pass the geometric checks, each refined in turn
+    /// (the first [`MAX_REFINED`] of a round); the first accepted concludes as the vote's
+    /// solutions do. None when none is accepted.
+    pub fn finish_scale_free(
+        &self,
+        detections: &[Detection],
+        lookup: &Lookup,
+        rows: &[Rows],
+        epoch: Option<f64>,
+    ) -> Option<Outcome> {
+        self.finish_scale_free_within(detections, lookup, rows, epoch, &mut Checked::default())
+    }
+
+    /// [`Solver::finish_scale_free`] of a lookup holding some of a frame's rounds, `checked`
+    /// counting the patterns its earlier rounds checked ([`MAX_PATTERNS`]).
+    pub fn finish_scale_free_within(
+        &self,
+        detections: &[Detection],
+        lookup: &Lookup,
+        rows: &[Rows],
+        epoch: Option<f64>,
+        checked: &mut Checked,
+    ) -> Option<Outcome> {
+        let perms = permutations();
+        let rounds = self.scale_free_rounds(detections.len());
+        let sf = self.scale_free.as_ref()?;
+        let mut refinable = sf.limits.max_refined;
+        for round in 0..rounds {
+            let mut quads = lookup.quads.iter().filter(|q| q.round == round).peekable();
+            if quads.peek().is_none() {
+                continue;
+            }
+            if refinable == 0 {
+                break;
+            }
+            let found: u64 = (quads.clone())
+                .flat_map(|q| &rows[q.queries.clone()])
+                .map(|r| u64::from(r.end.saturating_sub(r.start)))
+                .sum();
+            if checked.patterns.saturating_add(found) > MAX_PATTERNS {
+                tracing::debug!(
+                    "scale-free pass stopped: round {round}'s {found} patterns after {} checked",
+                    checked.patterns
+                );
+                checked.spent = true;
+                break;
+            }
+            checked.patterns += found;
+            match self.scale_free_round(
+                detections,
+                quads,
+                rows,
+                (rounds, &mut refinable),
+                epoch,
+                &perms,
+            ) {
+                RoundEnd::Solved(o) => return Some(*o),
+                RoundEnd::LeftToVote => return None,
+                RoundEnd::Nothing => {}
+            }
+        }
+        None
+    }
+
+    /// One round of the pass: its quads' hypotheses that pass the geometric checks, judged
+    /// against the round's share of the false-match budget; at most `refinable` of them
+    /// refined (and counted off it), of the frame's `rounds`.
+    fn scale_free_round<'a>(
+        &self,
+        detections: &[Detection],
+        quads: impl Iterator<Item = &'a Quad> + Clone,
+        rows: &[Rows],
+        (rounds, refinable): (usize, &mut usize),
+        epoch: Option<f64>,
+        perms: &[[usize; 4]],
+    ) -> RoundEnd {
+        let Some(sf) = self.scale_free.as_ref() else {
+            return RoundEnd::Nothing;
+        };
+        let share = sf.limits.share;
+        let (lo, hi) = self.pattern_range();
+        let refs = &self.bands[sf.band].refs;
+        let mut hyps: Vec<Hypothesis> = Vec::new();
+        for quad in quads.clone() {
+            // The image's chords at the camera's focal length, once a quad has a candidate.
+            let mut img1: Option<[f64; 6]> = None;
+            for r in &rows[quad.queries.clone()] {
+                for row in r.start as usize..(r.end as usize).min(sf.index.len()) {
+                    let ids = sf.index.quads[row];
+                    let img1 = *img1.get_or_insert_with(|| {
+                        let c = &self.camera;
+                        patterns::chords(
+                            &quad
+                                .stars
+                                .map(|i| c.pixel_to_vector(detections[i].x, detections[i].y)),
+                        )
+                    });
+                    if let Some(h) =
+                        self.check_quad(detections, quad.stars, &img1, ids, refs, (lo, hi), perms)
+                    {
+                        hyps.push(h);
+                    }
+                }
+            }
+        }
+        let found: u64 = quads
+            .clone()
+            .flat_map(|q| &rows[q.queries.clone()])
+            .map(|r| u64::from(r.end.saturating_sub(r.start)))
+            .sum();
+        tracing::debug!(
+            "scale-free round: {} quads, {found} patterns found, {} pass the checks",
+            quads.count(),
+            hyps.len()
+        );
+        if hyps.is_empty() {
+            return RoundEnd::Nothing;
+        }
+        // Every hypothesis of the round, times its rounds, judged against the pass's share of
+        // the budget (of each search and detection stage of the frame, as the vote's are).
+        let hypotheses = (hyps.len() as u64).saturating_mul(
+            rounds as u64
+                * share
+                * self.settings.searches
+                * self.detection_stages()
+                * self.parities(),
+        );
+        for h in hyps.iter().take(MAX_REFINED.min(*refinable)) {
+            *refinable -= 1;
+            let mut p = self.scale_free_prepared(h.scale);
+            p.camera.mirrored ^= h.mirrored;
+            let refs = self.bands[p.band].refs_at(epoch);
+            let Some(refined) =
+                refine::refine(h.r, detections, &refs, &p.camera, hypotheses, 4, &p.refine)
+            else {
+                continue;
+            };
+            tracing::debug!(
+                "scale-free quad {:?} = {:?} at scale {:.4}: {} matched of {} in view, P(false) {:.1e}",
+                h.stars,
+                h.refs,
+                h.scale,
+                refined.matches.len(),
+                refined.in_view,
+                refined.false_match_prob
+            );
+            if refined.false_match_prob <= self.settings.refine.max_false_prob {
+                let could = refined.in_view.min(detections.len());
+                if (refined.matches.len() as f64) < sf.limits.min_completeness * could as f64 {
+                    tracing::debug!(
+                        "scale-free: {} of {could} stars matched, left to the vote",
+                        refined.matches.len()
+                    );
+                    return RoundEnd::LeftToVote;
+                }
+                return RoundEnd::Solved(Box::new(self.conclude(
+                    detections,
+                    &p,
+                    (refined, hypotheses, 4),
+                    epoch,
+                )));
+            }
+        }
+        RoundEnd::Nothing
+    }
+
+    /// The pass settings at a quad's focal length, as the scale walk's at that scale: its
+    /// band, the scale step's tolerance, the focal length fitted (a searched scale), or the
+    /// vote's (a known one).
+    fn scale_free_prepared(&self, scale: f64) -> Prepared {
+        let mut s = self.settings.identify;
+        let mut rs = self.settings.refine;
+        if self.settings.scale_range.is_some() {
+            s.scale_tol += SCALE_STEP / 2.0;
+            if rs.fit == CameraFit::None {
+                rs.fit = CameraFit::Scale;
+            }
+        }
+        Prepared {
+            camera: scaled(&self.camera, scale),
+            band: self.band_of(scale),
+            vectors: Vec::new(),
+            ranges: Vec::new(),
+            n_vote: 0,
+            k: 0,
+            triangle_stars: 0,
+            identify: s,
+            refine: rs,
+            method: crate::solve::radial::Method::Vote,
+        }
+    }
+}
