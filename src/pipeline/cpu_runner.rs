@@ -2,12 +2,13 @@
 //! `solve_with` and `Solvers::record`, so both build the same records.
 
 use super::camera_source::CameraSource;
-use super::hints::{hint_record, identify_hinted};
+use super::hints::hint_record;
 use super::solvers::{BACKEND_CPU, Decoded, Global, Solvers};
 use crate::io::frame::Frame;
 use crate::record::{Record, Timing};
 use crate::solve::detect;
-use crate::solve::{Outcome, Solution, Solver};
+use crate::solve::driver::{identify_list_cpu, solve_frame_cpu};
+use crate::solve::{Outcome, Solution, Solver, Unsolved};
 use crate::streaks::{self, fit::StreakFit};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -159,7 +160,7 @@ impl Solvers {
         };
         let sol = Solution {
             detections: detect::stars(frame, &blobs, s),
-            outcome: Outcome::Unsolved("no_camera"),
+            outcome: Outcome::Unsolved(Unsolved::NoCamera),
             epoch: d.epoch,
         };
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -185,26 +186,24 @@ pub(super) fn solve_with(
 ) -> Record {
     let (sol, found, detect_ms, identify_ms) = match &solvers.streaks {
         None => {
-            let (sol, detect_ms, identify_ms) = match (regional, global.ready()) {
-                // A searched scale: the scale-free pass on both detection stages first (as the
-                // GPU batch does: `scale_free_first`).
-                (None, Some(g)) if g.scale_free_first() => {
-                    solver.solve_frame_scale_free_first(frame, g, d.epoch)
-                }
-                _ => solver.solve_frame_with(frame, |dets| {
-                    identify_hinted(regional, global, dets, d.epoch)
-                }),
-            };
+            let (sol, detect_ms, identify_ms) = solve_frame_cpu(
+                frame,
+                &[regional],
+                || global.solver(),
+                &solver.settings.detect,
+                d.epoch,
+            );
             (sol, None, detect_ms, identify_ms)
         }
         Some(o) => {
+            // Streaks are taken out of star detection first: no second detection stage.
             let t0 = Instant::now();
             let s = &solver.settings.detect;
             let p = detect::params(frame, s);
             let (blobs, found) = streaks::detect_cpu(frame, &p, &o.settings, s.k_sigma);
             let dets = detect::stars(frame, &blobs, s);
             let t1 = Instant::now();
-            let sol = identify_hinted(regional, global, dets, d.epoch);
+            let sol = identify_list_cpu(regional, || global.solver(), dets, d.epoch);
             let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
             (sol, Some(found), ms(t0, t1), ms(t1, Instant::now()))
         }

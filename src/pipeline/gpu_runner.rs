@@ -2,9 +2,9 @@
 
 use super::camera_source::CameraSource;
 use super::cpu_runner::{decoded_frame, solve_with};
-use super::hints::identify_hinted;
 use super::solvers::{BACKEND_CPU, Decoded, DetectKey, Detected, Global, SizeGroup, Solvers};
 use crate::cpu::centroid::Blob;
+use crate::cpu::pattern::Rows;
 use crate::error::{Result, error, fail};
 use crate::gpu::Gpu;
 use crate::gpu::pattern::GpuPatterns;
@@ -13,8 +13,12 @@ use crate::gpu::vote::{GpuTable, VoteJob};
 use crate::io::frame::Frame;
 use crate::record::{Record, Timing};
 use crate::solve::detect::{self, DetectSettings, Detection};
+use crate::solve::driver::identify_batch;
+use crate::solve::identify::VoteResult;
+use crate::solve::kernels::Kernels;
 use crate::solve::radial;
-use crate::solve::{Outcome, Prepared, Solution, Solver};
+use crate::solve::scale_free::Lookup;
+use crate::solve::{Prepared, Solution, Solver};
 use crate::streaks::{self, StreakOptions, fit::StreakFit};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -276,293 +280,31 @@ impl GpuRunner {
                 (kept, found)
             }
         };
-        let mut detections = gpu_stars(&self.gpu, frames, &blobs, settings)?;
+        let detections = gpu_stars(&self.gpu, frames, &blobs, settings)?;
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
-        let mut outcomes: Vec<Outcome> = vec![Outcome::Unsolved("too_few_stars"); frames.len()];
-        for (i, r) in regional.iter().enumerate() {
-            if let Some(r) = r {
-                let sol = r.identify(detections[i].clone(), epochs[i]);
-                if matches!(sol.outcome, Outcome::Solved(..)) {
-                    outcomes[i] = sol.outcome;
-                }
-            }
-        }
-        // The lost-in-space solver, for the frames their regions did not solve (built now if
-        // every frame had a hint and it was not needed before).
-        let global_solver = if outcomes.iter().all(|o| matches!(o, Outcome::Solved(..))) {
-            None
-        } else {
-            global.solver()
+        let regional: Vec<Option<&Solver>> = regional.iter().map(Option::as_ref).collect();
+        // With streaks, detection took them out first: no second detection stage.
+        let sizes: Vec<(u32, u32)> = frames.iter().map(|f| (f.width, f.height)).collect();
+        let sizes = streak_opts.is_none().then_some(sizes.as_slice());
+        let mut kernels = GpuKernels {
+            runner: self,
+            frames,
         };
-        if let Some(solver) = &global_solver {
-            self.scale_free_pass(solver, &detections, epochs, &mut outcomes)?;
-            if streak_opts.is_none() && global.ready().is_some() && solver.scale_free_first() {
-                self.scale_free_filtered(
-                    solver,
-                    frames,
-                    regional,
-                    &mut detections,
-                    epochs,
-                    &mut outcomes,
-                )?;
-                self.scale_free_points(
-                    solver,
-                    frames,
-                    regional,
-                    &mut detections,
-                    epochs,
-                    &mut outcomes,
-                )?;
-            }
-            self.vote_passes(solver, &detections, epochs, &mut outcomes)?;
-        }
-        let mut solutions: Vec<Solution> = detections
-            .into_iter()
-            .zip(outcomes)
-            .zip(epochs)
-            .map(|((detections, outcome), &epoch)| Solution {
-                detections,
-                outcome,
-                epoch,
-            })
-            .collect();
-        // The detection retry: frames that did not solve, detected again with the matched
-        // filter (on the GPU, in one submission) and identified again (the CPU twin's vote)
-        // when that finds a star the first detection did not.
-        // Detection's retry settings are the run's (any solver of the group has them).
-        let lead = global_solver
-            .as_deref()
-            .or_else(|| regional.iter().flatten().next());
-        if let Some(solver) = lead.filter(|s| streak_opts.is_none() && s.detection_stages() > 1) {
-            let unsolved: Vec<usize> = (0..frames.len())
-                .filter(|&i| matches!(solutions[i].outcome, Outcome::Unsolved(_)))
-                .collect();
-            if !unsolved.is_empty() {
-                let stars = self.detect_filtered(solver, frames, &unsolved)?;
-                for (&i, d) in unsolved.iter().zip(stars) {
-                    if !detect::adds_stars(&solutions[i].detections, &d) {
-                        continue;
-                    }
-                    let again = identify_hinted(regional[i].as_ref(), global, d, epochs[i]);
-                    if matches!(again.outcome, Outcome::Solved(..)) {
-                        solutions[i] = again;
-                    }
-                }
-            }
-        }
+        let solutions = identify_batch(
+            &mut kernels,
+            &regional,
+            || global.solver(),
+            detections,
+            epochs,
+            sizes,
+        )?;
         Ok((
             solutions,
             found,
             detect_ms,
             t1.elapsed().as_secs_f64() * 1e3,
         ))
-    }
-
-    /// The scale-free pass on the matched filter's detections of the frames without a region
-    /// that it did not solve from the first detections, before any scale walk (as
-    /// `Solver::solve_frame_scale_free_first` on the CPU): a frame solved there keeps those
-    /// detections.
-    fn scale_free_filtered(
-        &mut self,
-        solver: &Solver,
-        frames: &[&Frame],
-        regional: &[Option<Solver>],
-        detections: &mut [Vec<Detection>],
-        epochs: &[Option<f64>],
-        outcomes: &mut [Outcome],
-    ) -> Result<()> {
-        let todo: Vec<usize> = lost_in_space_unsolved(regional, outcomes).collect();
-        if todo.is_empty() {
-            return Ok(());
-        }
-        let stars = self.detect_filtered(solver, frames, &todo)?;
-        self.scale_free_adopting(solver, &todo, stars, detections, epochs, outcomes)
-    }
-
-    /// The scale-free pass on the point sources (`detect::point_sources`: blends left out) of
-    /// the first detections of the frames without a region that neither detection stage
-    /// solved, where no walk follows (as `Solver::solve_frame_scale_free_first` on the CPU): a
-    /// frame solved there keeps those detections.
-    fn scale_free_points(
-        &mut self,
-        solver: &Solver,
-        frames: &[&Frame],
-        regional: &[Option<Solver>],
-        detections: &mut [Vec<Detection>],
-        epochs: &[Option<f64>],
-        outcomes: &mut [Outcome],
-    ) -> Result<()> {
-        if solver.settings.walks() {
-            return Ok(());
-        }
-        let s = &solver.settings.detect;
-        let (todo, stars): (Vec<usize>, Vec<Vec<Detection>>) =
-            lost_in_space_unsolved(regional, outcomes)
-                .filter_map(|i| {
-                    let (w, h) = (frames[i].width, frames[i].height);
-                    Some((i, detect::point_sources(&detections[i], w, h, s)?))
-                })
-                .unzip();
-        self.scale_free_adopting(solver, &todo, stars, detections, epochs, outcomes)
-    }
-
-    /// The scale-free pass on other star lists (`stars[k]` for frame `todo[k]`): a frame it
-    /// solves takes the outcome and those stars.
-    fn scale_free_adopting(
-        &mut self,
-        solver: &Solver,
-        todo: &[usize],
-        stars: Vec<Vec<Detection>>,
-        detections: &mut [Vec<Detection>],
-        epochs: &[Option<f64>],
-        outcomes: &mut [Outcome],
-    ) -> Result<()> {
-        if todo.is_empty() {
-            return Ok(());
-        }
-        let sub_epochs: Vec<Option<f64>> = todo.iter().map(|&i| epochs[i]).collect();
-        let mut sub_outcomes = vec![Outcome::Unsolved("too_few_stars"); todo.len()];
-        self.scale_free_pass(solver, &stars, &sub_epochs, &mut sub_outcomes)?;
-        for ((&i, o), d) in todo.iter().zip(sub_outcomes).zip(stars) {
-            if matches!(o, Outcome::Solved(..)) {
-                outcomes[i] = o;
-                detections[i] = d;
-            }
-        }
-        Ok(())
-    }
-
-    /// The frames `which` detected again with the matched filter (detection's retry settings
-    /// of `solver`), in one submission.
-    fn detect_filtered(
-        &mut self,
-        solver: &Solver,
-        frames: &[&Frame],
-        which: &[usize],
-    ) -> Result<Vec<Vec<Detection>>> {
-        let subset: Vec<&Frame> = which.iter().map(|&i| frames[i]).collect();
-        let filtered = solver.filtered_settings();
-        let blobs = self
-            .gpu
-            .detect(&subset, &detect::params(frames[0], &filtered))?;
-        gpu_stars(&self.gpu, &subset, &blobs, &filtered)
-    }
-
-    /// The scale-free first pass (when the scale is searched) for the frames not solved yet:
-    /// every frame's quad keys looked up in one submission, then each frame's hypotheses
-    /// refined on the CPU, as `Solver::identify` does before its passes.
-    fn scale_free_pass(
-        &mut self,
-        solver: &Solver,
-        detections: &[Vec<Detection>],
-        epochs: &[Option<f64>],
-        outcomes: &mut [Outcome],
-    ) -> Result<()> {
-        let Some(sf) = &solver.scale_free else {
-            return Ok(());
-        };
-        let lookups = for_unsolved(detections, outcomes, |d| {
-            solver.scale_free_lookup(d, 0..solver.scale_free_rounds(d.len()))
-        });
-        if lookups.is_empty() {
-            return Ok(());
-        }
-        let key = (solver.camera.width, solver.camera.height);
-        let index = uploaded(&mut self.patterns, key, || {
-            self.gpu.upload_patterns(&sf.index)
-        })?;
-        let queries: Vec<u32> = lookups
-            .iter()
-            .flat_map(|(_, l)| l.queries.iter().copied())
-            .collect();
-        let rows = self.gpu.pattern(index, &queries)?;
-        let mut at = 0;
-        for (i, l) in &lookups {
-            let own = &rows[at..at + l.queries.len()];
-            at += l.queries.len();
-            outcomes[*i] = solver
-                .finish_scale_free(&detections[*i], l, own, epochs[*i])
-                .unwrap_or_else(|| solver.unsolved_before_walk(&detections[*i]));
-        }
-        Ok(())
-    }
-
-    /// The passes of lost-in-space identification for the frames not solved yet: for each
-    /// scale tried, one vote submission for all of them (the triangle method and radial
-    /// features as `Solver::identify` runs them: each pass by its own identifier).
-    fn vote_passes(
-        &mut self,
-        solver: &Solver,
-        detections: &[Vec<Detection>],
-        epochs: &[Option<f64>],
-        outcomes: &mut [Outcome],
-    ) -> Result<()> {
-        // Each frame's passes whose vote failed, for their triangle fallbacks after the votes.
-        let mut fallbacks: Vec<Vec<(usize, Prepared)>> = vec![Vec::new(); detections.len()];
-        for h in 0..solver.passes.len() {
-            let prepared = for_unsolved(detections, outcomes, |d| solver.prepare(d, h));
-            if prepared.is_empty() {
-                continue;
-            }
-            let key = (
-                solver.camera.width,
-                solver.camera.height,
-                solver.passes[h].band,
-            );
-            let method = solver.passes[h].method;
-            if method == radial::Method::Triangle {
-                // Triangles read the distance table on the CPU: no GPU stage.
-                for (i, p) in &prepared {
-                    outcomes[*i] = solver.finish_triangle_method(&detections[*i], p, epochs[*i]);
-                }
-                continue;
-            }
-            if let (radial::Method::Radial, Some(features)) = (method, &solver.bands[key.2].radial)
-            {
-                let table = uploaded(&mut self.radial, key, || self.gpu.upload_radial(features))?;
-                let jobs: Vec<RadialJob> = prepared
-                    .iter()
-                    .map(|(_, p)| RadialJob {
-                        features: radial::image_features(&p.vectors[..p.n_vote], features),
-                        k: radial::CANDIDATES,
-                    })
-                    .collect();
-                let found = self.gpu.radial(table, &jobs)?;
-                for ((i, p), f) in prepared.iter().zip(found) {
-                    outcomes[*i] = solver.finish_radial(&detections[*i], p, &f, epochs[*i]);
-                }
-                continue;
-            }
-            let band = &solver.bands[key.2];
-            let table = uploaded(&mut self.tables, key, || {
-                self.gpu.upload_table(band.table(), band.refs.len())
-            })?;
-            let jobs: Vec<VoteJob> = prepared
-                .iter()
-                .map(|(_, p)| VoteJob {
-                    ranges: p.ranges.clone(),
-                    stars: p.n_vote,
-                    k: p.k,
-                })
-                .collect();
-            let voted = self.gpu.vote(solver.bands[key.2].table(), table, &jobs)?;
-            for ((i, p), v) in prepared.into_iter().zip(voted) {
-                outcomes[i] = solver.finish(&detections[i], &p, &v, epochs[i]);
-                if !matches!(outcomes[i], Outcome::Solved(..)) && Solver::falls_back(&p) {
-                    fallbacks[i].push((h, p));
-                }
-            }
-        }
-        for (i, passes) in fallbacks.iter().enumerate() {
-            if matches!(outcomes[i], Outcome::Solved(..)) {
-                continue;
-            }
-            if let Some(o) = solver.fall_back(&detections[i], passes, epochs[i]) {
-                outcomes[i] = o;
-            }
-        }
-        Ok(())
     }
 }
 
@@ -631,26 +373,91 @@ fn uploaded<K: std::hash::Hash + Eq, T>(
     }
 }
 
-/// What `f` makes of each frame not solved yet, with the frame's index (frames it makes
-/// nothing of left out).
-fn for_unsolved<T>(
-    detections: &[Vec<Detection>],
-    outcomes: &[Outcome],
-    f: impl Fn(&[Detection]) -> Option<T>,
-) -> Vec<(usize, T)> {
-    detections
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| !matches!(outcomes[*i], Outcome::Solved(..)))
-        .filter_map(|(i, d)| f(d).map(|t| (i, t)))
-        .collect()
+/// A GPU batch's kernels: its frames (one size) and the runner's uploads, made on first use.
+struct GpuKernels<'r, 'f> {
+    runner: &'r mut GpuRunner,
+    frames: &'r [&'f Frame<'f>],
 }
 
-/// The frames without a region (lost in space) not solved yet.
-fn lost_in_space_unsolved<'a>(
-    regional: &'a [Option<Solver>],
-    outcomes: &'a [Outcome],
-) -> impl Iterator<Item = usize> + 'a {
-    (0..outcomes.len())
-        .filter(|&i| regional[i].is_none() && !matches!(outcomes[i], Outcome::Solved(..)))
+impl Kernels for GpuKernels<'_, '_> {
+    type Error = crate::Error;
+
+    fn detect_filtered(
+        &mut self,
+        which: &[usize],
+        s: &DetectSettings,
+    ) -> Result<Vec<Vec<Detection>>> {
+        let subset: Vec<&Frame> = which.iter().map(|&i| self.frames[i]).collect();
+        let Some(first) = subset.first() else {
+            return Ok(Vec::new());
+        };
+        let blobs = self.runner.gpu.detect(&subset, &detect::params(first, s))?;
+        gpu_stars(&self.runner.gpu, &subset, &blobs, s)
+    }
+
+    fn rounds_per_lookup(&self) -> usize {
+        usize::MAX
+    }
+
+    fn pattern(&mut self, solver: &Solver, lookups: &[&Lookup]) -> Result<Vec<Vec<Rows>>> {
+        let Some(sf) = &solver.scale_free else {
+            return Ok(vec![Vec::new(); lookups.len()]);
+        };
+        let r = &mut *self.runner;
+        let key = (solver.camera.width, solver.camera.height);
+        let index = uploaded(&mut r.patterns, key, || r.gpu.upload_patterns(&sf.index))?;
+        let queries: Vec<u32> = (lookups.iter())
+            .flat_map(|l| l.queries.iter().copied())
+            .collect();
+        let mut rows = r.gpu.pattern(index, &queries)?.into_iter();
+        Ok(lookups
+            .iter()
+            .map(|l| rows.by_ref().take(l.queries.len()).collect())
+            .collect())
+    }
+
+    fn vote(
+        &mut self,
+        solver: &Solver,
+        band: usize,
+        jobs: &[&Prepared],
+    ) -> Result<Vec<VoteResult>> {
+        let r = &mut *self.runner;
+        let b = &solver.bands[band];
+        let key = (solver.camera.width, solver.camera.height, band);
+        let table = uploaded(&mut r.tables, key, || {
+            r.gpu.upload_table(b.table(), b.refs.len())
+        })?;
+        let jobs: Vec<VoteJob> = jobs
+            .iter()
+            .map(|p| VoteJob {
+                ranges: p.ranges.clone(),
+                stars: p.n_vote,
+                k: p.k,
+            })
+            .collect();
+        r.gpu.vote(b.table(), table, &jobs)
+    }
+
+    fn radial(
+        &mut self,
+        solver: &Solver,
+        band: usize,
+        jobs: &[&Prepared],
+    ) -> Result<Vec<VoteResult>> {
+        let Some(features) = &solver.bands[band].radial else {
+            return Ok(Vec::new());
+        };
+        let r = &mut *self.runner;
+        let key = (solver.camera.width, solver.camera.height, band);
+        let table = uploaded(&mut r.radial, key, || r.gpu.upload_radial(features))?;
+        let jobs: Vec<RadialJob> = jobs
+            .iter()
+            .map(|p| RadialJob {
+                features: radial::image_features(&p.vectors[..p.n_vote], features),
+                k: radial::CANDIDATES,
+            })
+            .collect();
+        r.gpu.radial(table, &jobs)
+    }
 }

@@ -2,13 +2,12 @@
 //! region, and identification that tries the region before lost-in-space, whose solver is
 //! built only when a frame needs it.
 
-use super::solvers::{Decoded, Global, Solvers};
+use super::solvers::{Decoded, Solvers};
 use crate::io::frame::Frame;
 use crate::record::Record;
 use crate::sky::hint::{Hint, HintSource, header_hint};
-use crate::solve::detect::Detection;
+use crate::solve::Solver;
 use crate::solve::hinted::regional_solver;
-use crate::solve::{Outcome, Solution, Solver};
 
 impl Solvers {
     /// Use pointing hints: a frame with one is solved within its region first, and
@@ -58,38 +57,6 @@ impl Solvers {
                 None
             }
         }
-    }
-}
-
-/// Identify within a frame's hinted region first (when it has one), then lost-in-space.
-pub(crate) fn identify_hinted(
-    regional: Option<&Solver>,
-    global: &Global,
-    detections: Vec<Detection>,
-    epoch: Option<f64>,
-) -> Solution {
-    // The detections are copied only for a frame that has a region.
-    let in_region = match regional {
-        Some(r) => {
-            let sol = r.identify(detections.clone(), epoch);
-            if matches!(sol.outcome, Outcome::Solved(..)) {
-                return sol;
-            }
-            Some(sol)
-        }
-        None => None,
-    };
-    match global.solver() {
-        Some(g) => g.identify(detections, epoch),
-        None => in_region.unwrap_or_else(|| unsolved(detections, epoch)),
-    }
-}
-
-fn unsolved(detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-    Solution {
-        detections,
-        outcome: Outcome::Unsolved("no_consistent_match"),
-        epoch,
     }
 }
 

@@ -247,7 +247,7 @@ fn annotation<'a>(frame: &'a Frame, sol: &Solution, streaks: &[StreakFit]) -> An
         }
         Outcome::Unsolved(reason) => format!(
             "UNSOLVED ({})  {} STARS DETECTED",
-            reason.to_uppercase().replace('_', " "),
+            reason.as_str().to_uppercase().replace('_', " "),
             sol.detections.len()
         ),
     };

@@ -234,7 +234,9 @@ impl<'f> Detector<'f> {
         self.detect_with(&self.settings.filtered())
     }
 
-    fn detect_with(&self, s: &DetectSettings) -> Vec<Detection> {
+    /// [`detect`] under `s` (this detector's tile statistics: `s` may differ from its settings
+    /// only in the matched filter).
+    pub fn detect_with(&self, s: &DetectSettings) -> Vec<Detection> {
         let p = params(self.frame, s);
         stars(self.frame, &blobs_cpu_with(self.frame, &p, &self.tiles), s)
     }

@@ -1,74 +1,450 @@
-//! The identification flow of one frame on the CPU: the scale-free pass, the walk of passes
-//! and their fallbacks, and the detection retry.
+//! The identification flow, written once for both backends, over a batch of frames of one size
+//! (one frame on the CPU, a GPU batch on the GPU); the backend's [`Kernels`] compute the
+//! lookups, votes and detections. For each frame:
+//!
+//! 1. within its pointing hint's region first, when it has one (the CPU twins: a region's
+//!    table is a few thousand rows, less work than its upload);
+//! 2. lost in space (the size's solver, built only now if every frame had a region): the
+//!    scale-free pass, round by round (all rounds in one lookup on the GPU);
+//! 3. with a searched scale, the pass again on the matched filter's detections and on the
+//!    point sources (`detect::point_sources`) of frames without a region, before any walk
+//!    (`Solver::scale_free_first`);
+//! 4. the walk: each pass of the solver (the vote, radial features or triangles, at each
+//!    scale) for the frames not solved yet, then the triangle fallbacks of the passes whose
+//!    vote failed;
+//! 5. the detection retry: frames still unsolved, detected with the matched filter, are
+//!    identified again (1, 2 and 4) when that finds a star the first detection did not.
+//!
+//! A frame's solution is the same whichever backend and batch it is solved in.
 
 use super::detect::{self, Detection};
-use super::identify;
-use super::radial::Method;
-use super::scale_free::{Checked, rows_cpu};
-use super::solver::{Outcome, Solution, Solver};
+use super::kernels::{CpuKernels, Kernels};
+use super::scale_free::Checked;
+use super::solver::{Outcome, Prepared, Solution, Solver, Unsolved};
 use crate::io::frame::Frame;
+use std::convert::Infallible;
+use std::ops::Deref;
 use std::time::Instant;
 
-impl Solver {
-    /// Identify the stars of a detection list, voting on the CPU: the passes in turn until
-    /// one solves.
-    pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-        if let Some(o) = self.identify_scale_free(&detections, epoch) {
-            return Solution {
-                detections,
-                outcome: o,
-                epoch,
-            };
-        }
-        self.identify_walk(detections, epoch)
-    }
-
-    /// The passes of identification after the scale-free pass: the vote (or radial features,
-    /// or triangles) at each scale of the walk, then the triangle fallbacks of the passes whose
-    /// vote failed, in the same order ([`Solver::fallback`]).
-    pub fn identify_walk(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-        let mut outcome = self.unsolved_before_walk(&detections);
-        let mut fallbacks = Vec::new();
-        for h in 0..self.passes.len() {
-            let Some(p) = self.prepare(&detections, h) else {
-                continue;
-            };
-            let band = &self.bands[p.band];
-            outcome = match (p.method, &band.radial) {
-                (Method::Triangle, _) => self.finish_triangle_method(&detections, &p, epoch),
-                (Method::Radial, Some(t)) => {
-                    let image = crate::solve::radial::image_features(&p.vectors[..p.n_vote], t);
-                    let found = crate::solve::radial::candidates_cpu(
-                        t,
-                        &image,
-                        crate::solve::radial::CANDIDATES,
-                    );
-                    self.finish_radial(&detections, &p, &found, epoch)
+/// Identify a batch's frames from their first detections (`first[i]`, frame `i`'s epoch
+/// `epochs[i]` and hinted region's solver `regional[i]`). `global` makes the lost-in-space
+/// solver, called only when some frame is not solved within its region. `sizes` (each frame's
+/// width and height) when the kernels can detect the frames again: the matched filter's and
+/// the point sources' stages and the detection retry run only then (not for star lists, nor
+/// with `--streaks`, whose detection takes the streaks out first).
+pub fn identify_batch<K, G>(
+    kernels: &mut K,
+    regional: &[Option<&Solver>],
+    global: impl FnOnce() -> Option<G>,
+    first: Vec<Vec<Detection>>,
+    epochs: &[Option<f64>],
+    sizes: Option<&[(u32, u32)]>,
+) -> Result<Vec<Solution>, K::Error>
+where
+    K: Kernels + ?Sized,
+    G: Deref<Target = Solver>,
+{
+    let n = first.len();
+    let mut dets = first;
+    let all: Vec<usize> = (0..n).collect();
+    let mut outcomes = within_regions(regional, &dets, epochs, &all);
+    let global = if outcomes.iter().all(solved) {
+        None
+    } else {
+        global()
+    };
+    let g = global.as_deref();
+    let mut filtered: Vec<Option<Vec<Detection>>> = vec![None; n];
+    // Frames whose matched-filter detections the scale-free pass has seen (stage 3).
+    let mut passed_filtered = vec![false; n];
+    if let Some(g) = g {
+        pass_stage(kernels, g, &dets, epochs, &all, &mut outcomes, &[])?;
+        if let Some(sizes) = sizes.filter(|_| g.scale_free_first()) {
+            let todo: Vec<usize> = (0..n)
+                .filter(|&i| regional[i].is_none() && !solved(&outcomes[i]))
+                .collect();
+            if !todo.is_empty() {
+                let stars = kernels.detect_filtered(&todo, &g.filtered_settings())?;
+                for (&i, s) in todo.iter().zip(stars) {
+                    filtered[i] = Some(s);
+                    passed_filtered[i] = true;
                 }
-                _ => {
-                    let voted =
-                        identify::vote_cpu(band.table(), &p.ranges, p.n_vote, band.refs.len(), p.k);
-                    let o = self.finish(&detections, &p, &voted, epoch);
-                    if !matches!(o, Outcome::Solved(..)) && Self::falls_back(&p) {
-                        fallbacks.push((h, p));
+                let lists: Vec<&[Detection]> = todo
+                    .iter()
+                    .map(|&i| filtered[i].as_deref().unwrap_or(&[]))
+                    .collect();
+                let found = scale_free(kernels, g, &lists, &pick(epochs, &todo))?;
+                for (&i, o) in todo.iter().zip(found) {
+                    if let Some(o) = o {
+                        outcomes[i] = o;
+                        dets[i] = filtered[i].clone().unwrap_or_default();
                     }
-                    o
                 }
-            };
-            if matches!(outcome, Outcome::Solved(..)) {
-                tracing::debug!("solved by pass {h} ({:?})", self.passes[h].kind);
-                return Solution {
-                    detections,
-                    outcome,
-                    epoch,
-                };
+                if !g.settings.walks() {
+                    point_sources(kernels, g, &mut dets, epochs, sizes, &todo, &mut outcomes)?;
+                }
             }
         }
-        if let Some(o) = self.fall_back(&detections, &fallbacks, epoch) {
-            outcome = o;
-        }
-        Solution {
+        walk(kernels, g, &dets, epochs, &all, &mut outcomes)?;
+    } else {
+        unsolved_without_global(regional, &all, &mut outcomes);
+    }
+    if sizes.is_some() {
+        retry(
+            kernels,
+            regional,
+            g,
+            &mut dets,
+            epochs,
+            (&mut filtered, &passed_filtered),
+            &mut outcomes,
+        )?;
+    }
+    Ok(dets
+        .into_iter()
+        .zip(outcomes)
+        .zip(epochs)
+        .map(|((detections, outcome), &epoch)| Solution {
             detections,
+            outcome,
+            epoch,
+        })
+        .collect())
+}
+
+fn solved(o: &Outcome) -> bool {
+    matches!(o, Outcome::Solved(..))
+}
+
+fn pick<T: Copy>(v: &[T], which: &[usize]) -> Vec<T> {
+    which.iter().map(|&i| v[i]).collect()
+}
+
+/// Step 1 for frames `which`: each frame with a region identified within it; the others (and
+/// those it did not solve) keep the region's outcome until lost-in-space decides.
+fn within_regions(
+    regional: &[Option<&Solver>],
+    dets: &[Vec<Detection>],
+    epochs: &[Option<f64>],
+    which: &[usize],
+) -> Vec<Outcome> {
+    let mut outcomes = vec![Outcome::Unsolved(Unsolved::TooFewStars); dets.len()];
+    for &i in which {
+        if let Some(r) = regional[i] {
+            outcomes[i] = identify_cpu(r, dets[i].clone(), epochs[i]).outcome;
+        }
+    }
+    outcomes
+}
+
+/// Without a lost-in-space solver (it could not be built): a region's outcome stands, and a
+/// frame without one has no consistent match.
+fn unsolved_without_global(
+    regional: &[Option<&Solver>],
+    which: &[usize],
+    outcomes: &mut [Outcome],
+) {
+    for &i in which {
+        if regional[i].is_none() && !solved(&outcomes[i]) {
+            outcomes[i] = Outcome::Unsolved(Unsolved::NoConsistentMatch);
+        }
+    }
+}
+
+/// Step 2 for the frames of `which` not solved yet, less those of `skip_pass`.
+fn pass_stage<K: Kernels + ?Sized>(
+    kernels: &mut K,
+    g: &Solver,
+    dets: &[Vec<Detection>],
+    epochs: &[Option<f64>],
+    which: &[usize],
+    outcomes: &mut [Outcome],
+    skip_pass: &[usize],
+) -> Result<(), K::Error> {
+    let todo: Vec<usize> = (which.iter().copied())
+        .filter(|&i| !solved(&outcomes[i]) && !skip_pass.contains(&i))
+        .collect();
+    let lists: Vec<&[Detection]> = todo.iter().map(|&i| dets[i].as_slice()).collect();
+    let found = scale_free(kernels, g, &lists, &pick(epochs, &todo))?;
+    for (&i, o) in todo.iter().zip(found) {
+        if let Some(o) = o {
+            outcomes[i] = o;
+        }
+    }
+    Ok(())
+}
+
+/// The scale-free pass over star lists: each list's rounds, `rounds_per_lookup` at a time,
+/// until one solves it or its budget is spent. The outcome of each list it solved.
+fn scale_free<K: Kernels + ?Sized>(
+    kernels: &mut K,
+    g: &Solver,
+    lists: &[&[Detection]],
+    epochs: &[Option<f64>],
+) -> Result<Vec<Option<Outcome>>, K::Error> {
+    let mut found: Vec<Option<Outcome>> = vec![None; lists.len()];
+    if g.scale_free.is_none() {
+        return Ok(found);
+    }
+    let per = kernels.rounds_per_lookup().max(1);
+    let mut checked = vec![Checked::default(); lists.len()];
+    let mut live: Vec<usize> = (0..lists.len()).collect();
+    let mut start = 0usize;
+    while !live.is_empty() {
+        let lookups: Vec<_> = (live.iter())
+            .filter_map(|&k| {
+                let end = g.scale_free_rounds(lists[k].len());
+                (start < end)
+                    .then(|| {
+                        g.scale_free_lookup(lists[k], start..start.saturating_add(per).min(end))
+                    })
+                    .flatten()
+                    .map(|l| (k, l))
+            })
+            .collect();
+        if lookups.is_empty() {
+            break;
+        }
+        let rows = kernels.pattern(g, &lookups.iter().map(|(_, l)| l).collect::<Vec<_>>())?;
+        live.clear();
+        for ((k, l), rows) in lookups.iter().zip(rows) {
+            let c = &mut checked[*k];
+            match g.finish_scale_free_within(lists[*k], l, &rows, epochs[*k], c) {
+                Some(o) => found[*k] = Some(o),
+                None if !c.spent => live.push(*k),
+                None => {}
+            }
+        }
+        start = start.saturating_add(per);
+    }
+    Ok(found)
+}
+
+/// Step 3's second half: the pass on the point sources of the frames of `todo` it has not
+/// solved; a frame solved there keeps those detections.
+fn point_sources<K: Kernels + ?Sized>(
+    kernels: &mut K,
+    g: &Solver,
+    dets: &mut [Vec<Detection>],
+    epochs: &[Option<f64>],
+    sizes: &[(u32, u32)],
+    todo: &[usize],
+    outcomes: &mut [Outcome],
+) -> Result<(), K::Error> {
+    let s = &g.settings.detect;
+    let (which, points): (Vec<usize>, Vec<Vec<Detection>>) = (todo.iter())
+        .filter(|&&i| !solved(&outcomes[i]))
+        .filter_map(|&i| {
+            let (w, h) = sizes[i];
+            Some((i, detect::point_sources(&dets[i], w, h, s)?))
+        })
+        .unzip();
+    let lists: Vec<&[Detection]> = points.iter().map(Vec::as_slice).collect();
+    let found = scale_free(kernels, g, &lists, &pick(epochs, &which))?;
+    for ((&i, o), p) in which.iter().zip(found).zip(points) {
+        if let Some(o) = o {
+            outcomes[i] = o;
+            dets[i] = p;
+        }
+    }
+    Ok(())
+}
+
+/// Step 4 for the frames of `which` not solved yet: each of the solver's passes in turn, then
+/// the triangle fallbacks of the passes whose vote failed, in pass order.
+fn walk<K: Kernels + ?Sized>(
+    kernels: &mut K,
+    g: &Solver,
+    dets: &[Vec<Detection>],
+    epochs: &[Option<f64>],
+    which: &[usize],
+    outcomes: &mut [Outcome],
+) -> Result<(), K::Error> {
+    let todo: Vec<usize> = (which.iter().copied())
+        .filter(|&i| !solved(&outcomes[i]))
+        .collect();
+    for &i in &todo {
+        outcomes[i] = g.unsolved_before_walk(&dets[i]);
+    }
+    let mut fallbacks: Vec<Vec<(usize, Prepared)>> = vec![Vec::new(); dets.len()];
+    for h in 0..g.passes.len() {
+        let prepared: Vec<(usize, Prepared)> = (todo.iter())
+            .filter(|&&i| !solved(&outcomes[i]))
+            .filter_map(|&i| Some((i, g.prepare(&dets[i], h)?)))
+            .collect();
+        if prepared.is_empty() {
+            continue;
+        }
+        let ran: Vec<usize> = prepared.iter().map(|(i, _)| *i).collect();
+        let band = g.passes[h].band;
+        let jobs: Vec<&Prepared> = prepared.iter().map(|(_, p)| p).collect();
+        match (g.passes[h].method, &g.bands[band].radial) {
+            (super::radial::Method::Triangle, _) => {
+                for (i, p) in &prepared {
+                    outcomes[*i] = g.finish_triangle_method(&dets[*i], p, epochs[*i]);
+                }
+            }
+            (super::radial::Method::Radial, Some(_)) => {
+                let found = kernels.radial(g, band, &jobs)?;
+                for ((i, p), f) in prepared.iter().zip(found) {
+                    outcomes[*i] = g.finish_radial(&dets[*i], p, &f, epochs[*i]);
+                }
+            }
+            _ => {
+                let voted = kernels.vote(g, band, &jobs)?;
+                for ((i, p), v) in prepared.into_iter().zip(voted) {
+                    outcomes[i] = g.finish(&dets[i], &p, &v, epochs[i]);
+                    if !solved(&outcomes[i]) && Solver::falls_back(&p) {
+                        fallbacks[i].push((h, p));
+                    }
+                }
+            }
+        }
+        for &i in &ran {
+            if solved(&outcomes[i]) {
+                tracing::debug!("solved by pass {h} ({:?})", g.passes[h].kind);
+            }
+        }
+    }
+    for &i in &todo {
+        if !solved(&outcomes[i])
+            && let Some(o) = g.fall_back(&dets[i], &fallbacks[i], epochs[i])
+        {
+            outcomes[i] = o;
+        }
+    }
+    Ok(())
+}
+
+/// Step 5: the frames still unsolved detected with the matched filter (the detections stage 3
+/// made are kept: the same), and identified again (within their region, then lost in space,
+/// the scale-free pass skipped where stage 3 has run it on those detections) when that finds
+/// a star the first detection did not. A frame solved again keeps the new detections.
+fn retry<K: Kernels + ?Sized>(
+    kernels: &mut K,
+    regional: &[Option<&Solver>],
+    g: Option<&Solver>,
+    dets: &mut [Vec<Detection>],
+    epochs: &[Option<f64>],
+    (filtered, passed_filtered): (&mut [Option<Vec<Detection>>], &[bool]),
+    outcomes: &mut [Outcome],
+) -> Result<(), K::Error> {
+    // The run's settings: any solver of the batch has them.
+    let Some(lead) = g.or_else(|| regional.iter().flatten().next().copied()) else {
+        return Ok(());
+    };
+    if lead.detection_stages() < 2 {
+        return Ok(());
+    }
+    let unsolved: Vec<usize> = (0..dets.len()).filter(|&i| !solved(&outcomes[i])).collect();
+    let missing: Vec<usize> = (unsolved.iter().copied())
+        .filter(|&i| filtered[i].is_none())
+        .collect();
+    if !missing.is_empty() {
+        let stars = kernels.detect_filtered(&missing, &lead.filtered_settings())?;
+        for (&i, s) in missing.iter().zip(stars) {
+            filtered[i] = Some(s);
+        }
+    }
+    let again: Vec<usize> = (unsolved.into_iter())
+        .filter(|&i| {
+            let f = filtered[i].as_deref().unwrap_or(&[]);
+            detect::adds_stars(&dets[i], f)
+        })
+        .collect();
+    if again.is_empty() {
+        return Ok(());
+    }
+    let second: Vec<Vec<Detection>> = (0..dets.len())
+        .map(|i| match again.contains(&i) {
+            true => filtered[i].take().unwrap_or_default(),
+            false => Vec::new(),
+        })
+        .collect();
+    let mut redone = within_regions(regional, &second, epochs, &again);
+    match g {
+        Some(g) => {
+            let skip: Vec<usize> = (again.iter().copied())
+                .filter(|&i| passed_filtered[i])
+                .collect();
+            pass_stage(kernels, g, &second, epochs, &again, &mut redone, &skip)?;
+            walk(kernels, g, &second, epochs, &again, &mut redone)?;
+        }
+        None => unsolved_without_global(regional, &again, &mut redone),
+    }
+    for (i, (o, d)) in redone.into_iter().zip(second).enumerate() {
+        if again.contains(&i) && solved(&o) {
+            outcomes[i] = o;
+            dets[i] = d;
+        }
+    }
+    Ok(())
+}
+
+/// A result of the CPU twins, which cannot fail.
+fn cpu<T>(r: Result<T, Infallible>) -> T {
+    match r {
+        Ok(t) => t,
+        Err(never) => match never {},
+    }
+}
+
+/// [`Solver::identify`]: one star list through steps 2 and 4 on the CPU.
+fn identify_cpu(solver: &Solver, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
+    identify_list_cpu(None, || Some(solver), detections, epoch)
+}
+
+/// One star list on the CPU (no detection stage: star lists, `--streaks`): within `regional`'s
+/// region first, then lost in space (`global`, made only when the region does not solve it).
+pub fn identify_list_cpu<G: Deref<Target = Solver>>(
+    regional: Option<&Solver>,
+    global: impl FnOnce() -> Option<G>,
+    detections: Vec<Detection>,
+    epoch: Option<f64>,
+) -> Solution {
+    let sols = cpu(identify_batch(
+        &mut CpuKernels::star_lists(),
+        &[regional],
+        global,
+        vec![detections],
+        &[epoch],
+        None,
+    ));
+    only(sols, epoch)
+}
+
+/// The one solution of a one-frame batch.
+fn only(sols: Vec<Solution>, epoch: Option<f64>) -> Solution {
+    sols.into_iter().next().unwrap_or_else(|| Solution {
+        detections: Vec::new(),
+        outcome: Outcome::Unsolved(Unsolved::TooFewStars),
+        epoch,
+    })
+}
+
+impl Solver {
+    /// Identify the stars of a detection list on the CPU: the scale-free pass, then the walk.
+    pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
+        identify_cpu(self, detections, epoch)
+    }
+
+    /// The walk alone (step 4) on the CPU, as after a scale-free pass that did not solve.
+    pub fn identify_walk(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
+        let dets = vec![detections];
+        let mut outcomes = vec![Outcome::Unsolved(Unsolved::TooFewStars)];
+        cpu(walk(
+            &mut CpuKernels::star_lists(),
+            self,
+            &dets,
+            &[epoch],
+            &[0],
+            &mut outcomes,
+        ));
+        let outcome = outcomes
+            .pop()
+            .unwrap_or(Outcome::Unsolved(Unsolved::TooFewStars));
+        Solution {
+            detections: dets.into_iter().next().unwrap_or_default(),
             outcome,
             epoch,
         }
@@ -79,142 +455,35 @@ impl Solver {
         self.solve_frame_at(frame, None)
     }
 
-    /// Solve a decoded frame on the CPU, with its own observation epoch if it has one.
+    /// Solve a decoded frame on the CPU, with its own observation epoch if it has one: every
+    /// step of the flow. Returns the solution, detection and identification times (ms).
     pub fn solve_frame_at(&self, frame: &Frame, epoch: Option<f64>) -> (Solution, f64, f64) {
-        if self.scale_free_first() {
-            return self.solve_frame_scale_free_first(frame, self, epoch);
-        }
-        self.solve_frame_with(frame, |dets| self.identify(dets, epoch))
+        solve_frame_cpu(frame, &[None], || Some(self), &self.settings.detect, epoch)
     }
+}
 
-    /// Detect, identify with `identify`, and detect again with the matched filter when that
-    /// does not solve (the detection retry), identifying again when that finds a star the
-    /// first detection did not ([`detect::adds_stars`]). Returns the solution, detection and
-    /// identification times (ms).
-    pub fn solve_frame_with(
-        &self,
-        frame: &Frame,
-        identify: impl Fn(Vec<Detection>) -> Solution,
-    ) -> (Solution, f64, f64) {
-        let t0 = Instant::now();
-        let detector = detect::Detector::new(frame, &self.settings.detect);
-        let dets = detector.detect();
-        let t1 = Instant::now();
-        let sol = identify(dets);
-        let t2 = Instant::now();
-        let (mut detect_ms, identify_ms) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
-        if matches!(sol.outcome, Outcome::Unsolved(_)) && self.detection_stages() > 1 {
-            let t3 = Instant::now();
-            let filtered = detector.detect_filtered();
-            detect_ms += t3.elapsed().as_secs_f64();
-            if !detect::adds_stars(&sol.detections, &filtered) {
-                return (sol, detect_ms * 1e3, identify_ms * 1e3);
-            }
-            let t4 = Instant::now();
-            let again = identify(filtered);
-            let identify_ms = identify_ms + t4.elapsed().as_secs_f64();
-            if matches!(again.outcome, Outcome::Solved(..)) {
-                return (again, detect_ms * 1e3, identify_ms * 1e3);
-            }
-            return (sol, detect_ms * 1e3, identify_ms * 1e3);
-        }
-        (sol, detect_ms * 1e3, identify_ms * 1e3)
-    }
-
-    /// The scale-free pass round by round: a round's lookup only when
-    /// the ones before it did not solve (the GPU looks them all up at once; the records are
-    /// the same). The outcome when it solved.
-    pub fn identify_scale_free(
-        &self,
-        detections: &[Detection],
-        epoch: Option<f64>,
-    ) -> Option<Outcome> {
-        let sf = self.scale_free.as_ref()?;
-        let mut checked = Checked::default();
-        for round in 0..self.scale_free_rounds(detections.len()) {
-            let lookup = self.scale_free_lookup(detections, round..round + 1)?;
-            let rows = rows_cpu(sf, &lookup);
-            let found =
-                self.finish_scale_free_within(detections, &lookup, &rows, epoch, &mut checked);
-            if found.is_some() || checked.spent {
-                return found;
-            }
-        }
-        None
-    }
-
-    /// Detect with this solver's settings and identify with `id`, the scale-free pass first on
-    /// both detection stages (a sparse frame the pass misses may be solved by it from the
-    /// matched filter's detections, in milliseconds, where the walk takes seconds) and, where
-    /// no walk follows (`Settings::walks`), on the first stage's point sources
-    /// (`detect::point_sources`: blends left out), then the
-    /// walk on each (on the matched filter's only when they hold a new star, as
-    /// `solve_frame_with`). Solutions are those of `solve_frame_with` whenever the pass solves
-    /// the first stage or nothing solves the frame. Returns the solution, detection and
-    /// identification times (ms).
-    pub fn solve_frame_scale_free_first(
-        &self,
-        frame: &Frame,
-        id: &Solver,
-        epoch: Option<f64>,
-    ) -> (Solution, f64, f64) {
-        let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
-        let t = Instant::now();
-        let detector = detect::Detector::new(frame, &self.settings.detect);
-        let dets = detector.detect();
-        let mut detect_ms = ms(t);
-        let t = Instant::now();
-        let found = id.identify_scale_free(&dets, epoch);
-        let mut identify_ms = ms(t);
-        if let Some(outcome) = found {
-            let sol = Solution {
-                detections: dets,
-                outcome,
-                epoch,
-            };
-            return (sol, detect_ms, identify_ms);
-        }
-        let t = Instant::now();
-        let filtered = detector.detect_filtered();
-        detect_ms += ms(t);
-        let t = Instant::now();
-        // Only where no walk follows: the stage is judged as the pass is, within the half of
-        // the false-match budget that the walk would have had.
-        let points = || {
-            let s = &self.settings.detect;
-            (!id.settings.walks())
-                .then(|| detect::point_sources(&dets, frame.width, frame.height, s))
-                .flatten()
-        };
-        let solution = match id.identify_scale_free(&filtered, epoch) {
-            Some(outcome) => Solution {
-                detections: filtered,
-                outcome,
-                epoch,
-            },
-            None => match points().and_then(|p| Some((id.identify_scale_free(&p, epoch)?, p))) {
-                Some((outcome, points)) => Solution {
-                    detections: points,
-                    outcome,
-                    epoch,
-                },
-                None => {
-                    let adds = detect::adds_stars(&dets, &filtered);
-                    let sol = id.identify_walk(dets, epoch);
-                    if matches!(sol.outcome, Outcome::Solved(..)) || !adds {
-                        sol
-                    } else {
-                        let again = id.identify_walk(filtered, epoch);
-                        if matches!(again.outcome, Outcome::Solved(..)) {
-                            again
-                        } else {
-                            sol
-                        }
-                    }
-                }
-            },
-        };
-        identify_ms += ms(t);
-        (solution, detect_ms, identify_ms)
-    }
+/// One frame on the CPU through the whole flow, `regional` its region's solver: the solution,
+/// detection and identification times (ms).
+pub fn solve_frame_cpu<G: Deref<Target = Solver>>(
+    frame: &Frame,
+    regional: &[Option<&Solver>; 1],
+    global: impl FnOnce() -> Option<G>,
+    detect: &detect::DetectSettings,
+    epoch: Option<f64>,
+) -> (Solution, f64, f64) {
+    let t0 = Instant::now();
+    let (mut k, first) = CpuKernels::detect(&[frame], detect);
+    let first_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let sizes = [(frame.width, frame.height)];
+    let sols = cpu(identify_batch(
+        &mut k,
+        regional,
+        global,
+        first,
+        &[epoch],
+        Some(&sizes),
+    ));
+    let total_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let detect_ms = first_ms + k.detect_ms;
+    (only(sols, epoch), detect_ms, total_ms - detect_ms)
 }

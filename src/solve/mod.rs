@@ -2,16 +2,18 @@
 //! vote) or [`radial`] (ring features) with [`triangle`] checks → [`attitude`] (Wahba) →
 //! [`refine`] (match, refit, false-match probability; [`explain`]: the brightest detections
 //! explained). [`Solver`] holds one camera's catalog
-//! selection and distance table and runs the stages for a frame; [`hinted`] makes one for the
+//! selection and distance table and runs the stages after each kernel; [`driver`] is the flow
+//! of passes, written once over the backends' [`kernels`]; [`hinted`] makes a solver for the
 //! region a pointing hint names.
 
 pub mod attitude;
 mod bands;
 pub mod detect;
-mod driver;
+pub mod driver;
 pub mod explain;
 pub mod hinted;
 pub mod identify;
+pub mod kernels;
 mod mag_limit;
 pub mod radial;
 pub mod refine;

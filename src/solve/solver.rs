@@ -1,11 +1,11 @@
-//! The lost-in-space pipeline for one frame: detect → vote → select → verify → attitude →
-//! refine → accept, producing one result record.
+//! A camera's [`Solver`]: its bands, passes and pattern index, built once, and the stages of a
+//! pass after its kernel (verify → attitude → refine → accept, the triangle fallback, the
+//! deeper check), which share the [`Prepared`] state and the false-match budget. Which frames
+//! go through which pass, and in what order, is the driver's (`driver.rs`).
 //!
 //! Scale bands and passes are in `bands.rs`, the automatic magnitude limits in `mag_limit.rs`,
-//! the record of a solution in `report.rs`, the scale-free pass (first, at any scale) in
-//! `scale_free.rs`. About 850 lines: the passes of one frame (vote, triangles, radial, the
-//! deeper check) share the `Prepared` state and the false-match budget, and the `Solver`'s
-//! construction (bands, shallow pass, pattern index) is one piece.
+//! the record of a solution in `report.rs`, the scale-free pass in `scale_free.rs` and
+//! `scale_free/stage.rs`.
 
 use super::attitude::wahba_parity;
 use super::bands::{
@@ -85,13 +85,52 @@ pub struct Solution {
     pub epoch: Option<f64>,
 }
 
+/// Why a frame is not solved: the record's `reason`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unsolved {
+    /// Fewer detections than a pattern needs.
+    TooFewStars,
+    /// No geometrically consistent set of candidates (or no quad hypothesis accepted).
+    NoConsistentMatch,
+    /// A solution was found, and failed the false-match test.
+    LowConfidence,
+    /// No camera for the frame: streaks alone, reduced through its header's WCS.
+    NoCamera,
+}
+
+impl Unsolved {
+    /// Every reason (the record schema lists them).
+    pub const ALL: [Unsolved; 4] = [
+        Unsolved::TooFewStars,
+        Unsolved::NoConsistentMatch,
+        Unsolved::LowConfidence,
+        Unsolved::NoCamera,
+    ];
+
+    /// The reason as records write it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Unsolved::TooFewStars => "too_few_stars",
+            Unsolved::NoConsistentMatch => "no_consistent_match",
+            Unsolved::LowConfidence => "low_confidence",
+            Unsolved::NoCamera => "no_camera",
+        }
+    }
+}
+
+impl std::fmt::Display for Unsolved {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
 // One per frame, moved rarely: boxing the solution would buy nothing.
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Outcome {
     /// The refined solution, and the reference stars its matches' ids index.
     Solved(refine::Refined, Arc<RefCatalog>),
-    Unsolved(&'static str),
+    Unsolved(Unsolved),
 }
 
 impl Solver {
@@ -389,9 +428,9 @@ impl Solver {
     /// pass looked it up (four stars or more), too few stars otherwise.
     pub fn unsolved_before_walk(&self, detections: &[Detection]) -> Outcome {
         if self.scale_free.is_some() && detections.len() >= 4 {
-            Outcome::Unsolved("no_consistent_match")
+            Outcome::Unsolved(Unsolved::NoConsistentMatch)
         } else {
-            Outcome::Unsolved("too_few_stars")
+            Outcome::Unsolved(Unsolved::TooFewStars)
         }
     }
 
@@ -481,11 +520,11 @@ impl Solver {
             (t, n)
         });
         if triangles.is_empty() {
-            return Outcome::Unsolved("no_consistent_match");
+            return Outcome::Unsolved(Unsolved::NoConsistentMatch);
         }
         match self.first_accepted(detections, p, &refs, &triangles, triangles.len() as u64) {
             Some(a) => self.conclude(detections, p, a, epoch),
-            None => Outcome::Unsolved("low_confidence"),
+            None => Outcome::Unsolved(Unsolved::LowConfidence),
         }
     }
 
@@ -497,12 +536,12 @@ impl Solver {
         epoch: Option<f64>,
     ) -> Outcome {
         if p.triangle_stars < 4 {
-            return Outcome::Unsolved("too_few_stars");
+            return Outcome::Unsolved(Unsolved::TooFewStars);
         }
         let refs = self.bands[p.band].refs_at(epoch);
         match self.finish_triangles(detections, p, &refs) {
             Some(a) => self.conclude(detections, p, a, epoch),
-            None => Outcome::Unsolved("no_consistent_match"),
+            None => Outcome::Unsolved(Unsolved::NoConsistentMatch),
         }
     }
 
@@ -594,7 +633,7 @@ impl Solver {
         p: &Prepared,
         voted: &identify::VoteResult,
         refs: &RefCatalog,
-    ) -> Result<(Refined, u64, usize), &'static str> {
+    ) -> Result<(Refined, u64, usize), Unsolved> {
         let vectors = &p.vectors;
         let n_vote = voted.candidates.len() / voted.k.max(1);
         let ids = identify::verify(
@@ -605,20 +644,20 @@ impl Solver {
             &p.identify,
         );
         if ids.len() < 2 {
-            return Err("no_consistent_match");
+            return Err(Unsolved::NoConsistentMatch);
         }
         let cam: Vec<_> = ids.iter().map(|m| vectors[m.star]).collect();
         let icrs: Vec<_> = ids.iter().map(|m| refs.v(m.ref_id as usize)).collect();
         let (r0, camera) = self
             .first_attitude(&cam, &icrs, &p.camera)
-            .ok_or("no_consistent_match")?;
+            .ok_or(Unsolved::NoConsistentMatch)?;
         // Every pass this frame can be tried with multiplies the hypotheses a chance match could
         // come from; the vote has half the pass's error budget (see `STAGES`).
         let hypotheses = voted
             .hypotheses
             .saturating_mul(self.hypothesis_factor(detections.len(), p.method) * self.parities());
         let refined = refine::refine(r0, detections, refs, &camera, hypotheses, 2, &p.refine)
-            .ok_or("no_consistent_match")?;
+            .ok_or(Unsolved::NoConsistentMatch)?;
         if refined.false_match_prob > p.refine.max_false_prob {
             tracing::debug!(
                 "low confidence: {} of {} catalog stars in view matched, false-match \
@@ -628,7 +667,7 @@ impl Solver {
                 refined.false_match_prob,
                 p.camera.fx / self.camera.fx
             );
-            return Err("low_confidence");
+            return Err(Unsolved::LowConfidence);
         }
         Ok((refined, hypotheses, 2))
     }

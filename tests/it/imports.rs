@@ -47,7 +47,11 @@ fn gpustar_has_no_import_cycle_and_no_upward_import() {
         return;
     };
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{text}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(text.contains("cycles: 0; upward imports: 0"), "{text}");
 }
 
@@ -128,6 +132,10 @@ fn a_sibling_cycle_through_nested_groups_is_caught() {
     )
     .unwrap();
     let out = check("a_sibling_cycle_through_nested_groups_is_caught", &dir).unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -199,7 +199,10 @@ fn a_wide_range_is_not_walked_after_the_pass() {
         .collect();
     let sol = solver.identify(dets, None);
     assert!(
-        matches!(sol.outcome, Outcome::Unsolved("no_consistent_match")),
+        matches!(
+            sol.outcome,
+            Outcome::Unsolved(gpustar::solve::Unsolved::NoConsistentMatch)
+        ),
         "{:?}",
         sol.outcome
     );

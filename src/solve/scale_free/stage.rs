@@ -41,10 +41,10 @@ impl Solver {
         self.settings.scale_range.unwrap_or((1.0, 1.0))
     }
 
-    /// Whether a frame goes through the scale-free pass on both detection stages before any
-    /// scale walk ([`Solver::solve_frame_scale_free_first`]): with a searched scale, whose walk
-    /// takes seconds. A known scale's passes take milliseconds: each detection stage has the
-    /// pass and then the vote, as `solve_frame_with` runs them.
+    /// Whether a frame goes through the scale-free pass on both detection stages (and on its
+    /// point sources) before any scale walk (the driver's step 3): with a searched scale, whose
+    /// walk takes seconds. A known scale's passes take milliseconds: each detection stage has
+    /// the pass and then the vote.
     pub fn scale_free_first(&self) -> bool {
         self.scale_free.is_some()
             && self.settings.scale_range.is_some()
