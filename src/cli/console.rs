@@ -1,5 +1,6 @@
 //! The terminal side of a run: stop requests, progress, logging, and printing to a pipe.
 
+use super::exit::Exit;
 use anyhow::Result;
 use gpustar::io::output::{self};
 use std::io::Write;
@@ -20,7 +21,7 @@ pub(crate) fn interrupt_flag() -> &'static std::sync::atomic::AtomicBool {
     fn exit_between_lines(why: &str) -> ! {
         let _writing = output::WRITING.lock().unwrap_or_else(|e| e.into_inner());
         eprintln!("gpustar: {why}; inputs without a record are done by --resume");
-        std::process::exit(130);
+        std::process::exit(Exit::Interrupted as i32);
     }
     ONCE.call_once(|| {
         let _ = ctrlc::set_handler(|| {

@@ -1,5 +1,6 @@
 //! `gpustar merge`: one record file from the parts of a sharded run.
 
+use super::exit::Exit;
 use anyhow::Result;
 use gpustar::io::inputs;
 use gpustar::io::output::{self, Format, RecordWriter};
@@ -32,7 +33,7 @@ pub(crate) fn merge_cmd(
         Ok(m) => m,
         Err(e) => {
             eprintln!("gpustar: error: {e:#}");
-            return Ok(ExitCode::from(2));
+            return Ok(Exit::NotStarted.into());
         }
     };
     let out: Box<dyn Write + Send> = match &output {

@@ -4,6 +4,7 @@
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
+use exit::Exit;
 use gpustar::io::inputs::{self, Input};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -14,6 +15,7 @@ mod calibrate;
 mod catalog;
 mod console;
 mod evaluate;
+mod exit;
 mod info;
 mod merge;
 mod report;
@@ -329,14 +331,19 @@ where
         Ok(c) => c,
         Err(e) => {
             let _ = e.print();
-            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+            return if e.use_stderr() {
+                Exit::NotStarted
+            } else {
+                Exit::Ok
+            }
+            .into();
         }
     };
     match execute(cli) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("gpustar: error: {e:#}");
-            ExitCode::from(2)
+            Exit::NotStarted.into()
         }
     }
 }

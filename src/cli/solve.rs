@@ -2,6 +2,7 @@
 
 use super::args::*;
 use super::console::*;
+use super::exit::Exit;
 use anyhow::{Context, Result, bail};
 use gpustar::batch::{self, RunOptions};
 use gpustar::camera::Camera;
@@ -20,9 +21,6 @@ use gpustar::streaks::reduce::Astrometry;
 use gpustar::streaks::{StreakOptions, StreakSettings, export::Exports};
 use std::io::Write;
 use std::process::ExitCode;
-
-/// `gpustar solve`'s exit status when its frame is unsolved.
-pub(crate) const UNSOLVED_EXIT: u8 = 4;
 
 /// Range of focal-length factors (low, high) to search when the scale is uncertain.
 pub(crate) type ScaleRange = (f64, f64);
@@ -402,17 +400,18 @@ pub(crate) fn run_solve(
         );
     }
     Ok(if summary.write_error.is_some() {
-        ExitCode::from(3)
+        Exit::WriteFailed
     } else if summary.interrupted {
-        ExitCode::from(130)
+        Exit::Interrupted
     } else if c.errors + errors_before > 0 {
-        ExitCode::from(1)
+        Exit::ErrorRecords
     } else if dirs.is_none() && c.unsolved > 0 {
         // `solve`'s one frame was read but not solved: said in the status, as ASTAP does, so
         // that a script need not parse the record (`batch` keeps 0: unsolved frames are part
         // of an archive's normal result).
-        ExitCode::from(UNSOLVED_EXIT)
+        Exit::Unsolved
     } else {
-        ExitCode::SUCCESS
-    })
+        Exit::Ok
+    }
+    .into())
 }
