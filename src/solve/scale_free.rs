@@ -68,11 +68,16 @@ pub const KNOWN_SCALE_SHARE: u64 = 1 << 16;
 /// the wide retry matches 29. Clean frames' solutions match 55 % or more (docs/speed.md).
 pub const KNOWN_SCALE_MIN_COMPLETENESS: f64 = 0.5;
 
-/// The catalog patterns a frame's scale-free pass has checked ([`MAX_PATTERNS`]).
+/// Where a frame's scale-free pass stands between lookups, so that it ends the same whether its
+/// rounds are looked up one at a time (the CPU) or all at once (the GPU).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Checked {
+    /// The catalog patterns checked so far ([`MAX_PATTERNS`]).
     pub patterns: u64,
-    /// A round was left unchecked: the pass is over.
+    /// Quad hypotheses refined so far ([`PassLimits::max_refined`]).
+    pub refined: usize,
+    /// The pass is over: a round was left unchecked, the hypotheses it may refine are spent, or
+    /// a solution matched too few stars and left the frame to the vote.
     pub spent: bool,
 }
 

@@ -109,10 +109,27 @@ fn pass_alone(
     // A frame whose pass has checked its share of patterns already checks no more.
     let mut spent = scale_free::Checked {
         patterns: scale_free::MAX_PATTERNS,
+        refined: 0,
         spent: false,
     };
     let over = solver.finish_scale_free_within(&dets, &lookup, &rows, None, &mut spent);
     assert!(over.is_none() && spent.spent && spent.patterns == scale_free::MAX_PATTERNS);
+    // Looked up one round at a time (the CPU's way), what the earlier rounds checked and
+    // refined carried over: the same solution as all rounds at once (the GPU's way).
+    let mut checked = scale_free::Checked::default();
+    let mut by_round = None;
+    for round in 0..solver.scale_free_rounds(dets.len()) {
+        let l = solver.scale_free_lookup(&dets, round..round + 1)?;
+        let rows = scale_free::rows_cpu(sf, &l);
+        by_round = solver.finish_scale_free_within(&dets, &l, &rows, None, &mut checked);
+        if by_round.is_some() || checked.spent {
+            break;
+        }
+    }
+    let Some(Outcome::Solved(b, _)) = by_round else {
+        panic!("solved all at once, not round by round");
+    };
+    assert_eq!((b.r, b.matches.len()), (r.r, r.matches.len()));
     let err = gpustar::solve::attitude::attitude_error(
         &r.r,
         &nalgebra::Matrix3::from_fn(|i, j| truth.rotation_matrix[i][j]),

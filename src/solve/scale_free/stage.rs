@@ -87,7 +87,7 @@ impl Solver {
     }
 
     /// [`Solver::finish_scale_free`] of a lookup holding some of a frame's rounds, `checked`
-    /// counting the patterns its earlier rounds checked ([`MAX_PATTERNS`]).
+    /// what its earlier rounds checked and refined ([`MAX_PATTERNS`], `max_refined`).
     pub fn finish_scale_free_within(
         &self,
         detections: &[Detection],
@@ -99,13 +99,17 @@ impl Solver {
         let perms = permutations();
         let rounds = self.scale_free_rounds(detections.len());
         let sf = self.scale_free.as_ref()?;
-        let mut refinable = sf.limits.max_refined;
+        if checked.spent {
+            return None;
+        }
+        let mut refinable = sf.limits.max_refined.saturating_sub(checked.refined);
         for round in 0..rounds {
             let mut quads = lookup.quads.iter().filter(|q| q.round == round).peekable();
             if quads.peek().is_none() {
                 continue;
             }
             if refinable == 0 {
+                checked.spent = true;
                 break;
             }
             let found: u64 = (quads.clone())
@@ -121,16 +125,22 @@ impl Solver {
                 break;
             }
             checked.patterns += found;
-            match self.scale_free_round(
+            let before = refinable;
+            let end = self.scale_free_round(
                 detections,
                 quads,
                 rows,
                 (rounds, &mut refinable),
                 epoch,
                 &perms,
-            ) {
+            );
+            checked.refined += before - refinable;
+            match end {
                 RoundEnd::Solved(o) => return Some(*o),
-                RoundEnd::LeftToVote => return None,
+                RoundEnd::LeftToVote => {
+                    checked.spent = true;
+                    return None;
+                }
                 RoundEnd::Nothing => {}
             }
         }
