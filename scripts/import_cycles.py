@@ -22,7 +22,7 @@ import sys
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "src")
 LAYERS = [
-    ["error", "files", "camera", "record", "simd"],
+    ["error", "files", "camera", "record", "simd", "choice"],
     ["catalog"],
     ["cpu"],
     ["sky"],

@@ -17,6 +17,7 @@ pub mod batch;
 pub mod calibrate;
 pub mod camera;
 pub mod catalog;
+pub mod choice;
 pub mod cpu;
 pub mod error;
 pub mod files;

@@ -6,6 +6,7 @@
 //! WCS `--wcs-dir` writes). The pure-Python part (python/gpustar/) wraps these.
 
 use gpustar::batch::{self, RunOptions};
+use gpustar::choice::Choice;
 use gpustar::io::array::Samples;
 use gpustar::io::dark::Darks;
 use gpustar::io::inputs::{self, Shard};
@@ -189,17 +190,13 @@ impl<'py> Opts<'py> {
         }
     }
 
-    /// One of a `clap::ValueEnum`'s names, as the command line takes them.
-    fn choice<T: clap::ValueEnum>(&self, key: &str) -> PyResult<Option<T>> {
+    /// One of a library enum's names ([`Choice`]), as the command line takes them.
+    fn choice<T: Choice>(&self, key: &str) -> PyResult<Option<T>> {
         match self.get::<String>(key)? {
             None => Ok(None),
-            Some(s) => T::from_str(&s, true).map(Some).map_err(|_| {
-                let names: Vec<String> = T::value_variants()
-                    .iter()
-                    .filter_map(|v| v.to_possible_value().map(|p| p.get_name().to_string()))
-                    .collect();
-                config(format!("{key}: {s:?} is not one of {}", names.join(", ")))
-            }),
+            Some(s) => T::parse_name(&s)
+                .map(Some)
+                .map_err(|e| config(format!("{key}: {e}"))),
         }
     }
 }
@@ -286,8 +283,8 @@ fn build(
     options: Option<Bound<'_, PyDict>>,
 ) -> PyResult<Built> {
     let o = Opts::new(options)?;
-    let backend = <BackendChoice as clap::ValueEnum>::from_str(backend, true)
-        .map_err(|_| config(format!("backend: {backend:?} is not one of auto, gpu, cpu")))?;
+    let backend =
+        BackendChoice::parse_name(backend).map_err(|e| config(format!("backend: {e}")))?;
     let (camera, camera_mag, scale_range) = camera_source(
         camera,
         fov_deg,
@@ -1166,8 +1163,7 @@ fn start_batch(
     iod_station: u16,
     overwrite: bool,
 ) -> PyResult<BatchRun> {
-    let format = <Format as clap::ValueEnum>::from_str(format, true)
-        .map_err(|_| config(format!("format: {format:?} is not one of jsonl, csv")))?;
+    let format = Format::parse_name(format).map_err(|e| config(format!("format: {e}")))?;
     if format == Format::Csv && output.is_none() {
         return Err(config(
             "format is the output file's: give output=FILE (the records come as results)",

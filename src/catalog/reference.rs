@@ -10,17 +10,16 @@ use crate::error::{Result, fail};
 use nalgebra::Vector3;
 use std::sync::Arc;
 
-/// How stars closer together than the camera can separate are treated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum DoubleStars {
-    /// Replace the group by one star at its flux-weighted photocentre with the summed flux:
-    /// that is what the detector sees (one blob), so the pair still serves identification.
-    Merge,
-    /// Remove every star of the group (seed 000's choice).
-    Drop,
-    /// Keep them as they are.
-    Keep,
+crate::choice! {
+    /// How stars closer together than the camera can separate are treated.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum DoubleStars {
+        Merge = "merge", "Replace the group by one star at its flux-weighted photocentre with the \
+            summed flux: that is what the detector sees (one blob), so the pair still serves \
+            identification",
+        Drop = "drop", "Remove every star of the group (seed 000's choice)",
+        Keep = "keep", "Keep them as they are",
+    }
 }
 
 /// What a run selects from the catalog.

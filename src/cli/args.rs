@@ -3,8 +3,10 @@
 //! Over 700 lines on purpose: each option's short and long help lives on its field (clap
 //! derive), so `--help-all` and the code cannot drift apart; the text is most of the file.
 
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Args, Subcommand};
 use gpustar::catalog::DoubleStars;
+use gpustar::choice::Choice;
 use gpustar::io::inputs::Shard;
 use gpustar::io::output::Format;
 use gpustar::pipeline::BackendChoice;
@@ -58,6 +60,17 @@ pub struct RunArgs {
     #[arg(long, value_name = "SECONDS", requires = "sequence",
           value_parser = parse_positive, help_heading = "Sequences", hide_short_help = true)]
     pub frame_interval: Option<f64>,
+}
+
+/// A value parser for a library enum of named values ([`Choice`]): its names with their help,
+/// as `--help-all` lists them, in any case.
+pub(crate) fn choice<T: Choice + Send + Sync + Clone>() -> impl TypedValueParser<Value = T> {
+    PossibleValuesParser::new(
+        T::ALL
+            .iter()
+            .map(|(_, name, help)| PossibleValue::new(*name).help(*help)),
+    )
+    .try_map(|s| T::parse_name(&s))
 }
 
 /// A value parser for a number within `lo..=hi` (NaN and infinities refused): absurd values
@@ -114,7 +127,7 @@ pub enum CatalogCommand {
         #[arg(required = true, num_args = 1..)]
         input: Vec<PathBuf>,
         /// The input's format, when its content does not tell it.
-        #[arg(long, value_enum)]
+        #[arg(long, value_parser = choice::<ImportFormat>())]
         format: Option<ImportFormat>,
         /// Keep stars at or brighter than this, in the catalog's own magnitude (Hp, G or V)
         /// [default: all; 8.0 for a CSV output].
@@ -188,7 +201,7 @@ pub struct CameraOpts {
     pub fov_walk: bool,
     /// What refinement fits besides the attitude: nothing, the scale (field of view), or the
     /// scale and radial distortion k1 (reported as distortion_k1).
-    #[arg(long, value_enum, default_value_t = CameraFit::None, help_heading = "Camera and sky", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<CameraFit>(), default_value_t = CameraFit::None, help_heading = "Camera and sky", hide_short_help = true)]
     pub fit: CameraFit,
     /// Whether a frame may be a mirror image of the sky (a FITS image stored the conventional
     /// way, north up and east left, is one in row order): `either` (each frame takes the
@@ -303,7 +316,7 @@ pub struct CatalogOpts {
     pub mag_limit: Option<f64>,
     /// Stars the camera cannot separate: merge them into one at their photocentre, drop
     /// them, or keep them.
-    #[arg(long, value_enum, default_value_t = DoubleStars::Merge, help_heading = "Camera and sky", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<DoubleStars>(), default_value_t = DoubleStars::Merge, help_heading = "Camera and sky", hide_short_help = true)]
     pub double_stars: DoubleStars,
     /// Stars closer than this many pixels count as one.
     #[arg(long, default_value_t = 2.0, value_parser = within(0.0, 100.0), help_heading = "Camera and sky", hide_short_help = true)]
@@ -332,7 +345,7 @@ pub struct SolveOpts {
     #[arg(short, long, help_heading = "Output")]
     pub output: Option<PathBuf>,
     /// Record format.
-    #[arg(long, value_enum, default_value_t = Format::Jsonl, help_heading = "Output")]
+    #[arg(long, value_parser = choice::<Format>(), default_value_t = Format::Jsonl, help_heading = "Output")]
     pub format: Format,
     /// Where the kernels run: a hardware GPU if there is one, else the CPU (auto), the GPU, or the CPU.
     ///
@@ -340,7 +353,7 @@ pub struct SolveOpts {
     /// a software rasterizer such as lavapipe is slower than the twins), the GPU whatever it
     /// is, or the CPU. The adapter is the best one found, or the first whose name contains
     /// $GPUSTAR_ADAPTER.
-    #[arg(long, value_enum, default_value_t = BackendChoice::Auto, help_heading = "Run")]
+    #[arg(long, value_parser = choice::<BackendChoice>(), default_value_t = BackendChoice::Auto, help_heading = "Run")]
     pub backend: BackendChoice,
     /// Frames per GPU batch (one submission for detection and one for voting per batch).
     #[arg(long, default_value_t = 32, value_parser = count_within(1, 4096), help_heading = "Run", hide_short_help = true)]
@@ -356,14 +369,14 @@ pub struct SolveOpts {
     /// How star positions are measured: a maximum-likelihood fit of a pixel-integrated
     /// Gaussian on a 9x9 window (the centre of gravity where it does not settle; matches then
     /// carry their 1-sigma and weigh the attitude by it), or the centre of gravity.
-    #[arg(long, value_enum, default_value_t = gpustar::solve::detect::Centroid::Ml, help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<gpustar::solve::detect::Centroid>(), default_value_t = gpustar::solve::detect::Centroid::Ml, help_heading = "Detection and identification", hide_short_help = true)]
     pub centroid: gpustar::solve::detect::Centroid,
     /// How stars are identified: geometric voting, radial features (narrow, deep fields), or triangles.
     ///
     /// How stars are identified: geometric voting (triangles as its fallback), radial
     /// features as the candidate filter and triangles among the candidates (seed 002; for
     /// narrow, deep fields), or triangles alone (seed 002's baseline).
-    #[arg(long, value_enum, default_value_t = gpustar::solve::radial::Method::Vote, help_heading = "Detection and identification")]
+    #[arg(long, value_parser = choice::<gpustar::solve::radial::Method>(), default_value_t = gpustar::solve::radial::Method::Vote, help_heading = "Detection and identification")]
     pub method: gpustar::solve::radial::Method,
     /// Brightest detected stars that take part in the vote.
     #[arg(long, default_value_t = 40, value_parser = count_within(4, 200), help_heading = "Detection and identification", hide_short_help = true)]
@@ -518,7 +531,7 @@ pub struct StreakOpts {
     pub station: Option<Station>,
     /// Where the RA/Dec of streak ends come from: gpustar's solution, the FITS header's
     /// TAN/TAN-SIP WCS, or the solution when the frame solves and else the header (auto).
-    #[arg(long, value_enum, default_value_t = Astrometry::Auto, help_heading = "Streaks", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<Astrometry>(), default_value_t = Astrometry::Auto, help_heading = "Streaks", hide_short_help = true)]
     pub astrometry: Astrometry,
     /// UT1 − UTC in seconds for Az/El [default: interpolated in the bundled IERS table
     /// (catalog/eop.csv); beyond its end its last value, with a warning].
@@ -644,7 +657,7 @@ pub struct SimulateArgs {
     pub limit_snr: Option<f64>,
     /// Where the frames point: uniformly random attitudes, or near the catalog's own stars
     /// (for a catalog of a few regions of the sky, where random pointings find no stars).
-    #[arg(long, value_enum, default_value_t = Pointing::Sphere, conflicts_with = "sequence")]
+    #[arg(long, value_parser = choice::<Pointing>(), default_value_t = Pointing::Sphere, conflicts_with = "sequence")]
     pub pointing: Pointing,
     /// Write 16-bit FITS frames whose header gives the pointing off by this many degrees, in a
     /// random direction per frame (from --seed): OBJCTRA/OBJCTDEC (sexagesimal), RA/DEC

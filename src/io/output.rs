@@ -7,13 +7,13 @@ use std::collections::{HashMap, HashSet};
 use std::io::{Read, Seek, Write};
 use std::path::Path;
 
-/// Output format of the records.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Format {
-    /// One JSON object per line (spec/INTERFACE.md).
-    Jsonl,
-    /// A header and one row per file, without the per-star matches.
-    Csv,
+crate::choice! {
+    /// Output format of the records.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Format {
+        Jsonl = "jsonl", "One JSON object per line (spec/INTERFACE.md)",
+        Csv = "csv", "A header and one row per file, without the per-star matches",
+    }
 }
 
 pub const CSV_HEADER: &str = "file,status,reason,error,ra_deg,dec_deg,roll_deg,qw,qx,qy,qz,fov_x_deg,fov_y_deg,stars_detected,stars_matched,rmse_arcsec,p90_arcsec,max_arcsec,false_match_prob,total_ms,backend,distortion_k1,streaks,sequence_mode,particles,epoch,warnings,hint,sigma_boresight_arcsec,sigma_roll_arcsec,mirrored,pixel_scale_arcsec,pixel_scale_source";

@@ -21,15 +21,14 @@ pub use gpu_runner::*;
 pub use solvers::{BACKEND_CPU, DEFAULT_MAX_PIXELS, Decoded, Detected, SharedSolver, Solvers};
 use std::path::PathBuf;
 
-/// Which backend runs the kernels, as asked on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum BackendChoice {
-    /// The GPU if an adapter exists, else the CPU (with a warning).
-    Auto,
-    /// The GPU; an error when there is no adapter.
-    Gpu,
-    /// The CPU twins of the kernels.
-    Cpu,
+crate::choice! {
+    /// Which backend runs the kernels, as asked on the command line.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum BackendChoice {
+        Auto = "auto", "The GPU if an adapter exists, else the CPU (with a warning)",
+        Gpu = "gpu", "The GPU; an error when there is no adapter",
+        Cpu = "cpu", "The CPU twins of the kernels",
+    }
 }
 
 /// The backend in use.

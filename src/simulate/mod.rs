@@ -74,16 +74,16 @@ pub struct SimSettings {
     pub hints: Option<hints::HintSim>,
 }
 
-/// Where simulated frames point.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
-pub enum Pointing {
-    /// Uniformly random attitudes (boresight over the whole sphere, roll).
-    #[default]
-    Sphere,
-    /// Near a catalog star (one of those to the magnitude limit, drawn at random): the
-    /// boresight uniform within half the narrower field of view of it, the roll uniform, so
-    /// that the star is in the field.
-    Catalog,
+crate::choice! {
+    /// Where simulated frames point.
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub enum Pointing {
+        #[default]
+        Sphere = "sphere", "Uniformly random attitudes (boresight over the whole sphere, roll)",
+        Catalog = "catalog", "Near a catalog star (one of those to the magnitude limit, drawn at \
+            random): the boresight uniform within half the narrower field of view of it, the roll \
+            uniform, so that the star is in the field",
+    }
 }
 
 impl SimSettings {

@@ -34,16 +34,17 @@ pub struct DetectSettings {
     pub deblend: bool,
 }
 
-/// How a star's position is measured (`--centroid`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Centroid {
-    /// Centre of gravity of the component's background-subtracted pixels (seed 000 eq. 3).
-    Cog,
-    /// Maximum-likelihood fit of a pixel-integrated Gaussian on a 9×9 window
-    /// (`psf_fit`: the GPU kernel or its CPU twin); the centre of gravity where the fit does not
-    /// settle. The default: at the Cramér–Rao bound where CoG is 1.2–1.9× it (README,
-    /// "Centroids").
-    Ml,
+crate::choice! {
+    /// How a star's position is measured (`--centroid`).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Centroid {
+        Cog = "cog", "Centre of gravity of the component's background-subtracted pixels (seed 000 \
+            eq. 3)",
+        Ml = "ml", "Maximum-likelihood fit of a pixel-integrated Gaussian on a 9×9 window \
+            (`psf_fit`: the GPU kernel or its CPU twin); the centre of gravity where the fit does \
+            not settle. The default: at the Cramér–Rao bound where CoG is 1.2–1.9× it (README, \
+            \"Centroids\")",
+    }
 }
 
 impl Default for DetectSettings {

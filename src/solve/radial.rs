@@ -260,18 +260,19 @@ pub fn triangles(
     out
 }
 
-/// How stars are identified (`--method`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
-pub enum Method {
-    /// Geometric voting against the distance table (seed 000), triangles as the fallback.
-    #[default]
-    Vote,
-    /// Radial features as the candidate filter, triangles among the candidates (seed 002).
-    Radial,
-    /// Triangles alone, no candidate filter: side-side-side matches of the 8 brightest
-    /// stars' triangles through the distance table, each confirmed by a fourth star (the
-    /// vote's fallback on its own; seed 002's baseline).
-    Triangle,
+crate::choice! {
+    /// How stars are identified (`--method`).
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub enum Method {
+        #[default]
+        Vote = "vote", "Geometric voting against the distance table (seed 000), triangles as the \
+            fallback",
+        Radial = "radial", "Radial features as the candidate filter, triangles among the \
+            candidates (seed 002)",
+        Triangle = "triangle", "Triangles alone, no candidate filter: side-side-side matches of \
+            the 8 brightest stars' triangles through the distance table, each confirmed by a \
+            fourth star (the vote's fallback on its own; seed 002's baseline)",
+    }
 }
 
 impl Method {

@@ -21,16 +21,14 @@ pub struct RefineSettings {
     pub fit: CameraFit,
 }
 
-/// Camera parameters refinement may fit along with the attitude.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum CameraFit {
-    /// The camera as given.
-    None,
-    /// The focal length (one factor for fx and fy): the field of view.
-    Scale,
-    /// The focal length and the radial distortion k1.
-    Distortion,
+crate::choice! {
+    /// Camera parameters refinement may fit along with the attitude.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum CameraFit {
+        None = "none", "The camera as given",
+        Scale = "scale", "The focal length (one factor for fx and fy): the field of view",
+        Distortion = "distortion", "The focal length and the radial distortion k1",
+    }
 }
 
 /// Matches needed before the focal length is fitted, and before k1 is.

@@ -69,14 +69,13 @@ pub struct StreakOptions {
     pub identify: IdentifySettings,
 }
 
-/// Where the RA/Dec of streak ends come from (`--astrometry`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Astrometry {
-    /// gpustar's solution, else the header's WCS when it has one.
-    Auto,
-    /// gpustar's solution only.
-    Solve,
-    /// The FITS header's celestial WCS only (TAN or TAN-SIP), for fields too narrow for the
-    /// catalog.
-    Header,
+crate::choice! {
+    /// Where the RA/Dec of streak ends come from (`--astrometry`).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Astrometry {
+        Auto = "auto", "gpustar's solution, else the header's WCS when it has one",
+        Solve = "solve", "gpustar's solution only",
+        Header = "header", "The FITS header's celestial WCS only (TAN or TAN-SIP), for fields too \
+            narrow for the catalog",
+    }
 }

