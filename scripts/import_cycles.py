@@ -34,6 +34,7 @@ LAYERS = [
     ["products"],
     ["pipeline"],
     ["sequence"],
+    ["config"],
     ["batch"],
     ["calibrate"],
     ["report"],

@@ -18,6 +18,7 @@ pub mod calibrate;
 pub mod camera;
 pub mod catalog;
 pub mod choice;
+pub mod config;
 pub mod cpu;
 pub mod error;
 pub mod files;

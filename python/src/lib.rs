@@ -7,6 +7,8 @@
 
 use gpustar::batch::{self, RunOptions};
 use gpustar::choice::Choice;
+use gpustar::config::sidecar::{self, Sidecar};
+use gpustar::config::{RunConfig, ValueOrRange, check_fov};
 use gpustar::io::array::Samples;
 use gpustar::io::dark::Darks;
 use gpustar::io::inputs::{self, Shard};
@@ -15,10 +17,8 @@ use gpustar::pipeline::Counts;
 use gpustar::pipeline::{Backend, BackendChoice, CameraSource, Decoded, Solvers};
 use gpustar::products::Products;
 use gpustar::sequence::{Detected, SequenceOptions, Sequencer};
-use gpustar::solve::Parity;
 use gpustar::solve::detect::Detection;
 use gpustar::streaks::export::{Exports, NO_SITE};
-use gpustar::streaks::{StreakOptions, StreakSettings};
 use gpustar::{Camera, Catalog, Frame, Record, Settings};
 use numpy::{
     PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
@@ -90,6 +90,8 @@ fn config(m: impl Into<String>) -> PyErr {
 /// Everything a `Solver` or a `batch` run is built from, read from keyword options.
 struct Built {
     solvers: Solvers,
+    /// The run configuration the solvers were made from (kept beside a batch's output).
+    config: RunConfig,
     backend: BackendChoice,
     threads: usize,
     batch_size: usize,
@@ -118,6 +120,7 @@ const OPTIONS: &[&str] = &[
     "double_star_px",
     "cache",
     "hint",
+    "parity",
     "streaks",
     "threads",
     "batch_size",
@@ -171,16 +174,6 @@ impl<'py> Opts<'py> {
         }
     }
 
-    /// A number within lo..=hi (the command line's `within`).
-    fn within(&self, key: &str, lo: f64, hi: f64) -> PyResult<Option<f64>> {
-        match self.get::<f64>(key)? {
-            Some(v) if !(v.is_finite() && (lo..=hi).contains(&v)) => {
-                Err(config(format!("{key}: {v} is outside {lo} to {hi}")))
-            }
-            v => Ok(v),
-        }
-    }
-
     fn count(&self, key: &str, lo: usize, hi: usize) -> PyResult<Option<usize>> {
         match self.get::<usize>(key)? {
             Some(v) if !(lo..=hi).contains(&v) => {
@@ -201,78 +194,107 @@ impl<'py> Opts<'py> {
     }
 }
 
-/// The camera source, the camera file's magnitude limit, and the scale range to search.
-type CameraChoice = (CameraSource, Option<f64>, Option<(f64, f64)>);
+/// A camera file's camera and magnitude limit, from `camera`: a path (also returned), or the
+/// file's TOML text.
+fn camera_file(camera: &Bound<'_, PyAny>) -> PyResult<(Camera, Option<f64>, Option<PathBuf>)> {
+    let (text, path): (String, _) = match camera.extract::<PathBuf>() {
+        Ok(p) if !camera.extract::<String>().is_ok_and(|s| s.contains('=')) => {
+            let text = std::fs::read_to_string(&p).map_err(|e| {
+                py_err(gpustar::Error::Io {
+                    context: format!("cannot read {}", p.display()),
+                    error: e,
+                })
+            })?;
+            (text, Some(p))
+        }
+        _ => (camera.extract()?, None),
+    };
+    let (cam, mag) = Camera::from_toml(&text).map_err(py_err)?;
+    Ok((cam, mag, path))
+}
 
-/// The camera from `camera` (a camera file's path, or its TOML text) or `fov_deg` (a number,
-/// or a (low, high) range to search), as `--camera` and `--fov-deg` give it.
-fn camera_source(
-    camera: Option<&Bound<'_, PyAny>>,
+/// The run configuration of the constructor's arguments: `camera` (a camera file's path or
+/// its TOML text) or `fov_deg` (a number, or a (low, high) range to search), and the keyword
+/// options, which keep the command line's names (`retry` and `cache` for `--no-retry` and
+/// `--no-cache`). The library checks the ranges and maps it onto the run's settings.
+fn run_config(
     fov_deg: Option<&Bound<'_, PyAny>>,
-    fov_tolerance: Option<f64>,
-    pixel_aspect: Option<f64>,
-) -> PyResult<CameraChoice> {
-    if pixel_aspect.is_some() && fov_deg.is_none() {
-        return Err(config(
-            "pixel_aspect goes with fov_deg (a camera file gives fx_px and fy_px)",
-        ));
+    catalog: Option<PathBuf>,
+    backend: &str,
+    o: &Opts,
+) -> PyResult<RunConfig> {
+    let mut c = RunConfig {
+        catalog,
+        backend: BackendChoice::parse_name(backend).map_err(|e| config(format!("backend: {e}")))?,
+        ..RunConfig::default()
+    };
+    if let Some(f) = fov_deg {
+        c.fov_deg = Some(match f.extract::<(f64, f64)>() {
+            Ok((lo, hi)) => ValueOrRange::Range(
+                check_fov(lo).map_err(config)?,
+                check_fov(hi).map_err(config)?,
+            ),
+            Err(_) => ValueOrRange::Exact(f.extract()?),
+        });
     }
-    let with_aspect = |x: f64| CameraSource::Fov {
-        fov_x_deg: x,
-        pixel_aspect: pixel_aspect.unwrap_or(1.0),
-    };
-    let tolerance = match fov_tolerance {
-        Some(t) if !(t > 0.0 && t < 0.5) => {
-            return Err(config("fov_tolerance must be between 0 and 0.5"));
-        }
-        t => t.map(|t| (1.0 - t, 1.0 + t)),
-    };
-    let fov = |x: f64| {
-        if x > 0.0 && x < 170.0 {
-            Ok(x)
-        } else {
-            Err(config(format!(
-                "field of view must be between 0 and 170 degrees, got {x}"
-            )))
-        }
-    };
-    match (camera, fov_deg) {
-        (Some(c), _) => {
-            let text: String = match c.extract::<PathBuf>() {
-                Ok(p) if !c.extract::<String>().is_ok_and(|s| s.contains('=')) => {
-                    std::fs::read_to_string(&p).map_err(|e| {
-                        py_err(gpustar::Error::Io {
-                            context: format!("cannot read {}", p.display()),
-                            error: e,
-                        })
-                    })?
-                }
-                _ => c.extract()?,
-            };
-            let (cam, mag) = Camera::from_toml(&text).map_err(py_err)?;
-            Ok((CameraSource::Fixed(cam), mag, tolerance))
-        }
-        (None, Some(f)) => {
-            if let Ok((lo, hi)) = f.extract::<(f64, f64)>() {
-                let (lo, hi) = (fov(lo)?, fov(hi)?);
-                if lo >= hi {
-                    return Err(config(format!("expected (low, high), got ({lo}, {hi})")));
-                }
-                // The camera of the middle FOV; focal lengths scale as 1 / tan(FOV / 2)
-                // (as `--fov-deg LOW..HIGH`).
-                let mid = (lo + hi) / 2.0;
-                let k = |x: f64| 1.0 / (x.to_radians() / 2.0).tan();
-                Ok((
-                    with_aspect(mid),
-                    None,
-                    Some((k(hi) / k(mid), k(lo) / k(mid))),
-                ))
-            } else {
-                Ok((with_aspect(fov(f.extract()?)?), None, tolerance))
+    macro_rules! set {
+        ($($field:ident),+ $(,)?) => {$(
+            if let Some(v) = o.get(stringify!($field))? {
+                c.$field = v;
             }
-        }
-        (None, None) => Err(config("give the camera: camera=FILE or fov_deg=DEG")),
+        )+};
     }
+    macro_rules! set_some {
+        ($($field:ident),+ $(,)?) => {$(
+            c.$field = o.get(stringify!($field))?.or(c.$field.take());
+        )+};
+    }
+    macro_rules! choose {
+        ($($field:ident),+ $(,)?) => {$(
+            if let Some(v) = o.choice(stringify!($field))? {
+                c.$field = v;
+            }
+        )+};
+    }
+    set!(
+        fov_walk,
+        epoch,
+        double_star_px,
+        sigma,
+        vote_stars,
+        wide_min_stars,
+        pair_tol_px
+    );
+    set!(
+        scale_tol,
+        match_radius_px,
+        max_false_prob,
+        batch_size,
+        streaks
+    );
+    set!(streak_sigma, tle_cross, tle_along);
+    set_some!(
+        fov_tolerance,
+        pixel_aspect,
+        mag_limit,
+        hint,
+        station,
+        dut1,
+        tle
+    );
+    choose!(
+        fit,
+        double_stars,
+        centroid,
+        method,
+        detect_filter,
+        astrometry
+    );
+    c.parity = o.choice("parity")?;
+    c.no_retry = !o.get::<bool>("retry")?.unwrap_or(true);
+    c.no_cache = !o.get::<bool>("cache")?.unwrap_or(true);
+    c.validate().map_err(py_err)?;
+    Ok(c)
 }
 
 fn build(
@@ -283,135 +305,47 @@ fn build(
     options: Option<Bound<'_, PyDict>>,
 ) -> PyResult<Built> {
     let o = Opts::new(options)?;
-    let backend =
-        BackendChoice::parse_name(backend).map_err(|e| config(format!("backend: {e}")))?;
-    let (camera, camera_mag, scale_range) = camera_source(
-        camera,
-        fov_deg,
-        o.get::<f64>("fov_tolerance")?,
-        o.within("pixel_aspect", 0.5, 2.0)?,
-    )?;
-    let cat = Catalog::load(catalog.as_deref()).map_err(py_err)?;
-    let mut s = Settings::default();
-    if let Some(e) = o.within("epoch", 1000.0, 3000.0)? {
-        s.epoch = e;
+    let mut c = run_config(fov_deg, catalog, backend, &o)?;
+    if c.pixel_aspect.is_some() && fov_deg.is_none() {
+        return Err(config(
+            "pixel_aspect goes with fov_deg (a camera file gives fx_px and fy_px)",
+        ));
     }
-    s.mag_limit = o.within("mag_limit", -2.0, 20.0)?.or(camera_mag);
-    if let Some(d) = o.choice("double_stars")? {
-        s.double_stars = d;
-    }
-    if let Some(d) = o.within("double_star_px", 0.0, 100.0)? {
-        s.double_star_px = d;
-    }
-    s.table_cache = o.get::<bool>("cache")?.unwrap_or(true);
-    if let Some(k) = o.within("sigma", 0.5, 100.0)? {
-        s.detect.k_sigma = k as f32;
-    }
-    if let Some(f) = o.get::<String>("detect_filter")? {
-        s.detect.matched_filter = match f.as_str() {
-            "none" => false,
-            "binomial" => true,
-            _ => {
-                return Err(config(format!(
-                    "detect_filter: {f:?} is not one of none, binomial"
-                )));
-            }
-        };
-    }
-    if let Some(c) = o.choice("centroid")? {
-        s.detect.centroid = c;
-    }
-    if let Some(m) = o.choice("method")? {
-        s.method = m;
-    }
-    if let Some(v) = o.count("vote_stars", 4, 200)? {
-        s.identify.vote_stars = v;
-    }
-    s.retry = o.get::<bool>("retry")?.unwrap_or(true);
-    if let Some(v) = o.count("wide_min_stars", 0, usize::MAX)? {
-        s.wide_min_stars = v;
-    }
-    if let Some(v) = o.within("pair_tol_px", 0.01, 5.0)? {
-        s.identify.pair_tol_px = v;
-    }
-    if let Some(v) = o.within("scale_tol", 0.0, 0.05)? {
-        s.identify.scale_tol = v;
-    }
-    if let Some(v) = o.within("match_radius_px", 0.1, 20.0)? {
-        s.refine.match_radius_px = v;
-    }
-    if let Some(v) = o.within("max_false_prob", 1e-300, 0.5)? {
-        s.refine.max_false_prob = v;
-    }
-    if let Some(f) = o.choice("fit")? {
-        s.refine.fit = f;
-    }
-    s.scale_range = scale_range;
-    s.walk_wide = o.get::<bool>("fov_walk")?.unwrap_or(false);
-    // As `--parity`: open with fov_deg, the camera file's with camera.
-    s.parity = match (o.get::<String>("parity")?.as_deref(), &camera) {
-        (Some("either"), _) | (None, CameraSource::Fov { .. }) => Parity::Either,
-        (Some("camera"), _) | (None, _) => Parity::AsCamera,
-        (Some(p), _) => {
-            return Err(config(format!(
-                "parity: {p:?} is not one of either, camera"
-            )));
+    let fixed = match camera {
+        Some(cam) => {
+            let (camera, mag, path) = camera_file(cam)?;
+            c.camera = path;
+            Some((camera, mag))
         }
+        None if fov_deg.is_none() => {
+            return Err(config("give the camera: camera=FILE or fov_deg=DEG"));
+        }
+        None => None,
     };
-    let mut solvers = Solvers::new(cat, s, camera);
-    if let Some(h) = o.get::<String>("hint")? {
-        solvers = solvers.with_hints(gpustar::sky::hint::parse_hint(&h).map_err(py_err)?);
-    }
-    if o.get::<bool>("streaks")?.unwrap_or(false) {
-        let station = match o.get::<String>("station")? {
-            Some(t) => Some(gpustar::sky::station::parse_station(&t).map_err(py_err)?),
-            None => None,
-        };
-        let mut settings = StreakSettings::default();
-        if let Some(k) = o.within("streak_sigma", 0.5, 100.0)? {
-            settings.k_sigma = k as f32;
-        }
-        // Read before solving, as the command line does: a bad file fails the constructor.
-        let tle = match o.get::<std::path::PathBuf>("tle")? {
-            Some(p) => Some(std::sync::Arc::new(
-                gpustar::sky::tle::TleCatalog::load(&p).map_err(py_err)?,
-            )),
-            None => None,
-        };
-        let defaults = gpustar::streaks::identify::IdentifySettings::default();
-        solvers.streaks = Some(StreakOptions {
-            settings,
-            station,
-            dut1_s: o.within("dut1", -1.0, 1.0)?,
-            astrometry: o
-                .choice("astrometry")?
-                .unwrap_or(gpustar::streaks::reduce::Astrometry::Auto),
-            tle,
-            identify: gpustar::streaks::identify::IdentifySettings {
-                cross_arcsec: o
-                    .within("tle_cross", 1.0, 36_000.0)?
-                    .unwrap_or(defaults.cross_arcsec),
-                along_s: o
-                    .within("tle_along", 0.01, 600.0)?
-                    .unwrap_or(defaults.along_s),
-            },
-        });
-    } else {
+    if !c.streaks {
         for &k in STREAK_OPTIONS {
             if o.get::<Bound<'_, PyAny>>(k)?.is_some() {
                 return Err(config(format!("{k} is an option of streaks=True")));
             }
         }
     }
+    let choice = c.camera_source(fixed).map_err(py_err)?;
+    let cat = Catalog::load(c.catalog.as_deref()).map_err(py_err)?;
+    let mut solvers = Solvers::new(cat, c.settings(&choice), choice.0);
+    if let Some(h) = &c.hint {
+        solvers = solvers.with_hints(gpustar::sky::hint::parse_hint(h).map_err(py_err)?);
+    }
+    // Read before solving, as the command line does: a bad TLE file fails the constructor.
+    solvers.streaks = c.streak_options().map_err(py_err)?;
     let threads = o
         .count("threads", 1, 4096)?
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let batch_size = o.count("batch_size", 1, 4096)?.unwrap_or(32);
     Ok(Built {
         solvers,
-        backend,
+        backend: c.backend,
         threads,
-        batch_size,
+        batch_size: c.batch_size,
+        config: c,
     })
 }
 
@@ -1187,6 +1121,12 @@ fn start_batch(
     }
     let catalog_path = catalog.clone();
     let mut b = build(camera.as_ref(), fov_deg.as_ref(), catalog, backend, options)?;
+    // The batch's own options that shape the records, as the command line's configuration has
+    // them.
+    b.config.sequence = sequence;
+    b.config.frame_interval = frame_interval_s.filter(|_| sequence);
+    b.config.dark = dark.clone();
+    b.config.dark_median = dark_median;
     if b.solvers.streaks.is_none() {
         for (k, given) in [("tdm", tdm.is_some()), ("iod", iod.is_some())] {
             if given {
@@ -1258,9 +1198,19 @@ fn start_batch(
     .map_err(py_err)?;
     b.solvers.products = products;
     let mut retried_order: Option<(PathBuf, Vec<String>)> = None;
+    // As the command line: the configuration kept beside the records, and a resumed run's
+    // checked against it before the records are touched.
+    let side = Sidecar::new(&b.config, &b.solvers.catalog);
+    if let Some(p) = &output {
+        sidecar::check(p).map_err(py_err)?;
+        if resume {
+            sidecar::check_resume(p, &side).map_err(py_err)?;
+        }
+    }
     let (out, header): (Box<dyn std::io::Write + Send>, bool) = match &output {
         Some(p) => {
             let opened = output::open_output(p, format, resume, retry_errors).map_err(py_err)?;
+            sidecar::write(p, &side).map_err(py_err)?;
             // Redone error records are put back in their places when the run ends.
             if opened.previous.retried > 0 {
                 retried_order = Some((p.clone(), list.iter().map(|i| i.name.clone()).collect()));

@@ -7,6 +7,7 @@ use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Args, Subcommand};
 use gpustar::catalog::DoubleStars;
 use gpustar::choice::Choice;
+use gpustar::config::{self, Bounds, DEFAULTS, DetectFilter, ParityChoice, ValueOrRange};
 use gpustar::io::inputs::Shard;
 use gpustar::io::output::Format;
 use gpustar::pipeline::BackendChoice;
@@ -57,7 +58,7 @@ pub struct RunArgs {
     #[arg(long, help_heading = "Sequences")]
     pub sequence: bool,
     /// Seconds between frames, for frames without a time in their header (FITS DATE-OBS).
-    #[arg(long, value_name = "SECONDS", requires = "sequence",
+    #[arg(long, value_name = "SECONDS",
           value_parser = parse_positive, help_heading = "Sequences", hide_short_help = true)]
     pub frame_interval: Option<f64>,
 }
@@ -73,6 +74,18 @@ pub(crate) fn choice<T: Choice + Send + Sync + Clone>() -> impl TypedValueParser
     .try_map(|s| T::parse_name(&s))
 }
 
+/// [`within`] a library option's bounds (`gpustar::config`).
+pub(crate) fn bounded(b: Bounds<f64>) -> impl Fn(&str) -> std::result::Result<f64, String> + Clone {
+    within(b.min, b.max)
+}
+
+/// [`count_within`] a library option's bounds.
+pub(crate) fn count_bounded(
+    b: Bounds<usize>,
+) -> impl Fn(&str) -> std::result::Result<usize, String> + Clone {
+    count_within(b.min, b.max)
+}
+
 /// A value parser for a number within `lo..=hi` (NaN and infinities refused): absurd values
 /// are told at once (exit 2), not found out by a run that takes hours.
 pub(crate) fn within(
@@ -86,12 +99,14 @@ pub(crate) fn within(
     }
 }
 
-/// [`within`] for single-precision options.
-pub(crate) fn within_f32(
-    lo: f64,
-    hi: f64,
-) -> impl Fn(&str) -> std::result::Result<f32, String> + Clone {
-    move |s: &str| within(lo, hi)(s).map(|v| v as f32)
+/// `--fov-deg`: degrees, one value or LOW..HIGH (`gpustar::config::check_fov`).
+pub(crate) fn parse_fov(s: &str) -> std::result::Result<ValueOrRange, String> {
+    ValueOrRange::parse(s, config::check_fov)
+}
+
+/// `--scale-arcsec`: arcseconds per pixel, one value or LOW..HIGH (`config::check_scale`).
+pub(crate) fn parse_scale(s: &str) -> std::result::Result<ValueOrRange, String> {
+    ValueOrRange::parse(s, config::check_scale)
 }
 
 /// [`within`] for counts.
@@ -174,7 +189,7 @@ pub struct CameraOpts {
     /// Horizontal field of view in degrees: square pixels (or --pixel-aspect), centred, no
     /// distortion. A range (e.g. 8..20) searches the scale; the records give the fitted FOV.
     #[arg(long, value_parser = parse_fov, help_heading = "Camera and sky")]
-    pub fov_deg: Option<FovArg>,
+    pub fov_deg: Option<ValueOrRange>,
     /// Instead of --camera or --fov-deg: the pixel scale in arcsec per pixel, or a range
     /// LOW..HIGH to search.
     ///
@@ -184,7 +199,7 @@ pub struct CameraOpts {
     /// --fov-deg range does; the records give the fitted field of view.
     #[arg(long, value_name = "ARCSEC", value_parser = parse_scale,
           conflicts_with_all = ["camera", "fov_deg"], help_heading = "Camera and sky")]
-    pub scale_arcsec: Option<FovArg>,
+    pub scale_arcsec: Option<ValueOrRange>,
     /// With --fov-deg or --scale-arcsec: a pixel's height over its width, for sensors of
     /// non-square pixels (a Lodestar's 8.3 µm × 8.6 µm: 8.3/8.6); a number or a ratio A/B.
     /// --fov-deg and --scale-arcsec are the width's.
@@ -201,7 +216,7 @@ pub struct CameraOpts {
     pub fov_walk: bool,
     /// What refinement fits besides the attitude: nothing, the scale (field of view), or the
     /// scale and radial distortion k1 (reported as distortion_k1).
-    #[arg(long, value_parser = choice::<CameraFit>(), default_value_t = CameraFit::None, help_heading = "Camera and sky", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<CameraFit>(), default_value_t = DEFAULTS.fit, help_heading = "Camera and sky", hide_short_help = true)]
     pub fit: CameraFit,
     /// Whether a frame may be a mirror image of the sky (a FITS image stored the conventional
     /// way, north up and east left, is one in row order): `either` (each frame takes the
@@ -210,36 +225,25 @@ pub struct CameraOpts {
     /// --scale-arcsec, camera with --camera].
     #[arg(
         long,
-        value_enum,
+        value_parser = choice::<ParityChoice>(),
         help_heading = "Camera and sky",
         hide_short_help = true
     )]
-    pub parity: Option<ParityArg>,
+    pub parity: Option<ParityChoice>,
 }
 
-/// `--parity`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ParityArg {
-    Either,
-    Camera,
+/// `--hint`, checked and kept as written (the run configuration's form).
+fn parse_hint_arg(s: &str) -> std::result::Result<String, String> {
+    gpustar::sky::hint::parse_hint(s)
+        .map(|_| s.to_string())
+        .map_err(|e| e.to_string())
 }
 
-/// Detection's matched filter (`--detect-filter`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum DetectFilter {
-    None,
-    Binomial,
-}
-
-/// `--fov-deg` or `--scale-arcsec`: one value or a range.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum FovArg {
-    Exact(f64),
-    Range(f64, f64),
-}
-
-fn parse_hint_arg(s: &str) -> std::result::Result<gpustar::sky::hint::HintSource, String> {
-    gpustar::sky::hint::parse_hint(s).map_err(|e| e.to_string())
+/// `--station`, checked and kept as written (the run configuration's form).
+fn station_text(s: &str) -> std::result::Result<String, String> {
+    parse_station(s)
+        .map(|_| s.to_string())
+        .map_err(|e| e.to_string())
 }
 
 pub(crate) fn parse_pixel_aspect(s: &str) -> std::result::Result<f64, String> {
@@ -261,45 +265,6 @@ pub(crate) fn parse_pixel_aspect(s: &str) -> std::result::Result<f64, String> {
     }
 }
 
-/// One value or a range `LOW..HIGH` (LOW < HIGH), each read by `num`.
-fn value_or_range(
-    s: &str,
-    num: impl Fn(&str) -> std::result::Result<f64, String>,
-) -> std::result::Result<FovArg, String> {
-    match s.split_once("..") {
-        Some((a, b)) => {
-            let (a, b) = (num(a)?, num(b)?);
-            if a >= b {
-                return Err(format!("expected LOW..HIGH, got {s:?}"));
-            }
-            Ok(FovArg::Range(a, b))
-        }
-        None => Ok(FovArg::Exact(num(s)?)),
-    }
-}
-
-/// `--scale-arcsec`: arcseconds per pixel, one value or LOW..HIGH, above 0 and at most 36000
-/// (10° a pixel).
-pub(crate) fn parse_scale(s: &str) -> std::result::Result<FovArg, String> {
-    value_or_range(s, |v| match v.trim().parse::<f64>() {
-        Ok(x) if x > 0.0 && x <= 36_000.0 => Ok(x),
-        Ok(x) => Err(format!(
-            "pixel scale must be above 0 and at most 36000 arcsec, got {x}"
-        )),
-        Err(_) => Err(format!("bad pixel scale {v:?}")),
-    })
-}
-
-pub(crate) fn parse_fov(s: &str) -> std::result::Result<FovArg, String> {
-    value_or_range(s, |v| match v.trim().parse::<f64>() {
-        Ok(x) if x > 0.0 && x < 170.0 => Ok(x),
-        Ok(x) => Err(format!(
-            "field of view must be between 0 and 170 degrees, got {x}"
-        )),
-        Err(_) => Err(format!("bad field of view {v:?}")),
-    })
-}
-
 #[derive(Args, Debug, Clone)]
 pub struct CatalogOpts {
     /// Catalog: a file `gpustar catalog import` made (binary or CSV) [default: the built-in
@@ -307,19 +272,19 @@ pub struct CatalogOpts {
     #[arg(long, help_heading = "Camera and sky")]
     pub catalog: Option<PathBuf>,
     /// Observation epoch (decimal year) for proper motion.
-    #[arg(long, default_value_t = 2000.0, value_parser = within(1000.0, 3000.0), help_heading = "Camera and sky")]
+    #[arg(long, default_value_t = DEFAULTS.epoch, value_parser = bounded(config::EPOCH), help_heading = "Camera and sky")]
     pub epoch: f64,
     /// Faintest catalog magnitude used [default: the camera file's mag_limit, else chosen from
     /// the field of view so that about 40 catalog stars are in view; in a scale search, each
     /// band's middle field's for the vote, the fitted field's for the final refinement].
-    #[arg(long, value_parser = within(-2.0, 20.0), allow_negative_numbers = true, help_heading = "Camera and sky", hide_short_help = true)]
+    #[arg(long, value_parser = bounded(config::MAG_LIMIT), allow_negative_numbers = true, help_heading = "Camera and sky", hide_short_help = true)]
     pub mag_limit: Option<f64>,
     /// Stars the camera cannot separate: merge them into one at their photocentre, drop
     /// them, or keep them.
-    #[arg(long, value_parser = choice::<DoubleStars>(), default_value_t = DoubleStars::Merge, help_heading = "Camera and sky", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<DoubleStars>(), default_value_t = DEFAULTS.double_stars, help_heading = "Camera and sky", hide_short_help = true)]
     pub double_stars: DoubleStars,
     /// Stars closer than this many pixels count as one.
-    #[arg(long, default_value_t = 2.0, value_parser = within(0.0, 100.0), help_heading = "Camera and sky", hide_short_help = true)]
+    #[arg(long, default_value_t = DEFAULTS.double_star_px, value_parser = bounded(config::DOUBLE_STAR_PX), help_heading = "Camera and sky", hide_short_help = true)]
     pub double_star_px: f64,
     /// Do not read or write the on-disk caches (distance tables, pattern indexes, star selections, the stamps of catalogs already checked whole).
     #[arg(long, help_heading = "Run", hide_short_help = true)]
@@ -340,7 +305,7 @@ pub struct SolveOpts {
     /// centre). A frame with a hint is solved from the catalog stars of that region first,
     /// then lost-in-space; both searches share the false-match budget.
     #[arg(long, value_parser = parse_hint_arg, help_heading = "Camera and sky")]
-    pub hint: Option<gpustar::sky::hint::HintSource>,
+    pub hint: Option<String>,
     /// Write the records here instead of stdout.
     #[arg(short, long, help_heading = "Output")]
     pub output: Option<PathBuf>,
@@ -353,36 +318,36 @@ pub struct SolveOpts {
     /// a software rasterizer such as lavapipe is slower than the twins), the GPU whatever it
     /// is, or the CPU. The adapter is the best one found, or the first whose name contains
     /// $GPUSTAR_ADAPTER.
-    #[arg(long, value_parser = choice::<BackendChoice>(), default_value_t = BackendChoice::Auto, help_heading = "Run")]
+    #[arg(long, value_parser = choice::<BackendChoice>(), default_value_t = DEFAULTS.backend, help_heading = "Run")]
     pub backend: BackendChoice,
     /// Frames per GPU batch (one submission for detection and one for voting per batch).
-    #[arg(long, default_value_t = 32, value_parser = count_within(1, 4096), help_heading = "Run", hide_short_help = true)]
+    #[arg(long, default_value_t = DEFAULTS.batch_size, value_parser = count_bounded(config::BATCH_SIZE), help_heading = "Run", hide_short_help = true)]
     pub batch_size: usize,
     /// Detection threshold above the local background, in noise sigmas.
-    #[arg(long, default_value_t = 5.0, value_parser = within_f32(0.5, 100.0), help_heading = "Detection and identification", hide_short_help = true)]
-    pub sigma: f32,
+    #[arg(long, default_value_t = DEFAULTS.sigma, value_parser = bounded(config::SIGMA), help_heading = "Detection and identification", hide_short_help = true)]
+    pub sigma: f64,
     /// Detection's matched filter: `binomial` thresholds each pixel's 3x3 binomial smoothing
     /// (about a star's PSF) at --sigma sigmas of the smoothed noise, and the pixel at 0.375 of
     /// that, which finds stars of about half the peak SNR; `none` thresholds the pixels alone.
-    #[arg(long, value_enum, default_value_t = DetectFilter::None, help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<DetectFilter>(), default_value_t = DEFAULTS.detect_filter, help_heading = "Detection and identification", hide_short_help = true)]
     pub detect_filter: DetectFilter,
     /// How star positions are measured: a maximum-likelihood fit of a pixel-integrated
     /// Gaussian on a 9x9 window (the centre of gravity where it does not settle; matches then
     /// carry their 1-sigma and weigh the attitude by it), or the centre of gravity.
-    #[arg(long, value_parser = choice::<gpustar::solve::detect::Centroid>(), default_value_t = gpustar::solve::detect::Centroid::Ml, help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<gpustar::solve::detect::Centroid>(), default_value_t = DEFAULTS.centroid, help_heading = "Detection and identification", hide_short_help = true)]
     pub centroid: gpustar::solve::detect::Centroid,
     /// How stars are identified: geometric voting, radial features (narrow, deep fields), or triangles.
     ///
     /// How stars are identified: geometric voting (triangles as its fallback), radial
     /// features as the candidate filter and triangles among the candidates (seed 002; for
     /// narrow, deep fields), or triangles alone (seed 002's baseline).
-    #[arg(long, value_parser = choice::<gpustar::solve::radial::Method>(), default_value_t = gpustar::solve::radial::Method::Vote, help_heading = "Detection and identification")]
+    #[arg(long, value_parser = choice::<gpustar::solve::radial::Method>(), default_value_t = DEFAULTS.method, help_heading = "Detection and identification")]
     pub method: gpustar::solve::radial::Method,
     /// Brightest detected stars that take part in the vote.
-    #[arg(long, default_value_t = 40, value_parser = count_within(4, 200), help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, default_value_t = DEFAULTS.vote_stars, value_parser = count_bounded(config::VOTE_STARS), help_heading = "Detection and identification", hide_short_help = true)]
     pub vote_stars: usize,
     /// Pair distance tolerance from centroid errors, pixels.
-    #[arg(long, default_value_t = 0.4, value_parser = within(0.01, 5.0), help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, default_value_t = DEFAULTS.pair_tol_px, value_parser = bounded(config::PAIR_TOL_PX), help_heading = "Detection and identification", hide_short_help = true)]
     pub pair_tol_px: f64,
     /// Do not retry frames that fail: first with up to 60 voting stars, then with the voters
     /// spread over a grid of 16 cells (both when there are more stars than --vote-stars), then
@@ -396,16 +361,16 @@ pub struct SolveOpts {
     /// The retry with wide tolerances only for frames of at least this many detections: on
     /// sparse frames it costs 20-170 ms and solved none of 156 with 8 or fewer (docs/speed.md,
     /// "The wide retry's stars"); 0 tries it on every frame.
-    #[arg(long, default_value_t = gpustar::solve::WIDE_MIN_STARS, help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, default_value_t = DEFAULTS.wide_min_stars, help_heading = "Detection and identification", hide_short_help = true)]
     pub wide_min_stars: usize,
     /// Pair distance tolerance from focal-length and distortion errors, relative.
-    #[arg(long, default_value_t = 0.0002, value_parser = within(0.0, 0.05), help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, default_value_t = DEFAULTS.scale_tol, value_parser = bounded(config::SCALE_TOL), help_heading = "Detection and identification", hide_short_help = true)]
     pub scale_tol: f64,
     /// A detection matches a catalog star within this many pixels in refinement.
-    #[arg(long, default_value_t = 2.0, value_parser = within(0.1, 20.0), help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, default_value_t = DEFAULTS.match_radius_px, value_parser = bounded(config::MATCH_RADIUS_PX), help_heading = "Detection and identification", hide_short_help = true)]
     pub match_radius_px: f64,
     /// Report `solved` only when the probability of a chance match is below this.
-    #[arg(long, default_value_t = 1e-6, value_parser = within(1e-300, 0.5), help_heading = "Detection and identification", hide_short_help = true)]
+    #[arg(long, default_value_t = DEFAULTS.max_false_prob, value_parser = bounded(config::MAX_FALSE_PROB), help_heading = "Detection and identification", hide_short_help = true)]
     pub max_false_prob: f64,
     /// Subtract this dark frame from every frame before detection (hot pixels, fixed pattern).
     ///
@@ -489,7 +454,8 @@ pub struct SolveOpts {
     #[arg(
         long,
         value_name = "MP",
-        default_value_t = 300.0,
+        default_value_t = DEFAULTS.max_megapixels,
+        value_parser = bounded(config::MAX_MEGAPIXELS),
         help_heading = "Run",
         hide_short_help = true
     )]
@@ -510,6 +476,12 @@ pub struct SolveOpts {
     /// No progress bar, warnings or summary on stderr.
     #[arg(short, long, help_heading = "Output")]
     pub quiet: bool,
+    /// Read the options from a TOML file (the long options' names with `_` for `-`, e.g.
+    /// `fov_deg = "8..20"`, `sigma = 4.5`); options given on the command line win. Those that
+    /// shape the records (not the outputs' paths) are written beside -o as OUTPUT.run.toml,
+    /// which --resume compares.
+    #[arg(long, value_name = "FILE", help_heading = "Run")]
+    pub config: Option<PathBuf>,
     #[command(flatten)]
     pub streaks: StreakOpts,
 }
@@ -526,12 +498,12 @@ pub struct StreakOpts {
     pub streaks: bool,
     /// The station for Az/El (geodetic WGS-84, east longitude positive) [default: each FITS
     /// header's OBSGEO-B/L/H, OBSGEO-X/Y/Z or SITELAT/SITELONG/SITEELEV].
-    #[arg(long, value_name = "LAT,LON,HEIGHT_M", value_parser = parse_station,
-          requires = "streaks", help_heading = "Streaks")]
-    pub station: Option<Station>,
+    #[arg(long, value_name = "LAT,LON,HEIGHT_M", value_parser = station_text,
+          help_heading = "Streaks")]
+    pub station: Option<String>,
     /// Where the RA/Dec of streak ends come from: gpustar's solution, the FITS header's
     /// TAN/TAN-SIP WCS, or the solution when the frame solves and else the header (auto).
-    #[arg(long, value_parser = choice::<Astrometry>(), default_value_t = Astrometry::Auto, help_heading = "Streaks", hide_short_help = true)]
+    #[arg(long, value_parser = choice::<Astrometry>(), default_value_t = DEFAULTS.astrometry, help_heading = "Streaks", hide_short_help = true)]
     pub astrometry: Astrometry,
     /// UT1 − UTC in seconds for Az/El [default: interpolated in the bundled IERS table
     /// (catalog/eop.csv); beyond its end its last value, with a warning].
@@ -539,37 +511,26 @@ pub struct StreakOpts {
         long,
         value_name = "SECONDS",
         allow_negative_numbers = true,
-        requires = "streaks",
-        value_parser = within(-1.0, 1.0), help_heading = "Streaks", hide_short_help = true)]
+        value_parser = bounded(config::DUT1), help_heading = "Streaks", hide_short_help = true)]
     pub dut1: Option<f64>,
     /// Streak mask threshold, noise sigmas of the smoothed frame.
-    #[arg(long, default_value_t = 3.5,
-          value_parser = within_f32(0.5, 100.0), help_heading = "Streaks", hide_short_help = true)]
-    pub streak_sigma: f32,
+    #[arg(long, default_value_t = DEFAULTS.streak_sigma,
+          value_parser = bounded(config::STREAK_SIGMA), help_heading = "Streaks", hide_short_help = true)]
+    pub streak_sigma: f64,
     /// Write the streaks as a CCSDS TDM (KVN) file.
     ///
     /// Write the streaks as a CCSDS TDM (KVN): a RADEC segment, and AZEL when the station is
     /// known, per tracklet (one object over consecutive frames): the ends at the exposure's
     /// start and end where the direction is known, else midpoints at mid-exposure. A run
     /// without a timed streak writes none (and removes an older TDM gpustar wrote there).
-    #[arg(
-        long,
-        value_name = "FILE",
-        requires = "streaks",
-        help_heading = "Streaks"
-    )]
+    #[arg(long, value_name = "FILE", help_heading = "Streaks")]
     pub tdm: Option<PathBuf>,
     /// Write the streaks as IOD lines (sattools, TruSat).
     ///
     /// Write the streaks as IOD lines (angle format 2, J2000), the same observations as the
     /// TDM; each tracklet one object: its NORAD id and designator when --tle named it, else
     /// an unidentified one (stvid's 99999-n and YY DOY+500 designation).
-    #[arg(
-        long,
-        value_name = "FILE",
-        requires = "streaks",
-        help_heading = "Streaks"
-    )]
+    #[arg(long, value_name = "FILE", help_heading = "Streaks")]
     pub iod: Option<PathBuf>,
     /// COSPAR station number for the IOD lines (the default, 9999, is no site: warned about).
     #[arg(long, default_value_t = 9999, value_parser = clap::value_parser!(u16).range(0..=9999), help_heading = "Streaks", hide_short_help = true)]
@@ -580,20 +541,15 @@ pub struct StreakOpts {
     /// JSON) file, thousands of objects. Each is propagated by SGP4 to the frame's times and
     /// station; a streak on an object's predicted path gets "satellite" (NORAD id, name,
     /// cross- and along-track offsets), else "uncorrelated": true. TDM and IOD use the NORAD id.
-    #[arg(
-        long,
-        value_name = "FILE",
-        requires = "streaks",
-        help_heading = "Streaks"
-    )]
+    #[arg(long, value_name = "FILE", help_heading = "Streaks")]
     pub tle: Option<PathBuf>,
     /// --tle: largest distance of a streak's ends across an object's predicted path (arcsec).
-    #[arg(long, value_name = "ARCSEC", default_value_t = 300.0,
-          value_parser = within(1.0, 36_000.0), help_heading = "Streaks", hide_short_help = true)]
+    #[arg(long, value_name = "ARCSEC", default_value_t = DEFAULTS.tle_cross,
+          value_parser = bounded(config::TLE_CROSS), help_heading = "Streaks", hide_short_help = true)]
     pub tle_cross: f64,
     /// --tle: largest time offset along an object's predicted path (seconds).
-    #[arg(long, value_name = "SECONDS", default_value_t = 5.0,
-          value_parser = within(0.01, 600.0), help_heading = "Streaks", hide_short_help = true)]
+    #[arg(long, value_name = "SECONDS", default_value_t = DEFAULTS.tle_along,
+          value_parser = bounded(config::TLE_ALONG), help_heading = "Streaks", hide_short_help = true)]
     pub tle_along: f64,
 }
 

@@ -9,6 +9,7 @@ use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
 use gpustar::io::guard::{Claims, Kind, check_replaceable, write_atomically};
 use gpustar::io::inputs;
+use gpustar::pipeline::CameraSource;
 use gpustar::record::{Record, Status};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -49,7 +50,7 @@ pub(crate) fn calibrate_cmd(
     let found = calibrate::calibrate(
         &start,
         &catalog,
-        settings(c, camera_mag),
+        catalog_config(c)?.settings(&(CameraSource::Fixed(start.clone()), camera_mag, None)),
         &inputs,
         fov_tolerance,
         opts,

@@ -6,7 +6,7 @@ use super::solve::*;
 use anyhow::{Context, Result, bail};
 use gpustar::catalog::Catalog;
 use gpustar::pipeline::{Backend, BackendChoice, BackendNote, CameraSource};
-use gpustar::solve::{PassKind, Settings, Solver, scaled};
+use gpustar::solve::{PassKind, Solver, scaled};
 use std::process::ExitCode;
 
 pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) -> Result<ExitCode> {
@@ -75,7 +75,10 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
         )?;
         return print_all(&out);
     }
-    let (source, camera_mag, scale_range) = camera_source(c, false)?;
+    let cfg = camera_config(c, o)?;
+    let choice = cfg.camera_source(None)?;
+    let s = cfg.settings(&choice);
+    let source = choice.0;
     let camera = match source {
         CameraSource::Fixed(cam) => cam,
         CameraSource::None | CameraSource::Header => {
@@ -86,11 +89,6 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
                 size.context("--fov-deg and --scale-arcsec need --size WIDTHxHEIGHT here")?;
             sized.camera_for(w, h, None).map_err(anyhow::Error::msg)?
         }
-    };
-    let s = Settings {
-        scale_range,
-        walk_wide: c.fov_walk,
-        ..settings(o, camera_mag)
     };
     writeln!(
         out,
@@ -111,7 +109,7 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
                 "shallow pass (frames that show few stars): {} stars in view on average",
                 gpustar::solve::SHALLOW_STARS_IN_VIEW
             )?;
-        } else if scale_range.is_some() {
+        } else if s.scale_range.is_some() {
             writeln!(
                 out,
                 "scale band: FOV {:.4} to {:.4} deg ({} scales tried)",

@@ -3,7 +3,7 @@
 //! [`main_with_args`]. Only the binary uses anyhow; the library returns `gpustar::Error`.
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use exit::Exit;
 use gpustar::io::inputs::{self, Input};
 use std::path::PathBuf;
@@ -196,8 +196,9 @@ pub enum Command {
     Catalog(CatalogCommand),
 }
 
-/// Run the command line; errors are printed once by `main`.
-pub fn execute(cli: Cli) -> Result<ExitCode> {
+/// Run the command line; errors are printed once by `main`. `given`: the options the command
+/// line gives (they win over a --config file's).
+pub fn execute(cli: Cli, given: &[String]) -> Result<ExitCode> {
     init_logging(cli.verbose);
     if cli.verbose == 0 {
         give_the_driver_a_runtime_dir();
@@ -242,7 +243,7 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
                     })
                 });
             }
-            run_solve(inputs, Some(&gathered.dirs), &opts, &run)
+            run_solve(inputs, Some(&gathered.dirs), &opts, &run, given)
         }
         Command::Solve { image, opts } => {
             let name = image.display().to_string();
@@ -264,6 +265,7 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
                 None,
                 &opts,
                 &run,
+                given,
             )
         }
         Command::Merge {
@@ -320,6 +322,20 @@ pub fn execute(cli: Cli) -> Result<ExitCode> {
     }
 }
 
+/// The ids of the options given on the command line (of the innermost subcommand).
+fn given_options(m: &clap::ArgMatches) -> Vec<String> {
+    match m.subcommand() {
+        Some((_, sub)) => given_options(sub),
+        None => m
+            .ids()
+            .filter(|id| {
+                m.value_source(id.as_str()) == Some(clap::parser::ValueSource::CommandLine)
+            })
+            .map(|id| id.as_str().to_string())
+            .collect(),
+    }
+}
+
 /// Used by tests and `main`: parse arguments and run.
 pub fn main_with_args<I, T>(args: I) -> ExitCode
 where
@@ -327,7 +343,10 @@ where
     T: Into<std::ffi::OsString> + Clone,
 {
     alloc::keep_frame_buffers();
-    let cli = match Cli::try_parse_from(args) {
+    let parsed = Cli::command()
+        .try_get_matches_from(args)
+        .and_then(|m| Ok((Cli::from_arg_matches(&m)?, given_options(&m))));
+    let (cli, given) = match parsed {
         Ok(c) => c,
         Err(e) => {
             let _ = e.print();
@@ -339,7 +358,7 @@ where
             .into();
         }
     };
-    match execute(cli) {
+    match execute(cli, &given) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("gpustar: error: {e:#}");

@@ -5,8 +5,9 @@ use super::console::*;
 use super::exit::Exit;
 use anyhow::{Context, Result, bail};
 use gpustar::batch::{self, RunOptions};
-use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
+use gpustar::config::RunConfig;
+use gpustar::config::sidecar::{self, Sidecar};
 use gpustar::io::dark::Darks;
 use gpustar::io::inputs::Input;
 use gpustar::io::output::{self, RecordWriter};
@@ -14,112 +15,126 @@ use gpustar::pipeline::star_lists::StarLists;
 use gpustar::pipeline::{Backend, BackendChoice, BackendNote, CameraSource, Solvers};
 use gpustar::products::Products;
 use gpustar::sequence::SequenceOptions;
-use gpustar::sky::tle::TleCatalog;
-use gpustar::solve::{Parity, Settings};
-use gpustar::streaks::identify::IdentifySettings;
-use gpustar::streaks::reduce::Astrometry;
-use gpustar::streaks::{StreakOptions, StreakSettings, export::Exports};
+use gpustar::streaks::export::Exports;
 use std::io::Write;
 use std::process::ExitCode;
 
-/// Range of focal-length factors (low, high) to search when the scale is uncertain.
-pub(crate) type ScaleRange = (f64, f64);
-
-/// The camera source, its optional magnitude limit, and the scale range to search. With
-/// `header_only` (`--streaks --astrometry header`) no camera is needed.
-pub(crate) fn camera_source(
-    c: &CameraOpts,
-    header_only: bool,
-) -> Result<(CameraSource, Option<f64>, Option<ScaleRange>)> {
-    let tolerance = match c.fov_tolerance {
-        Some(t) if !(t > 0.0 && t < 0.5) => bail!("--fov-tolerance must be between 0 and 0.5"),
-        Some(t) => Some((1.0 - t, 1.0 + t)),
-        None => None,
+/// The catalog options (`calibrate`'s) as a run configuration, the others at their defaults.
+pub(crate) fn catalog_config(o: &CatalogOpts) -> Result<RunConfig> {
+    let cfg = RunConfig {
+        catalog: o.catalog.clone(),
+        epoch: o.epoch,
+        mag_limit: o.mag_limit,
+        double_stars: o.double_stars,
+        double_star_px: o.double_star_px,
+        no_cache: o.no_cache,
+        ..RunConfig::default()
     };
-    let aspect = c.pixel_aspect.unwrap_or(1.0);
-    if c.pixel_aspect.is_some() && c.fov_deg.is_none() && c.scale_arcsec.is_none() {
-        bail!("--pixel-aspect goes with --fov-deg or --scale-arcsec (a camera file gives fy_px)");
-    }
-    let fov = |fov_x_deg| CameraSource::Fov {
-        fov_x_deg,
-        pixel_aspect: aspect,
-    };
-    let scale = |arcsec_per_px| CameraSource::Scale {
-        arcsec_per_px,
-        pixel_aspect: aspect,
-    };
-    // A range searches the scale around the camera of its middle value: focal lengths scale as
-    // 1 / tan(FOV / 2), and as 1 / tan(pixel scale).
-    let factors =
-        |f: &dyn Fn(f64) -> f64, lo: f64, mid: f64, hi: f64| (f(hi) / f(mid), f(lo) / f(mid));
-    match (&c.camera, c.fov_deg, c.scale_arcsec) {
-        (Some(path), ..) => {
-            let (cam, mag) = Camera::from_toml_file(path)?;
-            Ok((CameraSource::Fixed(cam), mag, tolerance))
-        }
-        (None, Some(FovArg::Exact(deg)), _) => Ok((fov(deg), None, tolerance)),
-        (None, Some(FovArg::Range(lo, hi)), _) => {
-            let mid = (lo + hi) / 2.0;
-            let f = |fov: f64| 1.0 / (fov.to_radians() / 2.0).tan();
-            Ok((fov(mid), None, Some(factors(&f, lo, mid, hi))))
-        }
-        (None, None, Some(FovArg::Exact(s))) => Ok((scale(s), None, tolerance)),
-        (None, None, Some(FovArg::Range(lo, hi))) => {
-            let mid = (lo + hi) / 2.0;
-            let f = |s: f64| 1.0 / (s / 3600.0).to_radians().tan();
-            Ok((scale(mid), None, Some(factors(&f, lo, mid, hi))))
-        }
-        (None, None, None) if header_only => Ok((CameraSource::None, None, None)),
-        // Nothing given: each frame's header states its scale, as ASTAP reads it; a nominal
-        // focal length or pixel size is a few per cent off (the Seestar S50's: 1 %).
-        (None, None, None) => Ok((
-            CameraSource::Header,
-            None,
-            tolerance.or(Some(HEADER_SCALE_RANGE)),
-        )),
-    }
+    cfg.validate()?;
+    Ok(cfg)
 }
 
-/// The focal-length factors searched around a header's scale, unless --fov-tolerance says.
-const HEADER_SCALE_RANGE: ScaleRange = (0.97, 1.03);
-
-/// The parity setting of `--parity`, or its default for the camera's source: open with
-/// `--fov-deg` (which says nothing of it), the camera file's with `--camera`.
-pub(crate) fn parity(c: &CameraOpts, source: &CameraSource) -> Parity {
-    match (c.parity, source) {
-        (Some(ParityArg::Either), _)
-        | (None, CameraSource::Fov { .. } | CameraSource::Scale { .. } | CameraSource::Header) => {
-            Parity::Either
-        }
-        _ => Parity::AsCamera,
-    }
+/// The camera and catalog options (`info`'s) as a run configuration.
+pub(crate) fn camera_config(c: &CameraOpts, o: &CatalogOpts) -> Result<RunConfig> {
+    let cfg = RunConfig {
+        camera: c.camera.clone(),
+        fov_deg: c.fov_deg,
+        scale_arcsec: c.scale_arcsec,
+        pixel_aspect: c.pixel_aspect,
+        fov_tolerance: c.fov_tolerance,
+        fov_walk: c.fov_walk,
+        fit: c.fit,
+        parity: c.parity,
+        ..catalog_config(o)?
+    };
+    cfg.validate()?;
+    Ok(cfg)
 }
 
-pub(crate) fn settings(c: &CatalogOpts, camera_mag: Option<f64>) -> Settings {
-    Settings {
-        epoch: c.epoch,
-        mag_limit: c.mag_limit.or(camera_mag),
-        double_stars: c.double_stars,
-        double_star_px: c.double_star_px,
-        table_cache: !c.no_cache,
-        ..Settings::default()
+/// Options that stand for one another: one given on the command line takes the others out of
+/// a --config file.
+const ALTERNATIVES: [&[&str]; 2] = [
+    &["camera", "fov_deg", "scale_arcsec"],
+    &["dark", "dark_median"],
+];
+
+/// The run's configuration: the command line's options, over a --config file's where the
+/// command line does not give them (`given`: the options it gives).
+pub(crate) fn run_config(o: &SolveOpts, b: &RunArgs, given: &[String]) -> Result<RunConfig> {
+    let so = &o.streaks;
+    let cli = RunConfig {
+        hint: o.hint.clone(),
+        sigma: o.sigma,
+        detect_filter: o.detect_filter,
+        centroid: o.centroid,
+        method: o.method,
+        vote_stars: o.vote_stars,
+        pair_tol_px: o.pair_tol_px,
+        no_retry: o.no_retry,
+        wide_min_stars: o.wide_min_stars,
+        scale_tol: o.scale_tol,
+        match_radius_px: o.match_radius_px,
+        max_false_prob: o.max_false_prob,
+        dark: o.dark.clone(),
+        dark_median: o.dark_median,
+        xyls: o.xyls,
+        image_size: o.image_size,
+        backend: o.backend,
+        batch_size: o.batch_size,
+        max_megapixels: o.max_megapixels,
+        sequence: b.sequence,
+        frame_interval: b.frame_interval,
+        streaks: so.streaks,
+        station: so.station.clone(),
+        astrometry: so.astrometry,
+        dut1: so.dut1,
+        streak_sigma: so.streak_sigma,
+        tle: so.tle.clone(),
+        tle_cross: so.tle_cross,
+        tle_along: so.tle_along,
+        ..camera_config(&o.camera, &o.catalog)?
+    };
+    let Some(path) = &o.config else {
+        cli.validate()?;
+        return Ok(cli);
+    };
+    let text = gpustar::files::read_regular_text(path, "the --config file")?;
+    RunConfig::from_toml(&text, path)?;
+    let mut merged: toml::Table = toml::from_str(&text)?;
+    let ours = toml::Table::try_from(&cli)?;
+    for group in ALTERNATIVES {
+        if group.iter().any(|k| given.iter().any(|g| g == k)) {
+            for k in group {
+                merged.remove(*k);
+            }
+        }
     }
+    for (k, v) in ours {
+        if given.contains(&k) || !merged.contains_key(&k) {
+            merged.insert(k, v);
+        }
+    }
+    let cfg: RunConfig = merged
+        .try_into()
+        .with_context(|| format!("{} with the command line's options", path.display()))?;
+    cfg.validate()?;
+    Ok(cfg)
 }
 
 /// `--xyls` runs have stars, not pixels: the options that need pixels are refused.
-fn check_star_list_options(o: &SolveOpts, b: &RunArgs) -> Result<()> {
+fn check_star_list_options(o: &SolveOpts, cfg: &RunConfig) -> Result<()> {
     let pixels = [
-        (b.sequence, "--sequence"),
-        (o.streaks.streaks, "--streaks"),
-        (o.hint.is_some(), "--hint"),
+        (cfg.sequence, "--sequence"),
+        (cfg.streaks, "--streaks"),
+        (cfg.hint.is_some(), "--hint"),
         (
-            o.dark.is_some() || o.dark_median,
+            cfg.dark.is_some() || cfg.dark_median,
             "--dark and --dark-median",
         ),
         (o.new_fits.is_some(), "--new-fits"),
         (o.axy.is_some(), "--axy"),
         (o.annotate_dir.is_some(), "--annotate-dir"),
-        (o.backend == BackendChoice::Gpu, "--backend gpu"),
+        (cfg.backend == BackendChoice::Gpu, "--backend gpu"),
     ];
     if let Some((_, what)) = pixels.iter().find(|(given, _)| *given) {
         bail!("{what} needs the frames' pixels: not with --xyls (star lists)");
@@ -128,65 +143,58 @@ fn check_star_list_options(o: &SolveOpts, b: &RunArgs) -> Result<()> {
 }
 
 /// Run `batch` over `inputs`, listed from the directories `Some(dirs)` (with their
-/// subdirectories when the flag is set), or `solve` over its one frame (None).
+/// subdirectories when the flag is set), or `solve` over its one frame (None); `given`: the
+/// options the command line gives (over a --config file's).
 pub(crate) fn run_solve(
     inputs: Vec<Input>,
     dirs: Option<&[std::path::PathBuf]>,
     o: &SolveOpts,
     b: &RunArgs,
+    given: &[String],
 ) -> Result<ExitCode> {
-    if b.sequence && o.streaks.streaks {
+    let cfg = run_config(o, b, given)?;
+    if cfg.sequence && cfg.streaks {
         anyhow::bail!(
             "--sequence and --streaks do not go together yet: run the sequences and the \
              streak frames separately"
         );
     }
-    if b.sequence && o.hint.is_some() {
+    if cfg.sequence && cfg.hint.is_some() {
         anyhow::bail!(
             "--hint is not used with --sequence: a sequence's frames are identified lost-in-space \
              and then tracked from frame to frame"
         );
     }
-    if o.xyls {
-        check_star_list_options(o, b)?;
-    } else if o.image_size.is_some() {
+    if cfg.frame_interval.is_some() && !cfg.sequence {
+        bail!("--frame-interval is an option of --sequence");
+    }
+    let so = &o.streaks;
+    let streak_outputs = [(so.tdm.is_some(), "--tdm"), (so.iod.is_some(), "--iod")];
+    if let (false, Some((_, what))) = (cfg.streaks, streak_outputs.iter().find(|s| s.0)) {
+        bail!("{what} is an option of --streaks");
+    }
+    if cfg.xyls {
+        check_star_list_options(o, &cfg)?;
+    } else if cfg.image_size.is_some() {
         bail!("--image-size is the size of star lists: it goes with --xyls");
     }
-    let header_only = o.streaks.streaks && o.streaks.astrometry == Astrometry::Header;
-    let (camera, camera_mag, scale_range) = camera_source(&o.camera, header_only)?;
-    let catalog = Catalog::load_with(o.catalog.catalog.as_deref(), !o.catalog.no_cache)?;
-    let mut s = settings(&o.catalog, camera_mag);
-    s.detect.k_sigma = o.sigma;
-    s.detect.matched_filter = o.detect_filter == DetectFilter::Binomial;
-    s.detect.centroid = o.centroid;
-    s.method = o.method;
-    s.identify.vote_stars = o.vote_stars;
-    s.retry = !o.no_retry;
-    s.wide_min_stars = o.wide_min_stars;
-    s.identify.pair_tol_px = o.pair_tol_px;
-    s.identify.scale_tol = o.scale_tol;
-    s.refine.match_radius_px = o.match_radius_px;
-    s.refine.max_false_prob = o.max_false_prob;
-    s.refine.fit = o.camera.fit;
-    s.scale_range = scale_range;
-    s.walk_wide = o.camera.fov_walk;
-    s.parity = parity(&o.camera, &camera);
-    let so = &o.streaks;
+    let choice = cfg.camera_source(None)?;
+    let catalog = Catalog::load_with(cfg.catalog.as_deref(), !cfg.no_cache)?;
+    let s = cfg.settings(&choice);
+    let camera = choice.0;
     // Read before the run, so that a bad file stops it before any frame is done.
-    let tle = match &so.tle {
-        Some(p) => {
-            let c = TleCatalog::load(p)?;
-            if !o.quiet {
-                eprintln!(
-                    "gpustar: --tle {}: {} objects",
-                    p.display(),
-                    c.satellites.len()
-                );
-            }
-            Some(c)
-        }
-        None => None,
-    };
+    let streak_options = cfg.streak_options()?;
+    if let (Some(p), Some(t), false) = (
+        &cfg.tle,
+        streak_options.as_ref().and_then(|s| s.tle.as_ref()),
+        o.quiet,
+    ) {
+        eprintln!(
+            "gpustar: --tle {}: {} objects",
+            p.display(),
+            t.satellites.len()
+        );
+    }
     let mut exports = Exports::new(so.tdm.clone(), so.iod.clone(), so.iod_station);
     let mut products = Products {
         wcs_dir: o.wcs_dir.clone(),
@@ -199,10 +207,11 @@ pub(crate) fn run_solve(
     };
     // Every output checked before any work, and before -o is emptied.
     let read = [
-        (o.catalog.catalog.as_deref(), "the --catalog"),
-        (o.camera.camera.as_deref(), "the --camera file"),
-        (o.dark.as_deref(), "the --dark frame"),
-        (so.tle.as_deref(), "the --tle file"),
+        (cfg.catalog.as_deref(), "the --catalog"),
+        (cfg.camera.as_deref(), "the --camera file"),
+        (cfg.dark.as_deref(), "the --dark frame"),
+        (cfg.tle.as_deref(), "the --tle file"),
+        (o.config.as_deref(), "the --config file"),
     ];
     batch::claims::check_outputs(
         &batch::claims::RunFiles {
@@ -230,9 +239,22 @@ pub(crate) fn run_solve(
     // With error records taken out to be redone: every input's name in order, to put their
     // new records back in their places when the run ends.
     let mut retried_order: Option<Vec<String>> = None;
+    // The configuration the records are made with, kept beside them: a resumed run must be
+    // the same run (checked before the records are touched).
+    let side = Sidecar::new(&cfg, &catalog);
+    if let Some(p) = &o.output {
+        sidecar::check(p)?;
+        if b.resume
+            && let Some(note) = sidecar::check_resume(p, &side)?
+            && !o.quiet
+        {
+            eprintln!("gpustar: {note}");
+        }
+    }
     let out: Box<dyn Write + Send> = match &o.output {
         Some(p) => {
             let opened = output::open_output(p, o.format, b.resume, b.retry_errors)?;
+            sidecar::write(p, &side)?;
             let prev = opened.previous;
             if prev.retried > 0 {
                 retried_order = Some(inputs.iter().map(|i| i.name.clone()).collect());
@@ -242,7 +264,7 @@ pub(crate) fn run_solve(
                 .iter()
                 .filter(|i| prev.done.contains(&i.name))
                 .count();
-            inputs = batch::resumed_inputs(inputs, &prev.done, b.sequence);
+            inputs = batch::resumed_inputs(inputs, &prev.done, cfg.sequence);
             if b.resume && !o.quiet {
                 if prev.truncated > 0 {
                     eprintln!(
@@ -285,10 +307,10 @@ pub(crate) fn run_solve(
         None => Box::new(std::io::stdout()),
     };
     // Star lists have no pixels for the GPU's stages.
-    let (mut backend, note) = Backend::open(if o.xyls {
+    let (mut backend, note) = Backend::open(if cfg.xyls {
         BackendChoice::Cpu
     } else {
-        o.backend
+        cfg.backend
     })?;
     match note {
         Some(BackendNote::Warning(w)) => tracing::warn!("{w}"),
@@ -300,34 +322,18 @@ pub(crate) fn run_solve(
         CameraSource::Fixed(c) => Some((c.width, c.height)),
         _ => None,
     };
-    if !(o.max_megapixels > 0.0 && o.max_megapixels <= 4300.0) {
-        bail!("--max-megapixels must be above 0 and at most 4300 (2^32 pixels)");
-    }
     let mut solvers = Solvers::new(catalog, s, camera);
-    solvers.max_pixels = (o.max_megapixels * 1e6) as u64;
-    if let Some(h) = o.hint {
-        solvers = solvers.with_hints(h);
+    solvers.max_pixels = (cfg.max_megapixels * 1e6) as u64;
+    if let Some(h) = &cfg.hint {
+        solvers = solvers.with_hints(gpustar::sky::hint::parse_hint(h)?);
     }
-    solvers.darks = match (&o.dark, o.dark_median) {
+    solvers.darks = match (&cfg.dark, cfg.dark_median) {
         (Some(path), _) => Darks::from_file(path, expect).context("--dark")?,
         (None, true) => Darks::directory_median(),
         (None, false) => Darks::None,
     };
     solvers.products = products;
-    solvers.streaks = so.streaks.then_some(StreakOptions {
-        settings: StreakSettings {
-            k_sigma: so.streak_sigma,
-            ..StreakSettings::default()
-        },
-        station: so.station,
-        dut1_s: so.dut1,
-        astrometry: so.astrometry,
-        tle: tle.map(std::sync::Arc::new),
-        identify: IdentifySettings {
-            cross_arcsec: so.tle_cross,
-            along_s: so.tle_along,
-        },
-    });
+    solvers.streaks = streak_options;
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
     let to_do = inputs.iter().filter(|i| !i.replay).count();
@@ -337,14 +343,16 @@ pub(crate) fn run_solve(
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let opts = RunOptions {
         threads,
-        batch_size: o.batch_size,
+        batch_size: cfg.batch_size,
         flush_every: std::time::Duration::from_millis(250),
-        sequence: b.sequence.then(|| SequenceOptions {
-            frame_interval_s: b.frame_interval,
+        sequence: cfg.sequence.then(|| SequenceOptions {
+            frame_interval_s: cfg.frame_interval,
             ..SequenceOptions::default()
         }),
-        tracklets: so.streaks,
-        star_lists: o.xyls.then_some(StarLists { size: o.image_size }),
+        tracklets: cfg.streaks,
+        star_lists: cfg.xyls.then_some(StarLists {
+            size: cfg.image_size,
+        }),
     };
     let summary = batch::run(
         inputs,

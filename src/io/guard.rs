@@ -25,6 +25,7 @@ pub enum Kind {
     Corr,
     Axy,
     Report,
+    RunConfig,
 }
 
 /// The marks gpustar puts in the FITS files `--new-fits`, `--corr` and `--axy` write (a
@@ -40,6 +41,10 @@ pub const PNG_SOFTWARE: (&str, &str) = ("Software", "gpustar");
 /// The mark gpustar puts in the head of the report pages it writes (`gpustar report --html`),
 /// followed by its version.
 pub const HTML_GENERATOR: &str = "<meta name=\"generator\" content=\"gpustar";
+
+/// The first line of the run configuration gpustar keeps beside a run's records
+/// (`config::sidecar`).
+pub const RUN_CONFIG_MARK: &str = "# gpustar run configuration";
 
 /// How much of an existing file is read to tell whose it is: a FIFO, a device or a huge file
 /// at an output path costs no more than this.
@@ -57,6 +62,7 @@ impl Kind {
             Kind::Corr => "a table of matched stars gpustar wrote",
             Kind::Axy => "a star list gpustar wrote",
             Kind::Report => "a page gpustar report wrote",
+            Kind::RunConfig => "a run configuration gpustar wrote",
         }
     }
 
@@ -91,6 +97,7 @@ impl Kind {
             Kind::Camera => text.starts_with("# written by gpustar calibrate"),
             // Our pages name their generator in the head.
             Kind::Report => text.lines().take(4).any(|l| l.starts_with(HTML_GENERATOR)),
+            Kind::RunConfig => text.starts_with(RUN_CONFIG_MARK),
         }
     }
 }

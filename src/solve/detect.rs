@@ -47,17 +47,23 @@ crate::choice! {
     }
 }
 
+impl DetectSettings {
+    /// The defaults (`Default`), as a constant: the run configuration's (`config`) come
+    /// from here.
+    pub const DEFAULT: DetectSettings = DetectSettings {
+        tile: 32,
+        k_sigma: 5.0,
+        min_area: 2,
+        max_stars: 100,
+        matched_filter: false,
+        centroid: Centroid::Ml,
+        deblend: false,
+    };
+}
+
 impl Default for DetectSettings {
     fn default() -> Self {
-        DetectSettings {
-            tile: 32,
-            k_sigma: 5.0,
-            min_area: 2,
-            max_stars: 100,
-            matched_filter: false,
-            centroid: Centroid::Ml,
-            deblend: false,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -22,14 +22,20 @@ pub struct IdentifySettings {
     pub candidate_nodes: usize,
 }
 
+impl IdentifySettings {
+    /// The defaults (`Default`), as a constant: the run configuration's (`config`) come
+    /// from here.
+    pub const DEFAULT: IdentifySettings = IdentifySettings {
+        vote_stars: 40,
+        pair_tol_px: 0.4,
+        scale_tol: 0.0002,
+        candidate_nodes: 512,
+    };
+}
+
 impl Default for IdentifySettings {
     fn default() -> Self {
-        IdentifySettings {
-            vote_stars: 40,
-            pair_tol_px: 0.4,
-            scale_tol: 0.0002,
-            candidate_nodes: 512,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -35,14 +35,20 @@ crate::choice! {
 pub const MIN_MATCHES_SCALE: usize = 8;
 pub const MIN_MATCHES_DISTORTION: usize = 16;
 
+impl RefineSettings {
+    /// The defaults (`Default`), as a constant: the run configuration's (`config`) come
+    /// from here.
+    pub const DEFAULT: RefineSettings = RefineSettings {
+        match_radius_px: 2.0,
+        max_false_prob: 1e-6,
+        rounds: 4,
+        fit: CameraFit::None,
+    };
+}
+
 impl Default for RefineSettings {
     fn default() -> Self {
-        RefineSettings {
-            match_radius_px: 2.0,
-            max_false_prob: 1e-6,
-            rounds: 4,
-            fit: CameraFit::None,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -67,28 +67,34 @@ pub enum Parity {
     Either,
 }
 
+impl Settings {
+    /// The defaults (`Default`), as a constant: the run configuration's (`config`) come
+    /// from here.
+    pub const DEFAULT: Settings = Settings {
+        epoch: 2000.0,
+        mag_limit: None,
+        double_stars: DoubleStars::Merge,
+        double_star_px: 2.0,
+        detect: DetectSettings::DEFAULT,
+        identify: IdentifySettings::DEFAULT,
+        refine: RefineSettings::DEFAULT,
+        table_cache: true,
+        scale_range: None,
+        scale_free: true,
+        walk_wide: false,
+        retry: true,
+        wide_min_stars: WIDE_MIN_STARS,
+        detect_retry: true,
+        method: Method::Vote,
+        sky_sr: FULL_SKY_SR,
+        searches: 1,
+        parity: Parity::AsCamera,
+    };
+}
+
 impl Default for Settings {
     fn default() -> Self {
-        Settings {
-            epoch: 2000.0,
-            mag_limit: None,
-            double_stars: DoubleStars::Merge,
-            double_star_px: 2.0,
-            detect: DetectSettings::default(),
-            identify: IdentifySettings::default(),
-            refine: RefineSettings::default(),
-            table_cache: true,
-            scale_range: None,
-            scale_free: true,
-            walk_wide: false,
-            retry: true,
-            wide_min_stars: WIDE_MIN_STARS,
-            detect_retry: true,
-            method: Method::Vote,
-            sky_sr: FULL_SKY_SR,
-            searches: 1,
-            parity: Parity::AsCamera,
-        }
+        Self::DEFAULT
     }
 }
 

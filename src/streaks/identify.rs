@@ -32,12 +32,18 @@ pub struct IdentifySettings {
     pub along_s: f64,
 }
 
+impl IdentifySettings {
+    /// The defaults (`Default`), as a constant: the run configuration's (`config`) come
+    /// from here.
+    pub const DEFAULT: IdentifySettings = IdentifySettings {
+        cross_arcsec: 300.0,
+        along_s: 5.0,
+    };
+}
+
 impl Default for IdentifySettings {
     fn default() -> Self {
-        IdentifySettings {
-            cross_arcsec: 300.0,
-            along_s: 5.0,
-        }
+        Self::DEFAULT
     }
 }
 

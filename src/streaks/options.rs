@@ -32,18 +32,24 @@ pub struct StreakSettings {
     pub max_sigma_px: f64,
 }
 
+impl StreakSettings {
+    /// The defaults (`Default`), as a constant: the run configuration's (`config`) come
+    /// from here.
+    pub const DEFAULT: StreakSettings = StreakSettings {
+        k_sigma: 3.5,
+        min_length_px: 25.0,
+        min_snr: 20.0,
+        min_sigma_px: 0.5,
+        max_sigma_px: 8.0,
+        max_fit_rms_px: 1.0,
+        min_local_snr: 5.0,
+        min_tumbling_px: 80.0,
+    };
+}
+
 impl Default for StreakSettings {
     fn default() -> Self {
-        StreakSettings {
-            k_sigma: 3.5,
-            min_length_px: 25.0,
-            min_snr: 20.0,
-            min_sigma_px: 0.5,
-            max_sigma_px: 8.0,
-            max_fit_rms_px: 1.0,
-            min_local_snr: 5.0,
-            min_tumbling_px: 80.0,
-        }
+        Self::DEFAULT
     }
 }
 

@@ -18,6 +18,7 @@ mod catalog_files;
 mod centroid;
 mod components;
 mod confidence;
+mod config;
 mod dark;
 mod end_to_end;
 mod explain;
