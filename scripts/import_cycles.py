@@ -39,7 +39,7 @@ LAYERS = [
     ["calibrate"],
     ["report"],
     ["cli"],
-    ["lib", "main", "fuzz"],
+    ["lib", "main", "fuzz", "front"],
 ]
 # The binary's own modules: `crate::` in them starts at main.rs.
 BIN_ROOT, BIN_MODULES = "main", ("main", "cli")

@@ -22,6 +22,7 @@ pub mod config;
 pub mod cpu;
 pub mod error;
 pub mod files;
+pub mod front;
 pub mod gpu;
 pub mod io;
 pub mod pipeline;
