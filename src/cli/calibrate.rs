@@ -1,8 +1,7 @@
 //! `gpustar calibrate`: fit the camera to the frames of a directory (the loop is
 //! `gpustar::calibrate::calibrate`); this prints what it found and writes the camera file.
 
-use super::args::*;
-use super::solve::*;
+use super::args::{CatalogOpts, catalog_config};
 use anyhow::{Result, bail};
 use gpustar::calibrate::{self, CENTRE_SHIFT_SIGMAS, FitOptions, Step};
 use gpustar::camera::Camera;

@@ -1,6 +1,6 @@
 //! `gpustar evaluate`: score records against a simulation's truth.
 
-use super::console::*;
+use super::console::print_all;
 use anyhow::Result;
 use gpustar::io::output::{self};
 use std::path::Path;

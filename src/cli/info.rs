@@ -1,8 +1,7 @@
 //! `gpustar info`: what a camera sees of the catalog and which identifier it gets.
 
-use super::args::*;
-use super::console::*;
-use super::solve::*;
+use super::args::{CameraOpts, CatalogOpts, camera_config};
+use super::console::print_all;
 use anyhow::{Context, Result, bail};
 use gpustar::catalog::Catalog;
 use gpustar::pipeline::{Backend, BackendChoice, BackendNote, CameraSource};

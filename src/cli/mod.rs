@@ -3,9 +3,18 @@
 //! [`main_with_args`]. Only the binary uses anyhow; the library returns `gpustar::Error`.
 
 use anyhow::Result;
+use args::{CameraOpts, CatalogCommand, CatalogOpts, RunArgs, SimulateArgs, SolveOpts, parse_size};
+use calibrate::calibrate_cmd;
+use catalog::import_cmd;
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
+use console::{give_the_driver_a_runtime_dir, init_logging};
+use evaluate::evaluate_cmd;
 use exit::Exit;
 use gpustar::io::inputs::{self, Input};
+use merge::merge_cmd;
+use report::{ReportArgs, report_cmd};
+use simulate::simulate_cmd;
+use solve::run_solve;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -21,17 +30,6 @@ mod merge;
 mod report;
 mod simulate;
 mod solve;
-
-use args::*;
-use calibrate::*;
-use catalog::*;
-use console::*;
-use evaluate::*;
-use info::*;
-use merge::*;
-use report::*;
-use simulate::*;
-use solve::*;
 
 const AFTER_HELP: &str = "\
 Examples:
@@ -279,7 +277,7 @@ pub fn execute(cli: Cli, given: &[String]) -> Result<ExitCode> {
             camera,
             size,
             catalog,
-        } => info(&camera, size, &catalog),
+        } => info::info(&camera, size, &catalog),
         Command::Simulate(a) => simulate_cmd(a),
         Command::Calibrate {
             dir,

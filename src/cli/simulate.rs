@@ -1,6 +1,6 @@
 //! `gpustar simulate`: synthetic frames and their truth.
 
-use super::args::*;
+use super::args::SimulateArgs;
 use anyhow::Result;
 use gpustar::camera::Camera;
 use gpustar::catalog::Catalog;
