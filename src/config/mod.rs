@@ -32,65 +32,29 @@ pub struct Bounds<T> {
     pub max: T,
 }
 
-pub const EPOCH: Bounds<f64> = Bounds {
-    min: 1000.0,
-    max: 3000.0,
-};
-pub const MAG_LIMIT: Bounds<f64> = Bounds {
-    min: -2.0,
-    max: 20.0,
-};
-pub const DOUBLE_STAR_PX: Bounds<f64> = Bounds {
-    min: 0.0,
-    max: 100.0,
-};
-pub const PIXEL_ASPECT: Bounds<f64> = Bounds { min: 0.5, max: 2.0 };
-pub const SIGMA: Bounds<f64> = Bounds {
-    min: 0.5,
-    max: 100.0,
-};
-pub const VOTE_STARS: Bounds<usize> = Bounds { min: 4, max: 200 };
-pub const PAIR_TOL_PX: Bounds<f64> = Bounds {
-    min: 0.01,
-    max: 5.0,
-};
-pub const SCALE_TOL: Bounds<f64> = Bounds {
-    min: 0.0,
-    max: 0.05,
-};
-pub const MATCH_RADIUS_PX: Bounds<f64> = Bounds {
-    min: 0.1,
-    max: 20.0,
-};
-pub const MAX_FALSE_PROB: Bounds<f64> = Bounds {
-    min: 1e-300,
-    max: 0.5,
-};
-pub const BATCH_SIZE: Bounds<usize> = Bounds { min: 1, max: 4096 };
-pub const MAX_MEGAPIXELS: Bounds<f64> = Bounds {
-    min: 1e-6,
-    max: 4300.0,
-};
-pub const DUT1: Bounds<f64> = Bounds {
-    min: -1.0,
-    max: 1.0,
-};
-pub const STREAK_SIGMA: Bounds<f64> = Bounds {
-    min: 0.5,
-    max: 100.0,
-};
-pub const TLE_CROSS: Bounds<f64> = Bounds {
-    min: 1.0,
-    max: 36_000.0,
-};
-pub const TLE_ALONG: Bounds<f64> = Bounds {
-    min: 0.01,
-    max: 600.0,
-};
-pub const FRAME_INTERVAL: Bounds<f64> = Bounds {
-    min: 1e-9,
-    max: 1e9,
-};
+impl<T> Bounds<T> {
+    pub const fn new(min: T, max: T) -> Bounds<T> {
+        Bounds { min, max }
+    }
+}
+
+pub const EPOCH: Bounds<f64> = Bounds::new(1000.0, 3000.0);
+pub const MAG_LIMIT: Bounds<f64> = Bounds::new(-2.0, 20.0);
+pub const DOUBLE_STAR_PX: Bounds<f64> = Bounds::new(0.0, 100.0);
+pub const PIXEL_ASPECT: Bounds<f64> = Bounds::new(0.5, 2.0);
+pub const SIGMA: Bounds<f64> = Bounds::new(0.5, 100.0);
+pub const VOTE_STARS: Bounds<usize> = Bounds::new(4, 200);
+pub const PAIR_TOL_PX: Bounds<f64> = Bounds::new(0.01, 5.0);
+pub const SCALE_TOL: Bounds<f64> = Bounds::new(0.0, 0.05);
+pub const MATCH_RADIUS_PX: Bounds<f64> = Bounds::new(0.1, 20.0);
+pub const MAX_FALSE_PROB: Bounds<f64> = Bounds::new(1e-300, 0.5);
+pub const BATCH_SIZE: Bounds<usize> = Bounds::new(1, 4096);
+pub const MAX_MEGAPIXELS: Bounds<f64> = Bounds::new(1e-6, 4300.0);
+pub const DUT1: Bounds<f64> = Bounds::new(-1.0, 1.0);
+pub const STREAK_SIGMA: Bounds<f64> = Bounds::new(0.5, 100.0);
+pub const TLE_CROSS: Bounds<f64> = Bounds::new(1.0, 36_000.0);
+pub const TLE_ALONG: Bounds<f64> = Bounds::new(0.01, 600.0);
+pub const FRAME_INTERVAL: Bounds<f64> = Bounds::new(1e-9, 1e9);
 
 /// The focal-length factors searched around a header's scale, unless `fov_tolerance` says.
 pub const HEADER_SCALE_RANGE: (f64, f64) = (0.97, 1.03);
