@@ -114,14 +114,7 @@ fn main() {
                 }
                 None => {
                     let table = g.upload_table(band.table(), band.refs.len()).unwrap();
-                    let jobs: Vec<VoteJob> = prepared
-                        .iter()
-                        .map(|p| VoteJob {
-                            ranges: p.ranges.clone(),
-                            stars: p.n_vote,
-                            k: p.k,
-                        })
-                        .collect();
+                    let jobs: Vec<VoteJob> = prepared.iter().map(VoteJob::of).collect();
                     median_ms(3, || {
                         g.vote(band.table(), &table, &jobs).unwrap();
                     })

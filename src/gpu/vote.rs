@@ -63,6 +63,17 @@ pub struct VoteJob {
     pub k: usize,
 }
 
+impl VoteJob {
+    /// The vote of a prepared pass.
+    pub fn of(p: &crate::solve::Prepared) -> VoteJob {
+        VoteJob {
+            ranges: p.ranges.clone(),
+            stars: p.n_vote,
+            k: p.k,
+        }
+    }
+}
+
 impl Gpu {
     /// Upload a table for `refs` reference stars, its pairs split into slices of at most one
     /// binding each (a deep catalog's table is larger than `Limits::default()` allows one).

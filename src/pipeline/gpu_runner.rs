@@ -428,14 +428,7 @@ impl Kernels for GpuKernels<'_, '_> {
         let table = uploaded(&mut r.tables, key, || {
             r.gpu.upload_table(b.table(), b.refs.len())
         })?;
-        let jobs: Vec<VoteJob> = jobs
-            .iter()
-            .map(|p| VoteJob {
-                ranges: p.ranges.clone(),
-                stars: p.n_vote,
-                k: p.k,
-            })
-            .collect();
+        let jobs: Vec<VoteJob> = jobs.iter().map(|p| VoteJob::of(p)).collect();
         r.gpu.vote(b.table(), table, &jobs)
     }
 
