@@ -7,8 +7,9 @@ inline) that starts with `crate::`, `super::`, `self::` or `gpustar::` is resolv
 that defines the item: through modules, through `pub use` re-exports (named and glob) and
 through `mod.rs` files. So `use super::{Settings, Solver}` in `solve/bands.rs` is an edge to
 the files that define `Settings` and `Solver`, not to `solve/mod.rs`, and `crate::Result` is
-an edge to `error.rs`, not to `lib.rs`. Test modules (`#[cfg(test)]` items), comments and
-string literals are left out.
+an edge to `error.rs`, not to `lib.rs`. Intra-doc links (`[x](super::y::x)`, `` [`crate::z`] ``)
+count as uses. Test modules (`#[cfg(test)]` items), other comments and string literals are left
+out.
 
 Prints the cycles (strongly connected components of two files or more) and the upward imports;
 exits 1 when there is either.
@@ -44,6 +45,8 @@ LAYERS = [
 # The binary's own modules: `crate::` in them starts at main.rs.
 BIN_ROOT, BIN_MODULES = "main", ("main", "cli")
 IDENT = r"[A-Za-z_][A-Za-z0-9_]*"
+# An intra-doc link's path: [text](path) or [`path`].
+DOC_LINK = r"(?:\]\(|\[`)((?:crate|super|self)(?:::" + IDENT + r")+)(?:\)|`\])"
 
 
 def strip_comments_and_strings(src):
@@ -131,7 +134,18 @@ def modules(root):
                 name = os.path.relpath(path, root)[:-3].replace("/mod", "").replace(os.sep, "::")
                 if name == "mod":
                     continue
-                out[name] = without_tests(strip_comments_and_strings(open(path).read()))
+                raw = open(path).read()
+                code = strip_comments_and_strings(raw)
+                kept = without_tests(code)
+                # Intra-doc links name items too (rustdoc resolves them): a link outside the
+                # test items counts as a use of its target.
+                links = [
+                    m.group(1)
+                    for r, c, k in zip(raw.split("\n"), code.split("\n"), kept.split("\n"))
+                    if c == k
+                    for m in re.finditer(DOC_LINK, r)
+                ]
+                out[name] = kept + "\n" + "\n".join(links)
     return out
 
 

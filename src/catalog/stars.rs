@@ -1,5 +1,5 @@
 //! A catalog's stars: a vector when they were parsed or built, or the records of a mapped
-//! binary catalog file ([`store`](super::store)), turned into [`Star`]s only when something
+//! binary catalog file (`store`), turned into [`Star`]s only when something
 //! reads them all. A run whose star selection comes from the cache (`refs_cache`) reads only
 //! the magnitudes: parsing Tycho-2's 1.9 million records took 90 ms of a narrow frame's
 //! 230 ms; a catalog of tens of millions of stars is mapped in bounded time and memory.

@@ -1,7 +1,8 @@
 //! `gpustar calibrate`: fit the camera to the frames of a directory (the loop is
 //! `gpustar::calibrate::calibrate`); this prints what it found and writes the camera file.
 
-use super::args::{CatalogOpts, catalog_config};
+use super::args::CatalogOpts;
+use super::config::catalog_config;
 use anyhow::{Result, bail};
 use gpustar::calibrate::{self, CENTRE_SHIFT_SIGMAS, FitOptions, Step};
 use gpustar::camera::Camera;

@@ -1,6 +1,7 @@
 //! `gpustar info`: what a camera sees of the catalog and which identifier it gets.
 
-use super::args::{CameraOpts, CatalogOpts, camera_config};
+use super::args::{CameraOpts, CatalogOpts};
+use super::config::camera_config;
 use super::console::print_all;
 use anyhow::{Context, Result, bail};
 use gpustar::catalog::Catalog;

@@ -22,6 +22,7 @@ mod alloc;
 mod args;
 mod calibrate;
 mod catalog;
+mod config;
 mod console;
 mod evaluate;
 mod exit;

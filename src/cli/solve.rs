@@ -1,6 +1,7 @@
 //! `gpustar solve` and `gpustar batch`: the camera and settings from the options, then one run.
 
-use super::args::{RunArgs, SolveOpts, run_config};
+use super::args::{RunArgs, SolveOpts};
+use super::config::run_config;
 use super::console::{Progress, interrupt_flag};
 use super::exit::Exit;
 use anyhow::{Context, Result, bail};

@@ -276,7 +276,7 @@ pub fn scale_hypotheses(lo: f64, hi: f64, step: f64) -> Vec<f64> {
 
 /// One way of trying a frame: a focal-length factor, the band it falls in, what the vote
 /// is given, and the identifier that runs (one of the method's
-/// [`identifiers`](crate::solve::radial::Method::identifiers)).
+/// `identifiers`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pass {
     pub scale: f64,

@@ -19,8 +19,9 @@
 
 use super::detect::{self, Detection};
 use super::kernels::{CpuKernels, Kernels};
+use super::outcome::{Outcome, Solution, Unsolved};
 use super::scale_free::Checked;
-use super::solver::{Outcome, Prepared, Solution, Solver, Unsolved};
+use super::solver::{Prepared, Solver};
 use crate::io::frame::Frame;
 use std::convert::Infallible;
 use std::ops::Deref;

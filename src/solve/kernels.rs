@@ -1,4 +1,4 @@
-//! The kernels the identification flow ([`super::driver`]) runs on, for a batch of frames of
+//! The kernels the identification flow (`driver`) runs on, for a batch of frames of
 //! one size: the CPU twins ([`CpuKernels`]) or the GPU's (`pipeline::gpu_runner`). The flow
 //! itself — which frames go through which pass, fallbacks, budgets, retries — is written once,
 //! in the driver; a backend only says how a batch's lookups, votes and detections are computed.

@@ -15,6 +15,7 @@ pub mod hinted;
 pub mod identify;
 pub mod kernels;
 mod mag_limit;
+mod outcome;
 pub mod radial;
 pub mod refine;
 mod report;
@@ -25,6 +26,7 @@ pub mod triangle;
 
 pub use bands::*;
 pub use mag_limit::*;
+pub use outcome::{Outcome, Solution, Unsolved};
 pub use report::*;
 pub use settings::{Parity, Settings};
 pub use solver::*;

@@ -281,7 +281,7 @@ impl Method {
     /// rank three true candidates of a triangle among their best (few catalog stars among
     /// many false ones), the vote, which counts pairs, can (issue 28, docs/radial.md). Each
     /// identifier judges its hypotheses against an even share of the false-match budget
-    /// ([`Solver::hypothesis_factor`](crate::solve::Solver::hypothesis_factor)).
+    /// (`Solver::hypothesis_factor`).
     pub fn identifiers(self) -> &'static [Method] {
         match self {
             Method::Vote => &[Method::Vote],

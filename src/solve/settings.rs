@@ -33,7 +33,7 @@ pub struct Settings {
     /// not solve a frame (`--fov-walk`).
     pub walk_wide: bool,
     /// Frames that do not solve are tried again: with more voting stars
-    /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame ([`SPREAD_CELLS`](super::SPREAD_CELLS)), then
+    /// ([`RETRY_VOTE_STARS`]), with voters spread over the frame (`SPREAD_CELLS`), then
     /// with wide tolerances ([`WIDE_PAIR_TOL_PX`], [`WIDE_MATCH_RADIUS_PX`]).
     pub retry: bool,
     /// The wide retry (with `retry`) only for frames of at least this many detections
@@ -99,7 +99,7 @@ impl Default for Settings {
 }
 
 impl Settings {
-    /// Whether frames go through the scale-free pass first ([`super::scale_free`]).
+    /// Whether frames go through the scale-free pass first (`scale_free`).
     pub fn scale_free_on(&self) -> bool {
         self.scale_free && self.method == Method::Vote
     }

@@ -16,6 +16,7 @@ use super::bands::{
 use super::detect::{DetectSettings, Detection};
 use super::identify::{self, IdentifySettings};
 use super::mag_limit::{SHALLOW_STARS_IN_VIEW, mag_limit_in};
+use super::outcome::{Outcome, Unsolved};
 use super::refine::{self, RefineSettings, Refined};
 use super::settings::{Parity, Settings};
 use super::triangle;
@@ -30,7 +31,7 @@ use std::sync::Arc;
 pub struct Solver {
     pub camera: Camera,
     pub settings: Settings,
-    /// One, unless a scale search spans more than [`BAND_RATIO`](super::BAND_RATIO).
+    /// One, unless a scale search spans more than `BAND_RATIO`.
     pub bands: Vec<Band>,
     /// Focal-length factors tried, nearest to the camera's first (just 1.0 for a known scale).
     pub scales: Vec<f64>,
@@ -74,63 +75,6 @@ pub struct Prepared {
     pub refine: RefineSettings,
     /// The identifier of this pass.
     pub method: Method,
-}
-
-/// What the identification of one frame found (before it becomes a record).
-#[derive(Clone, Debug)]
-pub struct Solution {
-    pub detections: Vec<Detection>,
-    pub outcome: Outcome,
-    /// The frame's own observation epoch (FITS DATE-OBS), if it has one.
-    pub epoch: Option<f64>,
-}
-
-/// Why a frame is not solved: the record's `reason`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Unsolved {
-    /// Fewer detections than a pattern needs.
-    TooFewStars,
-    /// No geometrically consistent set of candidates (or no quad hypothesis accepted).
-    NoConsistentMatch,
-    /// A solution was found, and failed the false-match test.
-    LowConfidence,
-    /// No camera for the frame: streaks alone, reduced through its header's WCS.
-    NoCamera,
-}
-
-impl Unsolved {
-    /// Every reason (the record schema lists them).
-    pub const ALL: [Unsolved; 4] = [
-        Unsolved::TooFewStars,
-        Unsolved::NoConsistentMatch,
-        Unsolved::LowConfidence,
-        Unsolved::NoCamera,
-    ];
-
-    /// The reason as records write it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Unsolved::TooFewStars => "too_few_stars",
-            Unsolved::NoConsistentMatch => "no_consistent_match",
-            Unsolved::LowConfidence => "low_confidence",
-            Unsolved::NoCamera => "no_camera",
-        }
-    }
-}
-
-impl std::fmt::Display for Unsolved {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-// One per frame, moved rarely: boxing the solution would buy nothing.
-#[allow(clippy::large_enum_variant)]
-#[derive(Clone, Debug)]
-pub enum Outcome {
-    /// The refined solution, and the reference stars its matches' ids index.
-    Solved(refine::Refined, Arc<RefCatalog>),
-    Unsolved(Unsolved),
 }
 
 impl Solver {
@@ -360,7 +304,7 @@ impl Solver {
     /// So the chance that any of them accepts a wrong attitude stays within the whole. The
     /// triangle method, the vote's fallback stage on its own, keeps that stage's share. With the
     /// scale-free pass, which takes `1 / share` of the budget, the passes keep the rest
-    /// ([`PassLimits`](super::scale_free::PassLimits)): a searched scale's count twice (the
+    /// (`PassLimits`): a searched scale's count twice (the
     /// pass takes half); a known scale's have `prepare` scale their `max_false_prob` instead.
     pub fn hypothesis_factor(&self, n: usize, method: Method) -> u64 {
         let stages = match method {

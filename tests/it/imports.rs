@@ -137,5 +137,14 @@ fn a_sibling_cycle_through_nested_groups_is_caught() {
         "{}",
         String::from_utf8_lossy(&out.stdout)
     );
+    // A doc link names its target as a use does (rustdoc resolves it): a cycle again.
+    std::fs::write(
+        dir.join("sky/q.rs"),
+        "/// Made for [`P`](super::p::P).\npub struct Q;\npub fn g() {}\n",
+    )
+    .unwrap();
+    let out = check("a_sibling_cycle_through_nested_groups_is_caught", &dir).unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("cycle: sky::p <-> sky::q"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -490,7 +490,7 @@ mod tests {
         f
     }
 
-    /// The stars [`super::read`] keeps.
+    /// The stars `read` keeps.
     fn read(bytes: &[u8], source: &str, keep: impl Fn(f64) -> bool) -> Result<Vec<Star>> {
         let mut rows =
             crate::catalog::formats::Rows::new(crate::catalog::formats::Format::AnIndex.row_unit());

@@ -120,7 +120,7 @@ pub(crate) struct Rows {
 }
 
 impl Rows {
-    /// Rows counted in `unit`s ([`Format::row_unit`](super::Format::row_unit)).
+    /// Rows counted in `unit`s (`Format::row_unit`).
     pub(crate) fn new(unit: &'static str) -> Rows {
         Rows {
             stars: Vec::new(),

@@ -20,6 +20,6 @@ pub struct Detection {
 }
 
 /// The brightest detections the scale-free pass takes its quads from (its last round,
-/// `scale_free::ROUND_STARS`): where captions ([`drop_caption_rows`](super::caption::drop_caption_rows)) and blends
-/// ([`point_sources`](super::point_sources)) are looked for.
+/// `scale_free::ROUND_STARS`): where captions (`drop_caption_rows`) and blends
+/// (`point_sources`) are looked for.
 pub const QUAD_STARS: usize = 30;

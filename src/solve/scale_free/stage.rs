@@ -3,8 +3,9 @@
 
 use super::super::bands::{SCALE_STEP, scaled};
 use super::super::detect::Detection;
+use super::super::outcome::Outcome;
 use super::super::refine::{self, CameraFit};
-use super::super::solver::{Outcome, Prepared, Solver};
+use super::super::solver::{Prepared, Solver};
 use super::check::permutations;
 use super::{Checked, Hypothesis, Lookup, MAX_PATTERNS, MAX_REFINED, Quad, lookup, rounds_for};
 use crate::catalog::patterns;
