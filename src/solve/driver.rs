@@ -55,9 +55,8 @@ where
         global()
     };
     let g = global.as_deref();
+    // The matched filter's detections of the frames stage 3 has detected again.
     let mut filtered: Vec<Option<Vec<Detection>>> = vec![None; n];
-    // Frames whose matched-filter detections the scale-free pass has seen (stage 3).
-    let mut passed_filtered = vec![false; n];
     if let Some(g) = g {
         pass_stage(kernels, g, &dets, epochs, &all, &mut outcomes, &[])?;
         if let Some(sizes) = sizes.filter(|_| g.scale_free_first()) {
@@ -68,7 +67,6 @@ where
                 let stars = kernels.detect_filtered(&todo, &g.filtered_settings())?;
                 for (&i, s) in todo.iter().zip(stars) {
                     filtered[i] = Some(s);
-                    passed_filtered[i] = true;
                 }
                 let lists: Vec<&[Detection]> = todo
                     .iter()
@@ -78,7 +76,7 @@ where
                 for (&i, o) in todo.iter().zip(found) {
                     if let Some(o) = o {
                         outcomes[i] = o;
-                        dets[i] = filtered[i].clone().unwrap_or_default();
+                        dets[i] = filtered[i].take().unwrap_or_default();
                     }
                 }
                 if !g.settings.walks() {
@@ -97,7 +95,7 @@ where
             g,
             &mut dets,
             epochs,
-            (&mut filtered, &passed_filtered),
+            &mut filtered,
             &mut outcomes,
         )?;
     }
@@ -327,7 +325,7 @@ fn retry<K: Kernels + ?Sized>(
     g: Option<&Solver>,
     dets: &mut [Vec<Detection>],
     epochs: &[Option<f64>],
-    (filtered, passed_filtered): (&mut [Option<Vec<Detection>>], &[bool]),
+    filtered: &mut [Option<Vec<Detection>>],
     outcomes: &mut [Outcome],
 ) -> Result<(), K::Error> {
     // The run's settings: any solver of the batch has them.
@@ -338,9 +336,9 @@ fn retry<K: Kernels + ?Sized>(
         return Ok(());
     }
     let unsolved: Vec<usize> = (0..dets.len()).filter(|&i| !solved(&outcomes[i])).collect();
-    let missing: Vec<usize> = (unsolved.iter().copied())
-        .filter(|&i| filtered[i].is_none())
-        .collect();
+    // Stage 3 has detected these again, and run the scale-free pass on what it found.
+    let (passed, missing): (Vec<usize>, Vec<usize>) =
+        (unsolved.iter()).partition(|&&i| filtered[i].is_some());
     if !missing.is_empty() {
         let stars = kernels.detect_filtered(&missing, &lead.filtered_settings())?;
         for (&i, s) in missing.iter().zip(stars) {
@@ -365,10 +363,7 @@ fn retry<K: Kernels + ?Sized>(
     let mut redone = within_regions(regional, &second, epochs, &again);
     match g {
         Some(g) => {
-            let skip: Vec<usize> = (again.iter().copied())
-                .filter(|&i| passed_filtered[i])
-                .collect();
-            pass_stage(kernels, g, &second, epochs, &again, &mut redone, &skip)?;
+            pass_stage(kernels, g, &second, epochs, &again, &mut redone, &passed)?;
             walk(kernels, g, &second, epochs, &again, &mut redone)?;
         }
         None => unsolved_without_global(regional, &again, &mut redone),
