@@ -11,7 +11,6 @@ pub use crate::choice::Choice;
 pub use crate::config::sidecar::{self, Sidecar};
 pub use crate::config::{RunConfig, ValueOrRange, check_fov};
 pub use crate::io::array::Samples;
-pub use crate::io::dark::Darks;
 pub use crate::io::inputs::{self, Shard};
 pub use crate::io::output::{Format, RecordWriter, open_output, restore_input_order};
 pub use crate::io::wcs::wcs_header;

@@ -6,13 +6,12 @@ use crate::{Error, OutputError, config, py_err};
 use gpustar::Record;
 use gpustar::SequenceOptions;
 use gpustar::front::Choice;
-use gpustar::front::Darks;
 use gpustar::front::Products;
 use gpustar::front::{Exports, NO_SITE};
 use gpustar::front::{Format, RecordWriter, open_output, restore_input_order, resumed_inputs};
 use gpustar::front::{RunFiles, Sidecar, check_outputs, sidecar};
 use gpustar::front::{Shard, inputs};
-use gpustar::{Backend, CameraSource};
+use gpustar::Backend;
 use gpustar::{RunOptions, RunSummary, run};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -145,18 +144,7 @@ pub(crate) fn start_batch(
     }
     // As `--dark`, `--dark-median`, `--wcs-dir`, `--annotate-dir`, `--tdm`, `--iod`: the
     // library's own.
-    b.solvers.darks = match (&dark, dark_median) {
-        (Some(p), _) => {
-            // A camera file fixes the frames' size, and so the dark's.
-            let expect = match &b.solvers.camera {
-                CameraSource::Fixed(c) => Some((c.width, c.height)),
-                _ => None,
-            };
-            Darks::from_file(p, expect).map_err(py_err)?
-        }
-        (None, true) => Darks::directory_median(),
-        (None, false) => Darks::None,
-    };
+    b.solvers.darks = b.config.darks(&b.solvers.camera).map_err(py_err)?;
     let mut exports = Exports::new(tdm, iod, iod_station);
     let mut products = Products {
         wcs_dir,

@@ -257,12 +257,9 @@ pub(crate) fn build(
     }
     let choice = c.camera_source(fixed).map_err(py_err)?;
     let cat = Catalog::load(c.catalog.as_deref()).map_err(py_err)?;
-    let mut solvers = Solvers::new(cat, c.settings(&choice), choice.0);
-    if let Some(h) = &c.hint {
-        solvers = solvers.with_hints(gpustar::front::parse_hint(h).map_err(py_err)?);
-    }
-    // Read before solving, as the command line does: a bad TLE file fails the constructor.
-    solvers.streaks = c.streak_options().map_err(py_err)?;
+    // The TLE file is read now, as the command line does: a bad one fails the constructor.
+    let streaks = c.streak_options().map_err(py_err)?;
+    let solvers = c.solvers(cat, choice, streaks).map_err(py_err)?;
     let threads = o
         .count("threads", 1, 4096)?
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));

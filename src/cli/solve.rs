@@ -4,16 +4,15 @@ use super::args::{RunArgs, SolveOpts};
 use super::config::run_config;
 use super::console::{Progress, interrupt_flag};
 use super::exit::Exit;
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use gpustar::batch::{self, RunOptions};
 use gpustar::catalog::Catalog;
 use gpustar::config::RunConfig;
 use gpustar::config::sidecar::{self, Sidecar};
-use gpustar::io::dark::Darks;
 use gpustar::io::inputs::Input;
 use gpustar::io::output::{self, RecordWriter};
 use gpustar::pipeline::star_lists::StarLists;
-use gpustar::pipeline::{Backend, BackendChoice, BackendNote, CameraSource, Solvers};
+use gpustar::pipeline::{Backend, BackendChoice, BackendNote};
 use gpustar::products::Products;
 use gpustar::sequence::SequenceOptions;
 use gpustar::streaks::export::Exports;
@@ -79,8 +78,6 @@ pub(crate) fn run_solve(
     }
     let choice = cfg.camera_source(None)?;
     let catalog = Catalog::load_with(cfg.catalog.as_deref(), !cfg.no_cache)?;
-    let s = cfg.settings(&choice);
-    let camera = choice.0;
     // Read before the run, so that a bad file stops it before any frame is done.
     let streak_options = cfg.streak_options()?;
     if let (Some(p), Some(t), false) = (
@@ -216,23 +213,8 @@ pub(crate) fn run_solve(
         Some(BackendNote::Info(i)) => tracing::info!("{i}"),
         None => {}
     }
-    // A camera file fixes the frames' size, and so the dark's.
-    let expect = match &camera {
-        CameraSource::Fixed(c) => Some((c.width, c.height)),
-        _ => None,
-    };
-    let mut solvers = Solvers::new(catalog, s, camera);
-    solvers.max_pixels = (cfg.max_megapixels * 1e6) as u64;
-    if let Some(h) = &cfg.hint {
-        solvers = solvers.with_hints(gpustar::sky::hint::parse_hint(h)?);
-    }
-    solvers.darks = match (&cfg.dark, cfg.dark_median) {
-        (Some(path), _) => Darks::from_file(path, expect).context("--dark")?,
-        (None, true) => Darks::directory_median(),
-        (None, false) => Darks::None,
-    };
+    let mut solvers = cfg.solvers(catalog, choice, streak_options)?;
     solvers.products = products;
-    solvers.streaks = streak_options;
     let mut writer = RecordWriter::new(out, o.format, header);
     let stop = interrupt_flag();
     let to_do = inputs.iter().filter(|i| !i.replay).count();

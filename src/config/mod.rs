@@ -12,9 +12,11 @@
 pub mod sidecar;
 
 use crate::camera::Camera;
+use crate::catalog::Catalog;
 use crate::catalog::DoubleStars;
 use crate::error::{Error, Result};
-use crate::pipeline::{BackendChoice, CameraSource, DEFAULT_MAX_PIXELS};
+use crate::io::dark::Darks;
+use crate::pipeline::{BackendChoice, CameraSource, DEFAULT_MAX_PIXELS, Solvers};
 use crate::solve::detect::Centroid;
 use crate::solve::radial::Method;
 use crate::solve::refine::CameraFit;
@@ -65,10 +67,8 @@ pub fn check_within<T: PartialOrd + std::fmt::Display + Copy>(
     v: T,
     b: Bounds<T>,
 ) -> std::result::Result<T, String> {
-    // `v == v` is false for NaN only.
-    #[allow(clippy::eq_op)]
-    let finite = v == v;
-    if finite && b.min <= v && v <= b.max {
+    // NaN compares false with both ends, and so is refused too.
+    if b.min <= v && v <= b.max {
         Ok(v)
     } else {
         Err(format!("{name}: {v} is outside {} to {}", b.min, b.max))
@@ -501,6 +501,41 @@ impl RunConfig {
                 along_s: self.tle_along,
             },
         }))
+    }
+
+    /// `dark` or `dark_median`'s fixed-pattern removal; a camera file fixes the frames' size,
+    /// and so the dark's.
+    pub fn darks(&self, source: &CameraSource) -> Result<Darks> {
+        let expect = match source {
+            CameraSource::Fixed(c) => Some((c.width, c.height)),
+            _ => None,
+        };
+        Ok(match (&self.dark, self.dark_median) {
+            (Some(path), _) => Darks::from_file(path, expect).map_err(|e| e.context("--dark"))?,
+            (None, true) => Darks::directory_median(),
+            (None, false) => Darks::None,
+        })
+    }
+
+    /// The solvers of a run over `catalog` with this camera `choice` and the `streaks` options
+    /// ([`RunConfig::streak_options`], read before): settings, hints, darks and the largest
+    /// frame. The products (files written per frame) are the front end's.
+    pub fn solvers(
+        &self,
+        catalog: Catalog,
+        choice: CameraChoice,
+        streaks: Option<StreakOptions>,
+    ) -> Result<Solvers> {
+        let darks = self.darks(&choice.0)?;
+        let settings = self.settings(&choice);
+        let mut solvers = Solvers::new(catalog, settings, choice.0);
+        solvers.max_pixels = (self.max_megapixels * 1e6) as u64;
+        if let Some(h) = &self.hint {
+            solvers = solvers.with_hints(crate::sky::hint::parse_hint(h)?);
+        }
+        solvers.darks = darks;
+        solvers.streaks = streaks;
+        Ok(solvers)
     }
 
     /// The options whose values differ from `other`'s, less those that cannot change a
