@@ -3,6 +3,7 @@
 use crate::options::build;
 use crate::records::RecordHandle;
 use crate::{Error, OutputError, config, py_err};
+use gpustar::Backend;
 use gpustar::Record;
 use gpustar::SequenceOptions;
 use gpustar::front::Choice;
@@ -11,7 +12,6 @@ use gpustar::front::{Exports, NO_SITE};
 use gpustar::front::{Format, RecordWriter, open_output, restore_input_order, resumed_inputs};
 use gpustar::front::{RunFiles, Sidecar, check_outputs, sidecar};
 use gpustar::front::{Shard, inputs};
-use gpustar::Backend;
 use gpustar::{RunOptions, RunSummary, run};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
