@@ -35,6 +35,29 @@ pub enum Error {
     /// The GPU: no adapter, a kernel that does not build, a device lost in a run.
     #[error("{0}")]
     Gpu(String),
+    /// A bug in gpustar: a stage panicked on an input (its record says so, and the run goes on).
+    #[error("{0}")]
+    Internal(String),
+}
+
+/// A copy of the error for every frame that shares it (a frame size's solver, a dark, a GPU
+/// table): the same kind and message. An I/O error is copied as its kind and its message, as
+/// `std::io::Error` cannot be cloned.
+impl Clone for Error {
+    fn clone(&self) -> Self {
+        match self {
+            Error::Io { context, error } => Error::Io {
+                context: context.clone(),
+                error: std::io::Error::new(error.kind(), chain(error)),
+            },
+            Error::Input(m) => Error::Input(m.clone()),
+            Error::Catalog(m) => Error::Catalog(m.clone()),
+            Error::Config(m) => Error::Config(m.clone()),
+            Error::Output(m) => Error::Output(m.clone()),
+            Error::Gpu(m) => Error::Gpu(m.clone()),
+            Error::Internal(m) => Error::Internal(m.clone()),
+        }
+    }
 }
 
 /// The library's result type.
@@ -54,6 +77,7 @@ impl Error {
             Error::Config(m) => Error::Config(join(&c, &m)),
             Error::Output(m) => Error::Output(join(&c, &m)),
             Error::Gpu(m) => Error::Gpu(join(&c, &m)),
+            Error::Internal(m) => Error::Internal(join(&c, &m)),
         }
     }
 }
@@ -165,5 +189,21 @@ mod tests {
         assert_eq!(format!("{e:#}"), "decoding: b.png is empty");
         assert!(matches!(e, Error::Input(_)));
         assert!(std::error::Error::source(&e).is_none());
+    }
+
+    #[test]
+    fn a_copy_keeps_the_kind_and_the_message() {
+        let os = std::io::Error::from_raw_os_error(2);
+        let e = Error::Io {
+            context: "cannot read a.fits".into(),
+            error: os,
+        };
+        let copy = e.clone();
+        assert_eq!(copy.to_string(), e.to_string());
+        assert!(
+            matches!(&copy, Error::Io { error, .. } if error.kind() == std::io::ErrorKind::NotFound)
+        );
+        let e = error!(Catalog, "no stars");
+        assert!(matches!(e.clone(), Error::Catalog(m) if m == "no stars"));
     }
 }

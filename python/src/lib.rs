@@ -69,7 +69,8 @@ pub(crate) fn py_err(e: gpustar::Error) -> PyErr {
         gpustar::Error::Config(_) => ConfigError::new_err(m),
         gpustar::Error::Output(_) => OutputError::new_err(m),
         gpustar::Error::Gpu(_) => GpuError::new_err(m),
-        _ => IoError::new_err(m),
+        gpustar::Error::Io { .. } => IoError::new_err(m),
+        _ => Error::new_err(m),
     }
 }
 

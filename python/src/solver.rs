@@ -4,7 +4,7 @@
 use crate::arrays::{decoded_of, held};
 use crate::options::build;
 use crate::records::RecordHandle;
-use crate::{Error, InputError, config, py_err};
+use crate::{Error, InputError, py_err};
 use gpustar::Backend;
 use gpustar::front::Counts;
 use gpustar::front::Detection;
@@ -94,7 +94,7 @@ impl Solver {
         let s = py.detach(|| self.solvers.get(width, height));
         match s.as_ref() {
             Ok(_) => Ok(()),
-            Err(e) => Err(config(e.clone())),
+            Err(e) => Err(py_err(e.clone())),
         }
     }
 

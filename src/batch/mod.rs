@@ -296,7 +296,7 @@ fn gpu_loop(
             let msg = panic_message(&p);
             names
                 .iter()
-                .map(|n| solvers.error_record(n, msg.clone(), &runner.name()))
+                .map(|n| solvers.error_record(n, &msg, &runner.name()))
                 .collect()
         });
         for (i, r) in indices.into_iter().zip(records) {
@@ -425,7 +425,7 @@ fn sequence_loop(
             let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| seq.next(d)))
                 .unwrap_or_else(|p| {
                     seq = Sequencer::new(solvers, opts);
-                    solvers.error_record(&name, panic_message(&p), &backend)
+                    solvers.error_record(&name, &panic_message(&p), &backend)
                 });
             if done.send((next, r)).is_err() {
                 return;
@@ -449,17 +449,19 @@ fn guarded_detect(input: &Input, f: impl FnOnce() -> Detected) -> Detected {
 /// error record instead of ending the run.
 fn guarded(solvers: &Solvers, name: &str, f: impl FnOnce() -> Record) -> Record {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| {
-        solvers.error_record(name, panic_message(&p), crate::pipeline::BACKEND_CPU)
+        solvers.error_record(name, &panic_message(&p), crate::pipeline::BACKEND_CPU)
     })
 }
 
-fn panic_message(p: &Box<dyn std::any::Any + Send>) -> String {
+fn panic_message(p: &Box<dyn std::any::Any + Send>) -> crate::Error {
     let what = p
         .downcast_ref::<&str>()
         .map(|s| s.to_string())
         .or_else(|| p.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "unknown".into());
-    format!("internal error while processing this file ({what}); please report it with the file")
+    crate::Error::Internal(format!(
+        "internal error while processing this file ({what}); please report it with the file"
+    ))
 }
 
 /// The inputs of a worker until a stop is asked: queued inputs are then left without a

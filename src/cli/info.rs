@@ -87,7 +87,7 @@ pub(crate) fn info(c: &CameraOpts, size: Option<(u32, u32)>, o: &CatalogOpts) ->
         sized @ (CameraSource::Fov { .. } | CameraSource::Scale { .. }) => {
             let (w, h) =
                 size.context("--fov-deg and --scale-arcsec need --size WIDTHxHEIGHT here")?;
-            sized.camera_for(w, h, None).map_err(anyhow::Error::msg)?
+            sized.camera_for(w, h, None)?
         }
     };
     writeln!(

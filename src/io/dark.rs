@@ -6,6 +6,7 @@
 //! first and loses the second. Subtracting it leaves faint stars on a flat background (the
 //! openstartracker frames need this: their fixed pattern is as bright as their stars).
 
+use crate::error::{Context, Result, fail};
 use crate::io::frame::{Frame, is_image_path};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -35,19 +36,19 @@ pub enum Darks {
 
 /// A directory and a frame size: frames of other sizes in the directory get their own dark.
 type DarkKey = (PathBuf, u32, u32);
-type DarkResult = Result<Arc<Frame<'static>>, String>;
+type DarkResult = Result<Arc<Frame<'static>>>;
 
 impl Darks {
     /// Read the dark frame of `--dark FILE`. With `expect`, the frames' (width, height) from a
     /// camera file, a dark of another size is refused from its header before it is decoded: a
     /// PNG of a few hundred kB can declare 30000² pixels, 1.8 GB decoded. Without it (frames
     /// of any size), the decoders' limits on frames apply.
-    pub fn from_file(path: &Path, expect: Option<(u32, u32)>) -> crate::error::Result<Darks> {
+    pub fn from_file(path: &Path, expect: Option<(u32, u32)>) -> Result<Darks> {
         if let Some((w, h)) = expect
             && let Some((dw, dh)) = header_size(path)
             && (dw, dh) != (w, h)
         {
-            crate::error::fail!(
+            fail!(
                 Input,
                 "the dark frame {} is {dw}x{dh} but the camera file says {w}x{h}: pass a dark \
                  of this camera",
@@ -66,19 +67,15 @@ impl Darks {
     }
 
     /// The frame of `path` with the dark subtracted, or why that cannot be done (a person can
-    /// act on the message: wrong dark size, too few frames for a median).
-    pub fn apply<'a>(&self, path: &Path, frame: Frame<'a>) -> crate::Result<Frame<'a>> {
-        self.subtract(path, frame).map_err(crate::Error::Input)
-    }
-
-    /// [`Darks::apply`], its message as text (a directory's failed median is shared by its
-    /// frames).
-    fn subtract<'a>(&self, path: &Path, frame: Frame<'a>) -> Result<Frame<'a>, String> {
+    /// act on the message: wrong dark size, too few frames for a median; a directory's failed
+    /// median is every frame's error there).
+    pub fn apply<'a>(&self, path: &Path, frame: Frame<'a>) -> Result<Frame<'a>> {
         match self {
             Darks::None => Ok(frame),
             Darks::File { path: dp, frame: d } => {
                 if (d.width, d.height) != (frame.width, frame.height) {
-                    return Err(format!(
+                    fail!(
+                        Input,
                         "image is {}x{} but the dark frame {} is {}x{}: pass a dark of this \
                          camera",
                         frame.width,
@@ -86,7 +83,7 @@ impl Darks {
                         dp.display(),
                         d.width,
                         d.height
-                    ));
+                    );
                 }
                 Ok(subtract_dark(&frame, d))
             }
@@ -150,7 +147,7 @@ pub fn subtract_dark(frame: &Frame, dark: &Frame) -> Frame<'static> {
 /// The per-pixel median of up to `MEDIAN_FRAMES` frames of `dir` that are `width`×`height`.
 fn median_of_directory(dir: &Path, width: u32, height: u32) -> DarkResult {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| format!("--dark-median: cannot list {}: {e}", dir.display()))?
+        .with_context(|| format!("--dark-median: cannot list {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && is_image_path(p))
         .collect();
@@ -163,12 +160,13 @@ fn median_of_directory(dir: &Path, width: u32, height: u32) -> DarkResult {
         .filter(|f| (f.width, f.height) == (width, height))
         .collect();
     if frames.len() < MIN_MEDIAN_FRAMES {
-        return Err(format!(
+        fail!(
+            Input,
             "--dark-median needs at least {MIN_MEDIAN_FRAMES} readable {width}x{height} frames \
              in {} to make a dark, found {}: pass a dark frame with --dark FILE instead",
             dir.display(),
             frames.len()
-        ));
+        );
     }
     tracing::info!(
         "dark for {}x{} frames of {}: median of {} frames",

@@ -2,6 +2,7 @@
 //! pixel scale the frame's own header states.
 
 use crate::camera::Camera;
+use crate::error::{Result, error, fail};
 use crate::io::fits::scale::PixelScale;
 use std::collections::BTreeMap;
 
@@ -47,7 +48,7 @@ impl CameraSource {
         width: u32,
         height: u32,
         scale: Option<&PixelScale>,
-    ) -> std::result::Result<Camera, String> {
+    ) -> Result<Camera> {
         // A pixel scale s gives the pinhole's focal length 1 / tan(s) pixels, so the field is
         // 2 atan(width / 2 · tan(s)).
         let scaled = |arcsec_per_px: f64| {
@@ -57,22 +58,17 @@ impl CameraSource {
         let (fov_x_deg, pixel_aspect) = match (self, scale) {
             (CameraSource::Fixed(c), _) => {
                 if (c.width, c.height) != (width, height) {
-                    return Err(crate::io::frame::wrong_size(
-                        width,
-                        height,
-                        (c.width, c.height),
-                    ));
+                    let size = crate::io::frame::wrong_size(width, height, (c.width, c.height));
+                    return Err(error!(Input, "{size}"));
                 }
                 return Ok(c.clone());
             }
-            (CameraSource::None, _) => return Err("no camera given".into()),
-            (CameraSource::Header, None) => {
-                return Err(
-                    "the header states no pixel scale (a CD or CDELT WCS, PIXSCALE, SECPIX, or \
-                     FOCALLEN with XPIXSZ): give --camera, --fov-deg or --scale-arcsec"
-                        .into(),
-                );
-            }
+            (CameraSource::None, _) => fail!(Config, "no camera given"),
+            (CameraSource::Header, None) => fail!(
+                Input,
+                "the header states no pixel scale (a CD or CDELT WCS, PIXSCALE, SECPIX, or \
+                 FOCALLEN with XPIXSZ): give --camera, --fov-deg or --scale-arcsec"
+            ),
             (CameraSource::Header, Some(s)) => (scaled(s.arcsec_per_px), s.pixel_aspect),
             (
                 CameraSource::Fov {
@@ -90,14 +86,13 @@ impl CameraSource {
             ) => (scaled(*arcsec_per_px), *pixel_aspect),
         };
         if width < MIN_SIDE || height < MIN_SIDE {
-            return Err(format!(
+            fail!(
+                Input,
                 "image is {width}x{height}: too small to hold a star field (gpustar needs at \
                  least {MIN_SIDE} pixels a side)"
-            ));
+            );
         }
-        Ok(Camera::from_fov(width, height, fov_x_deg)
-            .map_err(|e| format!("{e:#}"))?
-            .with_pixel_aspect(pixel_aspect))
+        Ok(Camera::from_fov(width, height, fov_x_deg)?.with_pixel_aspect(pixel_aspect))
     }
 
     /// With [`CameraSource::Header`]: the pixel scale a frame's header keywords state, if any.

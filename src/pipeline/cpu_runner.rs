@@ -80,7 +80,7 @@ impl Solvers {
     pub fn solve_cpu(&self, d: Decoded) -> Record {
         let frame = match &d.frame {
             Ok(f) => f,
-            Err(e) => return self.error_record(&d.name, e.clone(), BACKEND_CPU),
+            Err(e) => return self.error_record(&d.name, e, BACKEND_CPU),
         };
         if matches!(self.camera, CameraSource::None) {
             return self.streaks_only(&d, frame);
@@ -95,7 +95,7 @@ impl Solvers {
             let solver = self.get_scaled(frame.width, frame.height, scale.as_ref());
             match solver.as_ref() {
                 Ok(s) => solve_with(self, s, None, &Global::Ready(s), &d, frame),
-                Err(e) => self.error_record(&d.name, e.clone(), BACKEND_CPU),
+                Err(e) => self.error_record(&d.name, e, BACKEND_CPU),
             }
         };
         record.pixel_scale = scale.map(|s| crate::record::PixelScaleRecord {
@@ -133,7 +133,7 @@ impl Solvers {
         let solver = self.get(width, height);
         let solver = match solver.as_ref() {
             Ok(s) => s,
-            Err(e) => return (self.error_record(name, e.clone(), BACKEND_CPU), None),
+            Err(e) => return (self.error_record(name, e, BACKEND_CPU), None),
         };
         let t0 = Instant::now();
         stars.sort_by(|a, b| b.flux.total_cmp(&a.flux));

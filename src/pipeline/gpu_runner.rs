@@ -5,7 +5,7 @@ use super::cpu_runner::{decoded_frame, solve_with};
 use super::solvers::{BACKEND_CPU, Decoded, DetectKey, Detected, Global, SizeGroup, Solvers};
 use crate::cpu::centroid::Blob;
 use crate::cpu::pattern::Rows;
-use crate::error::{Result, error, fail};
+use crate::error::{Result, error};
 use crate::gpu::Gpu;
 use crate::gpu::pattern::GpuPatterns;
 use crate::gpu::radial::{GpuRadial, RadialJob};
@@ -27,11 +27,11 @@ use std::time::Instant;
 pub struct GpuRunner {
     pub gpu: Gpu,
     /// By frame size and band of the solver for that size.
-    pub(crate) tables: HashMap<(u32, u32, usize), std::result::Result<GpuTable, String>>,
+    pub(crate) tables: HashMap<(u32, u32, usize), Result<GpuTable>>,
     /// The bands' radial features (`--method radial`), uploaded like the tables.
-    pub(crate) radial: HashMap<(u32, u32, usize), std::result::Result<GpuRadial, String>>,
+    pub(crate) radial: HashMap<(u32, u32, usize), Result<GpuRadial>>,
     /// The pattern index keys of the scale-free pass, by frame size.
-    pub(crate) patterns: HashMap<(u32, u32), std::result::Result<GpuPatterns, String>>,
+    pub(crate) patterns: HashMap<(u32, u32), Result<GpuPatterns>>,
     /// Set once the GPU failed: the rest of the run is on the CPU.
     pub(crate) failed: bool,
 }
@@ -58,7 +58,7 @@ impl GpuRunner {
         let mut records: Vec<Option<Record>> = (0..frames.len()).map(|_| None).collect();
         for (i, d) in frames.iter().enumerate() {
             if let Err(e) = &d.frame {
-                records[i] = Some(solvers.error_record(&d.name, e.clone(), &self.name()));
+                records[i] = Some(solvers.error_record(&d.name, e, &self.name()));
             }
         }
         let groups = size_groups(&frames);
@@ -96,7 +96,7 @@ impl GpuRunner {
                                 let lazy = Global::Lazy(solvers, (w, h), None);
                                 solve_with(solvers, r, Some(r), &lazy, d, decoded_frame(d))
                             }
-                            None => solvers.error_record(&d.name, e.clone(), &self.name()),
+                            None => solvers.error_record(&d.name, e, &self.name()),
                         });
                         for (i, r) in indices.into_iter().zip(recs) {
                             records[i] = Some(r);
@@ -321,7 +321,7 @@ fn cpu_record(
         (Some(r), _) => solve_with(solvers, r, Some(r), global, d, f),
         (None, Some(s)) => solve_with(solvers, s, None, global, d, f),
         // A lazy global is only made when every frame has a region.
-        (None, None) => solvers.error_record(&d.name, "no solver".to_string(), BACKEND_CPU),
+        (None, None) => solvers.error_record(&d.name, &error!(Internal, "no solver"), BACKEND_CPU),
     }
 }
 
@@ -360,17 +360,15 @@ pub(crate) fn size_groups(frames: &[Decoded]) -> Vec<(DetectKey, Vec<usize>)> {
 /// What `upload` put on the GPU for `key`, uploaded on first use; a failed upload is kept and
 /// told again (not retried for every batch).
 fn uploaded<K: std::hash::Hash + Eq, T>(
-    cache: &mut HashMap<K, std::result::Result<T, String>>,
+    cache: &mut HashMap<K, Result<T>>,
     key: K,
     upload: impl FnOnce() -> Result<T>,
 ) -> Result<&T> {
-    match cache
+    cache
         .entry(key)
-        .or_insert_with(|| upload().map_err(|e| format!("{e:#}")))
-    {
-        Ok(t) => Ok(t),
-        Err(e) => fail!(Gpu, "{e}"),
-    }
+        .or_insert_with(upload)
+        .as_ref()
+        .map_err(Clone::clone)
 }
 
 /// A GPU batch's kernels: its frames (one size) and the runner's uploads, made on first use.

@@ -19,9 +19,9 @@ use std::time::Instant;
 /// The `backend` field of records made on the CPU.
 pub const BACKEND_CPU: &str = "cpu";
 
-/// A frame size's solver, or why it could not be built: the message every record of that size
-/// carries (shared between threads, so text rather than an [`crate::Error`]).
-pub type SharedSolver = Arc<std::result::Result<Solver, String>>;
+/// A frame size's solver, or why it could not be built: the error every record of that size
+/// carries.
+pub type SharedSolver = Arc<Result<Solver>>;
 
 /// Frames of one size and bit depth (they share the detection parameters), with their
 /// positions in the batch.
@@ -56,11 +56,11 @@ pub struct Solvers {
     map: Mutex<HashMap<(u32, u32, u64, u64), SharedSolver>>,
 }
 
-/// A frame after its pixel stages (the sequence stage's input): its detections, or the
-/// message of its error record.
+/// A frame after its pixel stages (the sequence stage's input): its detections, or the error
+/// its record carries.
 pub struct Detected {
     pub decoded: Decoded<'static>,
-    pub detections: std::result::Result<Vec<crate::solve::detect::Detection>, String>,
+    pub detections: Result<Vec<crate::solve::detect::Detection>>,
     pub detect_ms: f64,
     /// The `backend` field of its record.
     pub backend: String,
@@ -77,8 +77,8 @@ pub struct Decoded<'a> {
     pub keywords: std::collections::BTreeMap<String, String>,
     /// Warnings from reading the file, for its record.
     pub warnings: Vec<String>,
-    /// The decoded frame, or the message its error record carries.
-    pub frame: std::result::Result<Frame<'a>, String>,
+    /// The decoded frame, or the error its record carries.
+    pub frame: Result<Frame<'a>>,
     pub decode_ms: f64,
 }
 
@@ -96,7 +96,7 @@ impl<'a> Decoded<'a> {
     ) -> Decoded<'a> {
         let (frame, mut warnings) = match frame {
             Ok((f, w)) => (Ok(f), w),
-            Err(e) => (Err(format!("{e:#}")), Vec::new()),
+            Err(e) => (Err(e), Vec::new()),
         };
         let epoch = match epoch {
             Some(e) => Some(e),
@@ -135,8 +135,8 @@ impl Solvers {
 
     /// An error record; under `--streaks` it carries `"streaks": []` as every other record
     /// of the run does, so that scripts read one shape.
-    pub fn error_record(&self, name: &str, message: String, backend: &str) -> Record {
-        let mut r = Record::error(name, message, backend);
+    pub fn error_record(&self, name: &str, error: &crate::Error, backend: &str) -> Record {
+        let mut r = Record::error(name, error.to_string(), backend);
         if self.streaks.is_some() {
             r.streaks = Some(Vec::new());
         }
@@ -161,8 +161,8 @@ impl Solvers {
             _ => None,
         };
         let (frame, info) = match Frame::read_info_within(path, expect, self.max_pixels) {
-            Ok((f, info)) => (self.darks.apply(path, f).map_err(|e| e.to_string()), info),
-            Err(e) => (Err(format!("{e:#}")), Default::default()),
+            Ok((f, info)) => (self.darks.apply(path, f), info),
+            Err(e) => (Err(e), Default::default()),
         };
         Decoded {
             name: name.to_string(),
@@ -208,14 +208,9 @@ impl Solvers {
         self.camera.header_scale(&d.keywords)
     }
 
-    fn build(
-        &self,
-        width: u32,
-        height: u32,
-        scale: Option<&PixelScale>,
-    ) -> std::result::Result<Solver, String> {
+    fn build(&self, width: u32, height: u32, scale: Option<&PixelScale>) -> Result<Solver> {
         let camera = self.camera.camera_for(width, height, scale)?;
-        Solver::new(&self.catalog, camera, self.settings).map_err(|e| format!("{e:#}"))
+        Solver::new(&self.catalog, camera, self.settings)
     }
 
     /// The pixel stages alone on the CPU (`--sequence`), keeping the brightest `max_stars`.

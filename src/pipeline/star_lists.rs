@@ -2,6 +2,7 @@
 //! images: their stars identified as a frame's detections would be, on the CPU.
 
 use super::{BACKEND_CPU, Solvers};
+use crate::error::error;
 use crate::io::fits::star_list::read_star_list;
 use crate::record::Record;
 use crate::solve::detect::Detection;
@@ -23,18 +24,16 @@ impl Solvers {
         let t0 = Instant::now();
         let list = match read_star_list(path) {
             Ok(l) => l,
-            Err(e) => return self.error_record(name, format!("{e:#}"), BACKEND_CPU),
+            Err(e) => return self.error_record(name, &e, BACKEND_CPU),
         };
         let Some((width, height)) = list.size.or(lists.size) else {
-            return self.error_record(
-                name,
-                format!(
-                    "{}: the star list states no image size (IMAGEW, IMAGEH): give \
-                     --image-size WIDTHxHEIGHT",
-                    path.display()
-                ),
-                BACKEND_CPU,
+            let e = error!(
+                Input,
+                "{}: the star list states no image size (IMAGEW, IMAGEH): give --image-size \
+                 WIDTHxHEIGHT",
+                path.display()
             );
+            return self.error_record(name, &e, BACKEND_CPU);
         };
         let n = list.x.len();
         let stars: Vec<Detection> = (0..n)

@@ -187,13 +187,13 @@ impl<'a> Sequencer<'a> {
         let (frame, dets) = match (&d.frame, &f.detections) {
             (Ok(frame), Ok(dets)) => (frame, dets),
             (Err(e), _) | (_, Err(e)) => {
-                return Record::error(&d.name, e.clone(), &f.backend);
+                return Record::error(&d.name, e.to_string(), &f.backend);
             }
         };
         let solver = self.solvers.get_for(d, frame);
         let solver = match solver.as_ref() {
             Ok(s) => s,
-            Err(e) => return Record::error(&d.name, e.clone(), &f.backend),
+            Err(e) => return Record::error(&d.name, e.to_string(), &f.backend),
         };
         let t_start = Instant::now();
         let mut warnings = Vec::new();

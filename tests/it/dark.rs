@@ -137,3 +137,39 @@ fn dark_problems_are_error_records_a_person_can_act_on() {
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(text.contains("the dark frame"), "{text}");
 }
+
+/// The errors a frame's record carries keep their kind on the way (a library caller or the
+/// Python package can tell a missing file from a bad dark or a missing camera).
+#[test]
+fn frame_errors_keep_their_kind() {
+    use gpustar::io::dark::Darks;
+    use gpustar::pipeline::Solvers;
+    use gpustar::{CameraSource, Catalog, Error, Settings};
+    let tmp = tempfile::tempdir().unwrap();
+    let mut solvers = Solvers::new(Catalog::builtin(), Settings::default(), CameraSource::None);
+    let missing = solvers.decode(&tmp.path().join("missing.png"), "missing.png");
+    assert!(
+        matches!(&missing.frame, Err(Error::Io { .. })),
+        "{:?}",
+        missing.frame.err()
+    );
+    // No camera: the solver of every size is a configuration error.
+    let shared = solvers.get(SIZE, SIZE);
+    assert!(
+        matches!(shared.as_ref(), Err(Error::Config(_))),
+        "{:?}",
+        shared.as_ref().as_ref().err()
+    );
+    // A directory median of one frame: an input error, the same for each frame there.
+    let one = tmp.path().join("one.png");
+    write_grey(&one, &vec![10; (SIZE * SIZE) as usize]);
+    solvers.darks = Darks::directory_median();
+    for _ in 0..2 {
+        let d = solvers.decode(&one, "one.png");
+        assert!(
+            matches!(&d.frame, Err(Error::Input(m)) if m.contains("at least 3")),
+            "{:?}",
+            d.frame.err()
+        );
+    }
+}
