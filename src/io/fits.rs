@@ -43,9 +43,10 @@ pub mod star_list;
 pub mod table;
 mod tiled;
 
-pub use cards::*;
-use pixels::*;
-use scan::*;
+pub(crate) use cards::number_text;
+pub use cards::{card, card_comment, card_end, card_raw, card_real, card_str, encode_u16};
+use pixels::{Scaling, convert_float, convert_int, new_pixels};
+use scan::{Scan, find_image_extension, parse_headers, scan_header};
 
 /// A decoded FITS image.
 #[derive(Clone, Debug, PartialEq)]

@@ -19,12 +19,16 @@ pub mod station;
 pub mod time;
 pub mod tle;
 
-pub use azel::*;
-pub use earth::*;
-pub use header::*;
+pub use azel::az_el;
+pub use earth::earth_orientation;
+pub use header::{Exposure, exposure_from_header};
 pub(crate) use keyword::{parse_number, value};
-pub use station::*;
-pub use time::*;
+pub(crate) use station::checked_station;
+pub use station::{Station, parse_station, station_from_header};
+pub(crate) use time::{DAYSEC, DJM0, Scale, parse_hms};
+pub use time::{
+    Hms, Utc, Ymd, iso_of_julian_year, julian_year, now_utc_iso, parse_iso, plausible_mjd,
+};
 
 #[cfg(test)]
 mod tests;

@@ -1,6 +1,8 @@
 //! Unit tests of sky/: header times in every form and scale, stations, the EOP table and
 //! Az/El against astropy. Size: about 750 lines, most of them header cases written out.
 
+use super::earth::{eop_table, parse_eop};
+use super::station::parse_angle;
 use super::*;
 use std::collections::HashMap;
 

@@ -24,9 +24,16 @@ mod settings;
 mod solver;
 pub mod triangle;
 
-pub use bands::*;
-pub use mag_limit::*;
+pub use bands::{
+    BAND_RATIO, Band, MAX_TABLE_ROWS, Pass, PassKind, RETRY_VOTE_STARS, SCALE_STEP, SPREAD_CELLS,
+    SPREAD_TRIANGLE_STARS, STAGES, WALK_MAX_RATIO, WIDE_MATCH_RADIUS_PX, WIDE_MIN_STARS,
+    WIDE_PAIR_TOL_PX, WIDE_SCALE_STEP, scale_bands, scale_hypotheses, scaled, spread_order,
+};
+pub use mag_limit::{
+    AUTO_STARS_IN_VIEW, FULL_SKY_SR, SHALLOW_STARS_IN_VIEW, auto_mag_limit, auto_mag_limit_in,
+    mag_limit_for, mag_limit_in,
+};
 pub use outcome::{Outcome, Solution, Unsolved};
-pub use report::*;
+pub use report::{ORTHOGONALITY_WARN, attitude_quality};
 pub use settings::{Parity, Settings};
-pub use solver::*;
+pub use solver::{Prepared, Solver};

@@ -1,3 +1,4 @@
+use super::cards::{BLOCK, CARD};
 use super::*;
 
 /// A card in fixed format: the value right-aligned in columns 11–30.
