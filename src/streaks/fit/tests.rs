@@ -1,0 +1,66 @@
+use super::*;
+
+/// A track that leaves the frame, the fit started from a segment up to 3° off its line (as
+/// the binned mask can give): the end is the edge's, at every angle and width. A free fit
+/// from such a start shortened the track by up to 27 px, or fitted another line.
+#[test]
+fn a_start_off_the_line_still_reaches_the_edge() {
+    let (w, h) = (300u32, 300u32);
+    let mut wrong = Vec::new();
+    for angle in [20.0f64, 35.0, 50.0, 65.0] {
+        for off in [1.0f64, 2.0, 3.0, -2.0] {
+            for sg in [0.9, 1.4, 1.9] {
+                // From (200, 150) out through the left or top edge, peak 60 in noise of 10.
+                let (ux, uy) = (-angle.to_radians().cos(), -angle.to_radians().sin());
+                let d = |x: u32, y: u32| {
+                    let (px, py) = (x as f64 - 200.0, y as f64 - 150.0);
+                    let (t, across) = (px * ux + py * uy, -px * uy + py * ux);
+                    let hash = (x.wrapping_mul(7919) ^ y.wrapping_mul(104_729)) % 1000;
+                    60.0 * (-across * across / (2.0 * sg * sg)).exp() * along(t, 0.0, 400.0, sg)
+                        + 34.6 * (hash as f64 / 1000.0 - 0.5)
+                };
+                let visible = (200.0 / -ux).min(150.0 / -uy);
+                let turn = off.to_radians();
+                let seg = Segment {
+                    cx: 200.0 + 0.5 * visible * ux,
+                    cy: 150.0 + 0.5 * visible * uy,
+                    ux: ux * turn.cos() - uy * turn.sin(),
+                    uy: ux * turn.sin() + uy * turn.cos(),
+                    t_min: -0.5 * visible,
+                    t_max: 0.5 * visible,
+                    pixels: 200,
+                };
+                let f = fit(&d, w, h, &seg).expect("a fit");
+                let inside = (0..2).find(|&k| !f.edge[k]);
+                let right = match inside {
+                    Some(k) => {
+                        let (x, y) = f.ends[k];
+                        let (ex, ey) = f.ends[1 - k];
+                        f.edge[1 - k]
+                            && (x - 200.0).hypot(y - 150.0) < 1.0
+                            && ex.min(ey).abs() < 1e-6
+                    }
+                    None => false,
+                };
+                if !right {
+                    wrong.push(format!("{angle}° {off}° σ {sg}: {:?} {:?}", f.ends, f.edge));
+                }
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
+/// A frame's span whose end plus the margin is −1.484292886511039: t0 at its upper bound
+/// plus one pixel rounds to −1.4842928865110387, past t1's bound (f64::clamp panicked
+/// there, on every Swarm frame once).
+#[test]
+fn clamping_the_ends_survives_bounds_that_cross_by_an_ulp() {
+    // No margin, so that hi + m is that value exactly.
+    let end = -1.484292886511039;
+    assert!((end - 1.0) + 1.0 > end, "the rounding this test is about");
+    let (t0, t1) = clamp_ends(1e6, 0.0, -100.0, end, 0.0);
+    assert!(t0 <= end - 1.0 && t1 >= t0 + 1.0, "{t0} {t1}");
+    let (t0, t1) = clamp_ends(-1e6, 1e6, -100.0, 50.0, 4.0);
+    assert_eq!((t0, t1), (-104.0, 54.0));
+}
