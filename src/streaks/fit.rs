@@ -61,6 +61,9 @@ type P = SVector<f64, 7>;
 const FREE: [bool; 7] = [true; 7];
 /// The ends (t0, t1) held, the rest fitted.
 const HOLD_ENDS: [bool; 7] = [true, true, false, false, true, true, true];
+/// A mask segment's end this close to the frame's last pixel (along the line) reaches the edge:
+/// the binned mask and a start a few degrees off the line put it a few pixels short.
+const MASK_AT_EDGE_PX: f64 = 8.0;
 
 /// The pixels the fit sees: background-subtracted values around the segment.
 struct Region {
@@ -95,10 +98,17 @@ pub fn fit(d: &dyn Fn(u32, u32) -> f64, w: u32, h: u32, seg: &Segment) -> Option
     let a0 = on[on.len() / 2].max(1.0);
     let rho0 = cross_offset(d, w, h, (cx, cy), th0, half);
     let mut q = P::from_column_slice(&[rho0, th0, -half, half, a0, 1.2, 0.0]);
-    // The line, width and amplitude first, the ends held where the mask puts them: started on
-    // a line a little off the track, a free fit shortens the segment to what the line
-    // explains, and the rejection below then takes the rest of the track for outliers.
-    q = model.levenberg_marquardt(&region, q, 10, HOLD_ENDS)?;
+    // Where the mask reaches the frame's edge, the line, width and amplitude first, the ends
+    // held where the mask puts them: started on a line a little off the track, a free fit
+    // shortens the segment to what the line explains, and the rejection below then takes the
+    // rest of the track, lit to the edge, for outliers. (Not where both ends are inside: a
+    // mask that runs on past an end, into a crossing streak, would be locked in instead.)
+    let at_edge = model
+        .frame_span(&q)
+        .is_some_and(|(lo, hi)| -half <= lo + MASK_AT_EDGE_PX || half >= hi - MASK_AT_EDGE_PX);
+    if at_edge {
+        q = model.levenberg_marquardt(&region, q, 10, HOLD_ENDS)?;
+    }
     let mut region = region;
     for round in 0..3 {
         q = model.levenberg_marquardt(&region, q, if round == 0 { 20 } else { 10 }, FREE)?;
