@@ -31,7 +31,8 @@ pub struct StreakFit {
     pub flux: f64,
     /// Matched-filter signal-to-noise ratio of the part in the frame.
     pub snr: f64,
-    /// RMS distance of the track's local centroids (4 px bins) from the fitted line (pixels).
+    /// RMS distance of the track's local centroids (4 px bins, less those holding a star: twice
+    /// the track's light and more) from the fitted line (pixels).
     pub fit_rms_px: f64,
     /// Fraction of the track, in bins of 4 px where the fit expects a clear signal, where the
     /// data show less than a third of it: chains of stars have gaps, streaks do not.
@@ -483,7 +484,10 @@ impl Model {
                     gaps += 1;
                 }
             }
-            if sw > 3.0 * bin_noise {
+            // A bin holding twice the track's light and more is a star on it (or a glint): its
+            // centroid is the star's, not the track's.
+            let star = sd - sm > (5.0 * bin_noise).max(sm);
+            if sw > 3.0 * bin_noise && !star {
                 let cent = swd / sw;
                 dev2 += cent * cent;
                 bins += 1;
