@@ -60,6 +60,8 @@ type P = SVector<f64, 7>;
 
 /// Every parameter fitted.
 const FREE: [bool; 7] = [true; 7];
+/// A pixel brighter than this many times the track's median at the start is a star's.
+const STAR_OVER_TRACK: f64 = 3.0;
 /// The ends (t0, t1) held, the rest fitted.
 const HOLD_ENDS: [bool; 7] = [true, true, false, false, true, true, true];
 /// A mask segment's end this close to the frame's last pixel (along the line) reaches the edge:
@@ -97,6 +99,14 @@ pub fn fit(d: &dyn Fn(u32, u32) -> f64, w: u32, h: u32, seg: &Segment) -> Option
     }
     on.sort_by(f64::total_cmp);
     let a0 = on[on.len() / 2].max(1.0);
+    // Pixels far brighter than the track's median (a star on it) are left out from the start:
+    // a fit started with them can settle on the star and never come back to the track.
+    let mut region = region;
+    let values: Vec<f64> = region.px.iter().map(|p| p.2).collect();
+    if let Some(spread) = robust_sigma(&values) {
+        let bright = STAR_OVER_TRACK * a0 + 5.0 * spread;
+        region.keep = region.px.iter().map(|p| p.2 <= bright).collect();
+    }
     let rho0 = cross_offset(d, w, h, (cx, cy), th0, half);
     let mut q = P::from_column_slice(&[rho0, th0, -half, half, a0, 1.2, 0.0]);
     // Where the mask reaches the frame's edge, the line, width and amplitude first, the ends
@@ -110,7 +120,6 @@ pub fn fit(d: &dyn Fn(u32, u32) -> f64, w: u32, h: u32, seg: &Segment) -> Option
     if at_edge {
         q = model.levenberg_marquardt(&region, q, 10, HOLD_ENDS)?;
     }
-    let mut region = region;
     for round in 0..3 {
         q = model.levenberg_marquardt(&region, q, if round == 0 { 20 } else { 10 }, FREE)?;
         // Leave out what the model cannot be (stars on the track, cosmic rays), then refit.
@@ -511,6 +520,17 @@ impl Model {
             if e1 <= e0 {
                 (e0, e1) = (v0, v1);
             }
+        }
+        // An end whose PSF reaches the frame's last pixel (within 2σ of it) is where the
+        // streak leaves: the object may have gone on past it. (A tumbling object's end fitted
+        // again with its brightness there can land on the edge or past it.)
+        let reach = (2.0 * sg).max(1.0);
+        let mut edge = edge;
+        if !edge[0] && e0 <= lo + reach {
+            (edge[0], e0) = (true, lo);
+        }
+        if !edge[1] && e1 >= hi - reach {
+            (edge[1], e1) = (true, hi);
         }
         Some(StreakFit {
             ends: [self.point(q, sc, e0), self.point(q, sc, e1)],

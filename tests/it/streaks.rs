@@ -251,6 +251,51 @@ fn short_faint_streaks_are_found() {
     assert!(hits >= 9, "{hits} of 10 found");
 }
 
+/// A star on a short streak's track, far brighter than the track and a little off its line,
+/// does not take the fit: the streak is found with its ends.
+#[test]
+fn a_bright_star_on_the_track_leaves_the_streak() {
+    let (a, b) = ((60.0, 60.0), (126.0, 84.0));
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let len = f64::hypot(dx, dy);
+    let mut wrong = Vec::new();
+    for (k, (at, across, snr)) in [
+        (0.3, 2.0, 150.0),
+        (0.5, 2.8, 200.0),
+        (0.6, -2.5, 300.0),
+        (0.5, 2.0, 400.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let star = (
+            a.0 + at * dx - across * dy / len,
+            a.1 + at * dy + across * dx / len,
+        );
+        let f = frame(
+            200,
+            150,
+            &[
+                Thing::Streak(a.0, a.1, b.0, b.1, 12.0),
+                Thing::Star(star.0, star.1, snr),
+            ],
+            60 + k as u64,
+        );
+        let found = find(&f);
+        let right = found.len() == 1 && {
+            let (e0, e1) = end_errors(&found[0], a, b);
+            e0.max(e1) < 1.0
+        };
+        if !right {
+            let ends: Vec<_> = found.iter().map(|s| s.ends).collect();
+            wrong.push(format!(
+                "star at {at}, {across} px off, SNR {snr}: {ends:?}"
+            ));
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}
+
 #[test]
 fn noise_stars_and_defects_give_no_streak() {
     let mut things = vec![

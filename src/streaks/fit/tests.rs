@@ -99,3 +99,40 @@ fn a_star_on_the_track_is_not_a_bend() {
         |r: &(f64, f64, f64, [(f64, f64); 2])| r.2 < 0.3 && (r.3[1].0 - r.3[0].0).abs() > 60.0;
     assert!(rms.iter().all(straight), "{rms:?}");
 }
+
+/// An end within two σ of the frame's last pixel is an edge end (the PSF reaches the edge:
+/// the object may have gone on past it), reported where the line leaves the frame; one
+/// further in is not.
+#[test]
+fn an_end_whose_psf_reaches_the_edge_is_an_edge_end() {
+    for (end_x, edge) in [(1.8, true), (2.2, true), (4.5, false)] {
+        let d = |x: u32, y: u32| {
+            let (px, py) = (x as f64, y as f64);
+            let hash = (x.wrapping_mul(7919) ^ y.wrapping_mul(104_729)) % 1000;
+            60.0 * (-(py - 50.0).powi(2) / (2.0 * 1.2 * 1.2)).exp() * along(px, end_x, 120.0, 1.2)
+                + 17.3 * (hash as f64 / 1000.0 - 0.5)
+        };
+        let seg = Segment {
+            cx: 0.5 * (end_x + 120.0),
+            cy: 50.0,
+            ux: 1.0,
+            uy: 0.0,
+            t_min: -0.5 * (120.0 - end_x),
+            t_max: 0.5 * (120.0 - end_x),
+            pixels: 100,
+        };
+        let f = fit(&d, 200, 100, &seg).expect("a fit");
+        let left = if f.ends[0].0 < f.ends[1].0 { 0 } else { 1 };
+        assert_eq!(
+            f.edge[left], edge,
+            "end at {end_x}: {:?} {:?}",
+            f.ends, f.edge
+        );
+        assert!(!f.edge[1 - left], "{:?}", f.edge);
+        if edge {
+            assert_eq!(f.ends[left].0, 0.0, "{:?}", f.ends);
+        } else {
+            assert!((f.ends[left].0 - end_x).abs() < 0.3, "{:?}", f.ends);
+        }
+    }
+}
