@@ -37,6 +37,11 @@ Model
   anomaly shifted by n * dt (dt uniform +-1.5 s: along-track) and the node by +-0.002 deg
   (cross-track); the truth records both. Streak peak SNR uniform 5..25 per pixel (as
   sim_streaks.py defines it); stars Hipparcos Hp <= 8 as sim_streaks.py renders them.
+* --glints: each streak gets a tumbling object's light curve, one of sim_streaks.py's five
+  (steady, periodic, irregular, gaps, flashes) equally often, its own along each frame's
+  track; truth "glint". --faint: peak SNR uniform 3..25 instead of 5..25 (streaks near the
+  detection limit). Both draw from their own random stream, so the passes, objects and frames
+  are those made without them.
 """
 import argparse
 import json
@@ -208,7 +213,7 @@ def render_frame(rng, cam, R, t_beg, t_end, streaks_px, path):
         p0, p1 = np.array(st["p0"]), np.array(st["p1"])
         theta = math.atan2(p1[1] - p0[1], p1[0] - p0[0])
         density = st["peak_snr"] * sig / ss.streak_peak_factor(theta, alpha)
-        ss.render_streak(signal, p0, p1, density, alpha)
+        ss.render_streak(signal, p0, p1, density, alpha, st.get("_bright"))
     electrons = rng.poisson(sky0 + signal).astype(np.float64) + rng.normal(0.0, ss.READ_NOISE, (H, W))
     img = np.clip(np.round(electrons / ss.GAIN + ss.BIAS), 0, ss.SAT_ADU).astype(np.uint16)
     hdr = fits.Header()
@@ -237,7 +242,13 @@ def main(argv=None):
                     "decoys 0-3 days old) instead of passes spread over 2024-2025")
     ap.add_argument("--first-id", type=int, default=1000,
                     help="NORAD ids are drawn from FIRST..FIRST+89000 (another file's ids apart)")
+    ap.add_argument("--glints", action="store_true",
+                    help="tumbling objects: a light curve along each streak (sim_streaks.py's)")
+    ap.add_argument("--faint", action="store_true",
+                    help="peak SNR 3..25 instead of 5..25: streaks near the detection limit")
     args = ap.parse_args(argv)
+    # --glints and --faint draw from their own stream: the geometry stays that of the seed.
+    rng2 = np.random.default_rng([args.seed, 2])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "camera.toml").write_text(f"width = {SIZE}\nheight = {SIZE}\nfov_x_deg = {FOV}\n")
@@ -358,8 +369,16 @@ def main(argv=None):
                     "peak_snr": round(float(rng.uniform(5.0, 25.0)), 2),
                     "file_along_s": along, "file_dnode_deg": dnode,
                 })
+                if args.faint:
+                    streaks[-1]["peak_snr"] = round(float(rng2.uniform(3.0, 25.0)), 2)
+                if args.glints:
+                    glint, bright = ss.draw_glint(rng2, float(np.linalg.norm(p1 - p0)))
+                    streaks[-1]["glint"] = glint
+                    if bright is not None:
+                        streaks[-1]["_bright"] = bright
             name = f"pass_{p:03d}/frame_{f:02d}.fits"
             render_frame(rng, cam, ps["R"], tb, te, streaks, out / name)
+            streaks = [{k: v for k, v in st.items() if k != "_bright"} for st in streaks]
             truths.append({"file": name, "pass": p, "frame": f, "date_beg_utc": ss.iso_ms(tb),
                            "date_end_utc": ss.iso_ms(te), "streaks": streaks})
         print(f"pass {p}: {len(ps['starts'])} frames, exposure {ps['exp_s']:.2f} s, "
