@@ -44,9 +44,12 @@ impl Model {
             t += 1.0;
         }
         // The same filter along six parallel tracks beside this one (those wholly in the
-        // frame), summed over the whole track.
+        // frame), summed over the whole track; each track's samples above its own median by
+        // more than 3 MADs (a star on it) taken at that bound, so that stars beside a short
+        // track do not make the tracks' spread.
         let bases = [-3.0, -2.0, -1.0, 1.0, 2.0, 3.0].map(|k| k * beside);
-        let (mut total, mut totals, mut inside) = (0.0, [0.0f64; 6], [true; 6]);
+        let (mut total, mut beside_samples, mut inside) =
+            (0.0, [const { Vec::<f64>::new() }; 6], [true; 6]);
         let mut samples = 0usize;
         // At most about 150 positions along a long track.
         let step = ((v1 - v0) / 150.0).max(1.0);
@@ -57,14 +60,17 @@ impl Model {
                 samples += 1;
                 for k in 0..6 {
                     match profile(t, bases[k]) {
-                        Some(v) => totals[k] += v,
+                        Some(v) => beside_samples[k].push(v),
                         None => inside[k] = false,
                     }
                 }
             }
             t += step;
         }
-        let others: Vec<f64> = (0..6).filter(|&k| inside[k]).map(|k| totals[k]).collect();
+        let others: Vec<f64> = (0..6)
+            .filter(|&k| inside[k])
+            .map(|k| clipped_sum(&beside_samples[k]))
+            .collect();
         // With fewer than three neighbour tracks in the frame (a streak along an edge) or a
         // handful of samples, there is nothing to compare with.
         // Median and MAD: a neighbour track may hold another streak of a train, or a star.
@@ -263,6 +269,22 @@ fn across(
         o += 0.5;
     }
     Some(sum)
+}
+
+/// The sum of `v`, each value above the median by more than 3 MADs (1.4826 · the median
+/// absolute deviation) taken at that bound: noise alone passes it once in 700.
+fn clipped_sum(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let median = |mut c: Vec<f64>| {
+        let m = c.len() / 2;
+        *c.select_nth_unstable_by(m, f64::total_cmp).1
+    };
+    let level = median(v.to_vec());
+    let spread = 1.4826 * median(v.iter().map(|x| (x - level).abs()).collect());
+    let top = level + 3.0 * spread;
+    v.iter().map(|&x| x.min(top)).sum()
 }
 
 #[cfg(test)]

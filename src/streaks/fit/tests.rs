@@ -136,3 +136,42 @@ fn an_end_whose_psf_reaches_the_edge_is_an_edge_end() {
         }
     }
 }
+
+/// Bright stars beside a short, faint track, on the parallel tracks the local-SNR test compares
+/// it with, do not make it "stand only a few sigmas above" them.
+#[test]
+fn stars_beside_a_track_leave_its_local_snr() {
+    let beside = 3.0 * 1.2 + 4.0;
+    let g = |dx: f64, dy: f64, s: f64| (-(dx * dx + dy * dy) / (2.0 * s * s)).exp();
+    let mut snr = Vec::new();
+    for (k1, k2, k3, peak) in [
+        (1.0, -2.0, 2.0, 100.0),
+        (-1.0, 1.0, -2.0, 150.0),
+        (2.0, -3.0, -1.0, 200.0),
+    ] {
+        let d = |x: u32, y: u32| {
+            let (px, py) = (x as f64, y as f64);
+            let track = 25.0 * g(0.0, py - 50.0, 1.2) * along(px, 30.0, 110.0, 1.2);
+            let star = |sx: f64, sy: f64| {
+                peak * (0.9 * g(px - sx, py - sy, 1.2) + 0.1 * g(px - sx, py - sy, 3.0))
+            };
+            let hash = (x.wrapping_mul(7919) ^ y.wrapping_mul(104_729)) % 1000;
+            track
+                + star(50.0, 50.0 + k1 * beside)
+                + star(85.0, 50.0 + k2 * beside)
+                + star(100.0, 50.0 + k3 * beside)
+                + 34.6 * (hash as f64 / 1000.0 - 0.5)
+        };
+        let model = Model {
+            c: (70.0, 50.0),
+            w: 160,
+            h: 100,
+        };
+        let q = P::from_column_slice(&[0.0, 0.0, -40.0, 40.0, 25.0, 1.2, 0.0]);
+        let (_, local_snr, _) = model.profile_stats(&q, -40.0, 40.0, &d);
+        snr.push(local_snr);
+    }
+    // Before, 3.6, 1.9 and 1.3: all under the test's threshold.
+    let least = crate::streaks::StreakSettings::DEFAULT.min_local_snr;
+    assert!(snr.iter().all(|&s| s > least), "{snr:?}");
+}
