@@ -88,16 +88,6 @@ impl Model {
         if on.len() < 8 {
             return (0.0, local_snr, no_chain);
         }
-        let median = |v: &mut Vec<f64>| {
-            let m = v.len() / 2;
-            *v.select_nth_unstable_by(m, f64::total_cmp).1
-        };
-        let mad = |v: &Vec<f64>| {
-            let mut c = v.clone();
-            let m = median(&mut c);
-            let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
-            1.4826 * median(&mut dev)
-        };
         // The whole track in 1 px steps, a PSF's reach beyond the ends included, for the
         // point-source model; its noise is the scatter of the profile beside the track. Both
         // without spikes: a pixel more than twice as high as every neighbour (a hot pixel, a
@@ -277,14 +267,21 @@ fn clipped_sum(v: &[f64]) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
-    let median = |mut c: Vec<f64>| {
-        let m = c.len() / 2;
-        *c.select_nth_unstable_by(m, f64::total_cmp).1
-    };
-    let level = median(v.to_vec());
-    let spread = 1.4826 * median(v.iter().map(|x| (x - level).abs()).collect());
-    let top = level + 3.0 * spread;
+    let top = median(&mut v.to_vec()) + 3.0 * mad(v);
     v.iter().map(|&x| x.min(top)).sum()
+}
+
+/// The median of `v` (its upper middle value; `v` reordered). `v` is not empty.
+fn median(v: &mut [f64]) -> f64 {
+    let m = v.len() / 2;
+    *v.select_nth_unstable_by(m, f64::total_cmp).1
+}
+
+/// 1.4826 · the median absolute deviation of `v` from its median. `v` is not empty.
+fn mad(v: &[f64]) -> f64 {
+    let m = median(&mut v.to_vec());
+    let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+    1.4826 * median(&mut dev)
 }
 
 #[cfg(test)]
