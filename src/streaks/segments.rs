@@ -109,7 +109,7 @@ pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Joined> {
     // Runs of each component, in label order (labels are first pixels in raster order).
     let mut order: Vec<usize> = (0..runs.len()).collect();
     order.sort_by_key(|&i| (labels[i], i));
-    let mut pieces = Vec::new();
+    let (mut pieces, mut stubs) = (Vec::new(), Vec::new());
     let mut start = 0;
     while start < order.len() {
         let label = labels[order[start]];
@@ -131,6 +131,8 @@ pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Joined> {
             .iter()
             .flat_map(|r| (r.x0..r.x1).map(move |x| (x as f64, r.y as f64)))
             .collect();
+        let before = pieces.len();
+        let all = px.clone();
         for _ in 0..MAX_LINES_PER_COMPONENT {
             match strongest_line(&px, s) {
                 Some((seg, used)) => {
@@ -147,8 +149,23 @@ pub fn segments(runs: &[Run], width: u32, s: &SegmentSettings) -> Vec<Joined> {
                 break;
             }
         }
+        // No line of its own (as wide as a third of its length: a bright streak's short piece
+        // between two dark stretches), but elongated: it may extend a line it lies on.
+        if pieces.len() == before && !round(&comp) {
+            stubs.push(extent(principal_axis(&all), &all));
+        }
     }
-    join_collinear(pieces, s)
+    join_collinear(pieces, &stubs, s)
+}
+
+/// `seg`'s extent set to that of the points along it.
+fn extent(mut seg: Segment, px: &[(f64, f64)]) -> Segment {
+    let (lo, hi) = px.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+        let t = seg.along(p.0, p.1);
+        (lo.min(t), hi.max(t))
+    });
+    (seg.t_min, seg.t_max) = (lo, hi);
+    seg
 }
 
 /// Is the component about as wide as long (second moments within a factor 4: an axis ratio
@@ -312,7 +329,7 @@ fn principal_axis(p: &[(f64, f64)]) -> Segment {
 /// directions within 2°, each one's ends within the band of the other's line, and a gap along
 /// the line shorter than the two pieces together (or `max_join_gap_px`). Pieces are joined in a fixed
 /// order, so the result does not depend on which piece came first.
-fn join_collinear(mut pieces: Vec<Segment>, s: &SegmentSettings) -> Vec<Joined> {
+fn join_collinear(mut pieces: Vec<Segment>, stubs: &[Segment], s: &SegmentSettings) -> Vec<Joined> {
     pieces.sort_by(|a, b| b.length().total_cmp(&a.length()));
     let mut out: Vec<Joined> = Vec::new();
     for p in pieces {
@@ -331,6 +348,26 @@ fn join_collinear(mut pieces: Vec<Segment>, s: &SegmentSettings) -> Vec<Joined> 
                 line: p,
                 pieces: vec![p],
             });
+        }
+    }
+    // A stub's own direction is loose (it is short and wide): it extends the first line its
+    // middle lies on, when its axis is within 10° of the line's and the gap is a join's.
+    for p in stubs {
+        let (cx, cy) = p.point(0.5 * (p.t_min + p.t_max));
+        let near = |q: &Segment| {
+            (p.ux * q.ux + p.uy * q.uy).abs() > 10f64.to_radians().cos()
+                && q.across(cx, cy).abs() <= s.band_px
+        };
+        if let Some(j) = out.iter_mut().find(|j| near(&j.line)) {
+            let q = &mut j.line;
+            let half = 0.5 * p.length();
+            let t = q.along(cx, cy);
+            let gap = (t - half - q.t_max).max(q.t_min - t - half).max(0.0);
+            if gap <= (q.length() + p.length()).max(s.max_join_gap_px) {
+                q.t_min = q.t_min.min(t - half);
+                q.t_max = q.t_max.max(t + half);
+                q.pixels += p.pixels;
+            }
         }
     }
     out

@@ -367,6 +367,31 @@ fn broken_modulated_and_flashing_streaks_are_one_streak_with_both_ends() {
     }
 }
 
+/// A bright tumbling object's short streak, dark twice: its lit pieces after the first are
+/// as wide in the mask as a third of their length, no line of their own; they extend the
+/// first piece's line and the streak has both ends (before: the first 33 of 107 px, so
+/// `--tle` found it moving at a third of its rate and did not name it).
+#[test]
+fn short_bright_pieces_extend_the_streak_they_lie_on() {
+    let (a, b) = ((68.2, 42.2), (97.6, 145.6));
+    let pieces = vec![(0.0, 0.31, 1.0), (0.445, 0.65, 1.0), (0.755, 1.0, 1.0)];
+    for seed in 0..3u64 {
+        let f = frame(
+            200,
+            200,
+            &[Thing::Tumbling(a.0, a.1, b.0, b.1, 22.0, pieces.clone())],
+            80 + seed,
+        );
+        let found = find(&f);
+        assert_eq!(found.len(), 1, "seed {seed}: {found:?}");
+        let (e0, e1) = end_errors(&found[0], a, b);
+        assert!(
+            e0 < 1.0 && e1 < 1.0,
+            "seed {seed}: end errors {e0:.2} {e1:.2} px"
+        );
+    }
+}
+
 /// Dense chains of stars, 5 px (1.8 FWHM) apart, bright and faint, with a streak beside one:
 /// no streak but the streak.
 #[test]
