@@ -11,7 +11,7 @@ anything else is a false streak. Reported:
 * direction: of matched streaks with direction_known, those whose ends[0] -> ends[1] runs the
   way the object moved (truth p0 -> p1);
 * names (--tle): of matched streaks of objects in the TLE file, those named with the right
-  NORAD id; streaks named for a wrong object (in the file or not), and streaks of objects NOT
+  NORAD id (and how many of those are partial matches, `seen_fraction`); streaks named for a wrong object (in the file or not), and streaks of objects NOT
   in the file named for anything;
 * tracklets: pure (every streak of a tracklet is one object) and whole (an object's matched
   streaks of one pass in one tracklet).
@@ -70,6 +70,7 @@ def main():
     n_true = n_big = found = found_big = false = 0
     dir_known = dir_right = 0
     named_in = named_right = wrong_name = named_out = in_file = out_file = uncorrelated_in = 0
+    partial = 0
     tracklet_objs = defaultdict(set)
     obj_tracklets = defaultdict(set)
     seen = set()
@@ -117,6 +118,7 @@ def main():
                 in_file += 1
                 if sat and sat["norad"] == st["norad"]:
                     named_right += 1
+                    partial += "seen_fraction" in sat
                 elif sat:
                     wrong_name += 1
                     examples.append(("wrong name", r["file"], st["norad"], sat["norad"]))
@@ -148,7 +150,7 @@ def main():
         "big_streaks": n_big, "big_found": found_big, "false_streaks": false,
         "direction_known": dir_known, "direction_right": dir_right,
         "in_file_matched": in_file, "named_right": named_right, "named_wrong": wrong_name,
-        "in_file_not_named": uncorrelated_in,
+        "in_file_not_named": uncorrelated_in, "named_partial": partial,
         "not_in_file_matched": out_file, "not_in_file_named": named_out,
         "tracklets": len(tracklet_objs), "tracklets_pure": pure,
         "objects_passes": len(obj_tracklets), "objects_in_one_tracklet": whole,
@@ -159,7 +161,8 @@ def main():
     print(f"direction known on {dir_known}/{found} found streaks, right {dir_right}/{dir_known} "
           f"({pc(dir_right, dir_known)})")
     print(f"objects in the file: {named_right}/{in_file} streaks named right ({pc(named_right, in_file)}), "
-          f"{wrong_name} named wrong, {uncorrelated_in} not named")
+          f"{wrong_name} named wrong, {uncorrelated_in} not named; {partial} of the right ones partial "
+          f"(seen_fraction: dark over part of the exposure)")
     print(f"objects not in the file: {named_out}/{out_file} streaks named for something")
     print(f"tracklets {len(tracklet_objs)}: {pure} pure ({pc(pure, len(tracklet_objs))}); "
           f"object-passes {len(obj_tracklets)}: {whole} in one tracklet ({pc(whole, len(obj_tracklets))})")

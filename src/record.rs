@@ -178,8 +178,16 @@ pub struct SatelliteRecord {
     /// of the motion, start × end).
     pub cross_track_arcsec: f64,
     /// The time offset along the path (s): the streak is where the elements put the object
-    /// this much later (positive: the object is ahead of its elements).
+    /// this much later (positive: the object is ahead of its elements). For a partial match
+    /// (`seen_fraction`), the offset nearest 0 that keeps the whole streak on the path the
+    /// exposure covers.
     pub along_track_s: f64,
+    /// Present when the streak covers less than 90 % of the path the elements predict over
+    /// the exposure (the share it covers): the object was dark over the rest (a tumbling
+    /// object's dark face, its shadow), so its ends are not its positions at the exposure's
+    /// start and end, and its observations are left out of `--tdm` and `--iod`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seen_fraction: Option<f64>,
 }
 
 /// Milliseconds spent per stage.
@@ -547,6 +555,7 @@ mod tests {
             intl_des: None,
             cross_track_arcsec: 0.0,
             along_track_s: 0.0,
+            seen_fraction: None,
         };
         let scale = PixelScaleRecord {
             arcsec_per_px: 1.0,

@@ -36,7 +36,8 @@ pub struct Exports {
     groups: Vec<Group>,
     /// Tracklet name → its place in `groups`.
     index: std::collections::HashMap<String, usize>,
-    /// Streaks without a timed observation with RA/Dec (edge ends, no time, no plate).
+    /// Streaks without a timed observation with RA/Dec (edge ends, no time, no plate, a
+    /// partial `--tle` match).
     pub left_out: usize,
 }
 
@@ -144,7 +145,14 @@ impl Exports {
                     el_deg: e.el_deg,
                 })
             };
-            let obs: Vec<AngleObs> = if s.direction_known {
+            // Matched to only part of its predicted path: its ends are not timed.
+            let partial = s
+                .satellite
+                .as_ref()
+                .is_some_and(|m| m.seen_fraction.is_some());
+            let obs: Vec<AngleObs> = if partial {
+                Vec::new()
+            } else if s.direction_known {
                 s.ends.iter().filter_map(timed).collect()
             } else {
                 s.mid.iter().filter_map(timed).collect()
@@ -342,7 +350,8 @@ impl Exports {
         if self.left_out > 0 {
             said.push(format!(
                 "{} streaks without a timed observation left out (an end on the frame's edge \
-                 and no direction, or no time or plate solution)",
+                 and no direction, no time or plate solution, or dark over part of the \
+                 exposure: --tle's seen_fraction)",
                 self.left_out
             ));
         }
@@ -433,4 +442,56 @@ pub fn iod_designation(des: &str) -> Option<String> {
         && (1..=3).contains(&piece.len())
         && piece.bytes().all(|c| c.is_ascii_uppercase());
     ok.then(|| format!("{yy} {num}{piece}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::SatelliteRecord;
+
+    /// A named streak is exported with its timed ends; named as a partial match (dark over
+    /// part of its exposure, so its ends are not timed), it is left out and counted.
+    #[test]
+    fn a_partial_match_gives_no_timed_observation() {
+        let end = |ra: f64, t: &str| StreakEnd {
+            x: 0.0,
+            y: 0.0,
+            ra_deg: Some(ra),
+            dec_deg: Some(20.0),
+            edge: Some(false),
+            time_utc: Some(t.into()),
+            az_deg: None,
+            el_deg: None,
+        };
+        let (t0, t1) = ("2025-03-10T20:00:00.000", "2025-03-10T20:00:04.000");
+        let named = |seen_fraction| {
+            let mut s = StreakRecord::for_tests(
+                [end(10.0, t0), end(10.5, t1)],
+                [end(10.5, t0), end(10.0, t1)],
+                100.0,
+                None,
+            );
+            s.direction_known = true;
+            s.satellite = Some(SatelliteRecord {
+                norad: 25544,
+                name: "ISS".into(),
+                intl_des: Some("98067A".into()),
+                cross_track_arcsec: 0.0,
+                along_track_s: 0.0,
+                seen_fraction,
+            });
+            let mut r = Record::empty("f.fits", "cpu");
+            r.streaks = Some(vec![s]);
+            r
+        };
+        let mut e = Exports::new(None, None, 9999);
+        e.add(&named(None));
+        assert_eq!(
+            (e.groups.len(), e.groups[0].obs.len(), e.left_out),
+            (1, 2, 0)
+        );
+        let mut e = Exports::new(None, None, 9999);
+        e.add(&named(Some(0.4)));
+        assert_eq!((e.groups.len(), e.left_out), (0, 1));
+    }
 }

@@ -49,6 +49,11 @@ impl Default for IdentifySettings {
 
 /// Largest relative difference of the streak's rate from the predicted one.
 const RATE_TOL: f64 = 0.10;
+/// A streak with both ends inside that covers less of the predicted path than 1 − `RATE_TOL`
+/// is a partial match when all of it lies on the path the exposure covers, widened by the
+/// along-track tolerance: a tumbling object dark at the start or end of its exposure. Added to
+/// its score, so that any whole match is the better.
+const PARTIAL_PENALTY: f64 = 2.0;
 
 /// A frame's view of the objects: its times and the station's frame at each.
 pub struct FrameSky<'a> {
@@ -100,6 +105,8 @@ struct Observed {
 struct Fit {
     cross_arcsec: f64,
     along_s: f64,
+    /// A partial match's share of the predicted path (see [`PARTIAL_PENALTY`]).
+    seen_fraction: Option<f64>,
     reversed: bool,
     score: f64,
 }
@@ -216,6 +223,7 @@ impl FrameSky<'_> {
                         intl_des: sat.intl_des.clone(),
                         cross_track_arcsec: f.cross_arcsec,
                         along_track_s: f.along_s,
+                        seen_fraction: f.seen_fraction,
                     });
                     rec.uncorrelated = Some(false);
                     if one_way && !rec.direction_known && (!f.reversed || rec.reverse()) {
@@ -307,21 +315,34 @@ fn fit(
     if along.is_empty() {
         return None;
     }
+    let mut seen_fraction = None;
+    let mut along_s = along.iter().sum::<f64>() / along.len() as f64;
     if o.inside[0] && o.inside[1] {
-        let seen_rate = (phi(&o.ends[second]) - phi(&o.ends[first])) / dt;
-        if (seen_rate / rate - 1.0).abs() > RATE_TOL {
+        let seen = (phi(&o.ends[second]) - phi(&o.ends[first])) / arc;
+        if seen <= 0.0 || seen > 1.0 + RATE_TOL {
             return None;
         }
+        if seen < 1.0 - RATE_TOL {
+            // The offsets that keep the streak within the exposure's path: from its later
+            // end's at the exposure's end (along[1]) to its earlier end's at the start.
+            seen_fraction = Some(seen);
+            along_s = 0f64.clamp(along[1], along[0]);
+        }
     }
-    let along_s = along.iter().sum::<f64>() / along.len() as f64;
     if worst_cross > s.cross_arcsec || along_s.abs() > s.along_s {
         return None;
     }
+    let penalty = if seen_fraction.is_some() {
+        PARTIAL_PENALTY
+    } else {
+        0.0
+    };
     Some(Fit {
         cross_arcsec: signed_cross,
         along_s,
+        seen_fraction,
         reversed,
-        score: worst_cross / s.cross_arcsec + along_s.abs() / s.along_s,
+        score: worst_cross / s.cross_arcsec + along_s.abs() / s.along_s + penalty,
     })
 }
 
@@ -361,6 +382,44 @@ mod tests {
             inside: [true, true],
         };
         assert!(fit(&far, &q0, &q1, dt, false, &s).is_none());
+    }
+
+    /// A streak lit over 40 % of the exposure's path (a tumbling object dark at the start):
+    /// matched as partial, with its share and the least offset that keeps it on the path; the
+    /// wrong way, past the along-track tolerance, or longer than the path, refused.
+    #[test]
+    fn a_streak_dark_over_part_of_its_exposure_is_a_partial_match() {
+        let (q0, q1, dt) = (unit(10.0, 20.0), unit(10.5, 20.2), 4.0);
+        let arc = angle(&q0, &q1);
+        let n = normalized(cross(&q0, &q1)).unwrap();
+        let along_dir = cross(&n, &q0);
+        let at = |phi: f64| {
+            normalized([0, 1, 2].map(|i| q0[i] * phi.cos() + along_dir[i] * phi.sin())).unwrap()
+        };
+        let seen = |a: f64, b: f64| Observed {
+            ends: [at(a * arc), at(b * arc)],
+            inside: [true, true],
+        };
+        let s = IdentifySettings::default();
+        let f = fit(&seen(0.5, 0.9), &q0, &q1, dt, false, &s).expect("partial");
+        assert!((f.seen_fraction.unwrap() - 0.4).abs() < 1e-9, "{f:?}");
+        assert!(
+            f.along_s.abs() < 1e-9 && f.score >= PARTIAL_PENALTY,
+            "{f:?}"
+        );
+        assert!(fit(&seen(0.5, 0.9), &q0, &q1, dt, true, &s).is_none());
+        // Beyond the exposure's end by 0.2 of the path (0.8 s): that much ahead at least.
+        let late = fit(&seen(0.8, 1.2), &q0, &q1, dt, false, &s).expect("partial");
+        assert!((late.along_s - 0.8).abs() < 1e-6, "{late:?}");
+        // Beyond it by 1.5 paths (6 s, over the 5 s tolerance), or longer than the path.
+        assert!(fit(&seen(2.2, 2.5), &q0, &q1, dt, false, &s).is_none());
+        assert!(fit(&seen(0.0, 1.2), &q0, &q1, dt, false, &s).is_none());
+        // A whole streak is no partial one.
+        let whole = fit(&seen(0.0, 1.0), &q0, &q1, dt, false, &s).expect("whole");
+        assert!(
+            whole.seen_fraction.is_none() && whole.score < 1e-6,
+            "{whole:?}"
+        );
     }
 }
 
