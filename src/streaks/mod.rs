@@ -16,6 +16,7 @@ pub mod export;
 pub mod fit;
 pub mod formats;
 pub mod identify;
+pub mod join_named;
 mod options;
 pub mod reduce;
 pub mod segments;

@@ -3,6 +3,7 @@
 //! header's time keywords, and topocentric Az/El for the station.
 
 use super::fit::{StreakFit, length};
+use super::join_named::join_named_pieces;
 pub use super::options::Astrometry;
 use super::options::StreakOptions;
 use crate::catalog::vector_to_radec;
@@ -78,45 +79,43 @@ pub fn records(
         }
     };
     let times = |e: &Exposure| [e.start, e.end];
-    let mut out: Vec<StreakRecord> = found
-        .iter()
-        .map(|f| {
-            let t = exposure.as_ref().map(times);
-            let ends = [0, 1].map(|k| {
-                let (x, y) = f.ends[k];
-                end(x, y, Some(f.edge[k]), t.map(|t| t[k]))
-            });
-            // The other way along: each place at the other end's time (its Az/El with it).
-            let reversed = [0, 1].map(|k| {
-                let (x, y) = f.ends[1 - k];
-                end(x, y, Some(f.edge[1 - k]), t.map(|t| t[k]))
-            });
-            let mid = (!f.edge[0] && !f.edge[1]).then(|| {
-                let (x, y) = (
-                    0.5 * (f.ends[0].0 + f.ends[1].0),
-                    0.5 * (f.ends[0].1 + f.ends[1].1),
-                );
-                end(x, y, None, exposure.as_ref().map(Exposure::mid))
-            });
-            StreakRecord {
-                ends,
-                direction_known: false,
-                mid,
-                length_px: length(f),
-                width_px: f.sigma_px * FWHM_PER_SIGMA,
-                flux: f.flux,
-                snr: f.snr,
-                fit_rms_px: f.fit_rms_px,
-                station: station_name.clone(),
-                tracklet: None,
-                tracklet_index: None,
-                satellite: None,
-                uncorrelated: None,
-                reversed: Some(Box::new(reversed)),
-                exposure_utc: exposure.as_ref().map(|e| [e.start.iso(), e.end.iso()]),
-            }
-        })
-        .collect();
+    let mut build = |f: &StreakFit| {
+        let t = exposure.as_ref().map(times);
+        let ends = [0, 1].map(|k| {
+            let (x, y) = f.ends[k];
+            end(x, y, Some(f.edge[k]), t.map(|t| t[k]))
+        });
+        // The other way along: each place at the other end's time (its Az/El with it).
+        let reversed = [0, 1].map(|k| {
+            let (x, y) = f.ends[1 - k];
+            end(x, y, Some(f.edge[1 - k]), t.map(|t| t[k]))
+        });
+        let mid = (!f.edge[0] && !f.edge[1]).then(|| {
+            let (x, y) = (
+                0.5 * (f.ends[0].0 + f.ends[1].0),
+                0.5 * (f.ends[0].1 + f.ends[1].1),
+            );
+            end(x, y, None, exposure.as_ref().map(Exposure::mid))
+        });
+        StreakRecord {
+            ends,
+            direction_known: false,
+            mid,
+            length_px: length(f),
+            width_px: f.sigma_px * FWHM_PER_SIGMA,
+            flux: f.flux,
+            snr: f.snr,
+            fit_rms_px: f.fit_rms_px,
+            station: station_name.clone(),
+            tracklet: None,
+            tracklet_index: None,
+            satellite: None,
+            uncorrelated: None,
+            reversed: Some(Box::new(reversed)),
+            exposure_utc: exposure.as_ref().map(|e| [e.start.iso(), e.end.iso()]),
+        }
+    };
+    let mut out: Vec<StreakRecord> = found.iter().map(&mut build).collect();
     if let Some(catalog) = &opts.tle {
         match (station, exposure) {
             (Some(station), Some(exposure)) => {
@@ -130,6 +129,15 @@ pub fn records(
                     yp,
                 };
                 frame.identify(&mut out, &opts.identify);
+                // Pieces of one object's broken streak, joined by their match, matched again;
+                // kept apart when the whole does not match the object.
+                if let Some(joined) = join_named_pieces(found, &out) {
+                    let mut again: Vec<StreakRecord> = joined.iter().map(&mut build).collect();
+                    frame.identify(&mut again, &opts.identify);
+                    if again.len() < out.len() && whole_matches(&out, &again) {
+                        out = again;
+                    }
+                }
             }
             _ => warnings.push(
                 "--tle: no station or no exposure time, so the streaks are not matched to the \
@@ -138,7 +146,24 @@ pub fn records(
             ),
         }
     }
+    // Each said once, though the joined streaks' ends were reduced again.
+    let mut said = std::collections::HashSet::new();
+    warnings.retain(|w| said.insert(w.clone()));
     (out, warnings)
+}
+
+/// Do the joined records keep every object the pieces were matched to?
+fn whole_matches(pieces: &[StreakRecord], joined: &[StreakRecord]) -> bool {
+    let named = |r: &[StreakRecord]| {
+        let mut n: Vec<u64> = r
+            .iter()
+            .filter_map(|s| s.satellite.as_ref().map(|m| m.norad))
+            .collect();
+        n.sort_unstable();
+        n.dedup();
+        n
+    };
+    named(pieces) == named(joined)
 }
 
 /// Header keywords that name the station, in order of preference.
