@@ -541,6 +541,8 @@ pub struct StreakOpts {
     /// JSON) file, thousands of objects. Each is propagated by SGP4 to the frame's times and
     /// station; a streak on an object's predicted path gets "satellite" (NORAD id, name,
     /// cross- and along-track offsets), else "uncorrelated": true. TDM and IOD use the NORAD id.
+    /// A streak lit over less than 90 % of the path (a tumbling object dark for part of the
+    /// exposure) is a partial match ("seen_fraction"), left out of the TDM and IOD.
     #[arg(long, value_name = "FILE", help_heading = "Streaks")]
     pub tle: Option<PathBuf>,
     /// --tle: largest distance of a streak's ends across an object's predicted path (arcsec).
