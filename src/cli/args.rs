@@ -550,6 +550,10 @@ pub struct StreakOpts {
           value_parser = bounded(config::TLE_CROSS), help_heading = "Streaks", hide_short_help = true)]
     pub tle_cross: f64,
     /// --tle: largest time offset along an object's predicted path (seconds).
+    ///
+    /// --tle: largest time offset along an object's predicted path (seconds), for elements
+    /// days old. Fresher elements are held closer: 2 s at their epoch, a second more per day
+    /// of age.
     #[arg(long, value_name = "SECONDS", default_value_t = DEFAULTS.tle_along,
           value_parser = bounded(config::TLE_ALONG), help_heading = "Streaks", hide_short_help = true)]
     pub tle_along: f64,

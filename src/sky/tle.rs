@@ -77,6 +77,11 @@ pub struct Satellite {
 }
 
 impl Satellite {
+    /// Days from the elements' epoch to `t` (either way).
+    pub fn age_days(&self, t: &Utc) -> f64 {
+        (t.jd1 + t.jd2 - self.epoch_jd).abs()
+    }
+
     /// The propagator of a set of elements, with the WGS-72 constants that TLEs and the OMMs
     /// made from them are fitted with (as Vallado's and python-sgp4's default; the crate's
     /// `from_elements` takes WGS-84, tens of metres apart).

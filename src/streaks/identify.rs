@@ -28,8 +28,23 @@ pub struct IdentifySettings {
     /// Largest distance of an end across the path (arcsec): elements days old are off by
     /// kilometres, a few arcminutes at a low orbit's range.
     pub cross_arcsec: f64,
-    /// Largest time offset along the path (seconds): along-track errors grow fastest.
+    /// Largest time offset along the path (seconds): along-track errors grow fastest. The
+    /// offset allowed grows with the elements' age up to this ([`along_tolerance_s`]).
     pub along_s: f64,
+}
+
+/// The time offset along the path allowed at the elements' epoch (seconds: 15 km at a low
+/// orbit's 7.5 km/s; elements fitted to a day of tracking are off by a few km along-track)
+/// and its growth per day of age (drag they model poorly: LEO elements drift a few km a day).
+/// Two objects that pass one line in one frame (opposite ways, 85″ apart) were told apart only
+/// by this: the wrong one's offset was 4 s against elements of that hour.
+const ALONG_AT_EPOCH_S: f64 = 2.0;
+const ALONG_PER_DAY_S: f64 = 1.0;
+
+/// The along-track tolerance for elements `age_days` old: [`ALONG_AT_EPOCH_S`] growing by
+/// [`ALONG_PER_DAY_S`] a day, up to `IdentifySettings::along_s`.
+pub fn along_tolerance_s(s: &IdentifySettings, age_days: f64) -> f64 {
+    (ALONG_AT_EPOCH_S + ALONG_PER_DAY_S * age_days).min(s.along_s)
 }
 
 impl IdentifySettings {
@@ -201,7 +216,11 @@ impl FrameSky<'_> {
                 ) else {
                     continue;
                 };
-                let fits = [false, true].map(|rev| fit(obs, &q0, &q1, dt, rev, s));
+                let aged = IdentifySettings {
+                    along_s: along_tolerance_s(s, sat.age_days(&t0)),
+                    ..*s
+                };
+                let fits = [false, true].map(|rev| fit(obs, &q0, &q1, dt, rev, &aged));
                 let ok: Vec<Fit> = fits.iter().flatten().copied().collect();
                 let Some(f) = ok
                     .iter()
@@ -384,6 +403,18 @@ mod tests {
         assert!(fit(&far, &q0, &q1, dt, false, &s).is_none());
     }
 
+    /// The along-track tolerance: 2 s at the elements' epoch, a second more a day, at most
+    /// `--tle-along`.
+    #[test]
+    fn the_along_track_tolerance_grows_with_the_elements_age() {
+        let s = IdentifySettings::default();
+        assert_eq!(along_tolerance_s(&s, 0.0), 2.0);
+        assert_eq!(along_tolerance_s(&s, 1.5), 3.5);
+        assert_eq!(along_tolerance_s(&s, 400.0), s.along_s);
+        let tight = IdentifySettings { along_s: 1.0, ..s };
+        assert_eq!(along_tolerance_s(&tight, 0.0), 1.0);
+    }
+
     /// A streak lit over 40 % of the exposure's path (a tumbling object dark at the start):
     /// matched as partial, with its share and the least offset that keeps it on the path; the
     /// wrong way, past the along-track tolerance, or longer than the path, refused.
@@ -503,8 +534,15 @@ mod chain_tests {
                 None,
             )
         };
-        let mut s = [streak(0.0), streak(20.0)];
+        let mut s = [streak(0.0), streak(20.0), streak(1.5), streak(3.5)];
         sky.identify(&mut s, &IdentifySettings::default());
+        // Elements hours old: 1.5 s along is theirs, 3.5 s is beyond what such elements are
+        // off by (the 5 s of `--tle-along` is for elements days old).
+        let age = cat.satellites[0].age_days(&t0);
+        assert!(age < 1.0, "{age}");
+        let near = s[2].satellite.as_ref().expect("1.5 s along: named");
+        assert!((near.along_track_s - 1.5).abs() < 0.05, "{near:?}");
+        assert!(s[3].satellite.is_none(), "{:?}", s[3].satellite);
         let sat = s[0].satellite.as_ref().expect("named");
         assert_eq!((sat.norad, sat.name.as_str()), (25544, "ISS (ZARYA)"));
         assert!(
