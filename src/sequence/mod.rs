@@ -9,6 +9,7 @@
 //! runs on one CPU thread in input order, because each frame starts from what the one before
 //! it left.
 
+mod drift;
 pub mod motion;
 pub mod particles;
 pub mod simulate;

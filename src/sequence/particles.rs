@@ -11,7 +11,10 @@
 //! ln((1 − β)/α) (particle) or ln(β/(1 − α)) (star), α being the probability of calling a star
 //! a particle and β of calling a particle a star. Tracks not yet decided are stars for
 //! identification (frames are solved as without a sequence); particles never vote or match.
+//! A particle slower than Δ, whose steps are noise-sized, is told by the drift test
+//! ([`super::drift`]) from the line its last points make.
 
+use super::drift;
 use crate::camera::Camera;
 use nalgebra::{Matrix3, Vector3};
 
@@ -93,6 +96,9 @@ struct Track {
     flux: f64,
     llr: f64,
     decision: Decision,
+    /// The track's last points clear of the frame's edge (reference-frame directions and
+    /// times), at most [`drift::POINTS`], for the drift test.
+    history: Vec<(Vector3<f64>, f64)>,
 }
 
 /// A frame's detections: pixels, camera-frame directions and fluxes.
@@ -156,7 +162,9 @@ impl Tracker {
         let s = self.s;
         let sigma = sigma_px.max(s.sigma_floor_px);
         let ifov = self.camera.ifov_rad();
-        let cam = &self.camera;
+        // Its own copy: the drift test below changes the tracks while projecting.
+        let camera = self.camera.clone();
+        let cam = &camera;
         let to_px = |w: &Vector3<f64>| cam.vector_to_pixel(&(c * w));
         self.tracks
             .retain(|tr| frame.saturating_sub(tr.last_frame) <= s.max_gap_frames);
@@ -305,7 +313,14 @@ impl Tracker {
             tr.last = (w, t);
             tr.last_frame = frame;
             tr.flux = flux[j];
+            if drift::clear_of_edge(cam, px[j]) {
+                if tr.history.len() == drift::POINTS {
+                    tr.history.remove(0);
+                }
+                tr.history.push((w, t));
+            }
         }
+        self.drift_test(&owner, px, &to_px, sigma);
         // Detections no track claims start tracks of their own; a bright one where the previous
         // frame looked and saw nothing (no detection within twice the gate of where it would
         // have stood) starts with that evidence.
@@ -332,6 +347,11 @@ impl Tracker {
                     last_frame: frame,
                     flux: flux[j],
                     llr,
+                    history: if drift::clear_of_edge(cam, px[j]) {
+                        vec![(c.transpose() * dirs[j], t)]
+                    } else {
+                        Vec::new()
+                    },
                     decision: if llr >= ln_a {
                         Decision::Particle
                     } else {
@@ -359,6 +379,34 @@ impl Tracker {
             decision,
             velocity,
             pulled,
+        }
+    }
+
+    /// The drift test ([`drift`]) on the tracks this frame continued: a track not yet called a
+    /// particle whose points move steadily against the stars' velocity field becomes one.
+    fn drift_test(
+        &mut self,
+        owner: &[Option<usize>],
+        px: &[(f64, f64)],
+        to_px: &drift::Project,
+        sigma: f64,
+    ) {
+        let continued: Vec<drift::Continued> = owner
+            .iter()
+            .enumerate()
+            .filter_map(|(j, k)| {
+                k.map(|k| drift::Continued {
+                    at: px[j],
+                    star: self.tracks[k].decision == Decision::Star,
+                    line: drift::line_fit(&self.tracks[k].history, to_px),
+                })
+            })
+            .collect();
+        let tracks = owner.iter().flatten();
+        for (k, moving) in tracks.zip(drift::drifting(&continued, &self.camera, sigma)) {
+            if moving {
+                self.tracks[*k].decision = Decision::Particle;
+            }
         }
     }
 
@@ -561,6 +609,46 @@ mod tests {
                 assert_eq!(j.decision[0], Decision::Star, "{j:?}");
             }
         }
+    }
+
+    /// A particle moving 0.3 px a frame (about 0.3′/s, a tenth of the step test's Δ) is
+    /// called a star by Wald's test at once, and a particle by the drift test once its line
+    /// stands out; a star pulled 1 px aside for three frames by a passing particle, and the
+    /// stars around it, stay stars.
+    #[test]
+    fn slow_particles_drift_and_pulled_stars_do_not() {
+        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
+        let mut tracker = Tracker::new(camera.clone(), ParticleSettings::default());
+        let stars: Vec<(f64, f64)> = (0..24)
+            .map(|i| (100.0 + 35.0 * i as f64, 300.0 + 60.0 * (i % 5) as f64))
+            .collect();
+        let mut last = None;
+        let mut called = Vec::new();
+        for f in 0..12 {
+            let c = Matrix3::identity();
+            let mut px = stars.clone();
+            if (4..7).contains(&f) {
+                px[3].0 += 1.0;
+            }
+            px.push((500.0 + 0.3 * f as f64, 520.0 + 0.1 * f as f64));
+            let flux = vec![1e4; px.len()];
+            let j = add_frame(&mut tracker, &camera, f, &c, last.as_ref(), &px, &flux);
+            last = Some(c);
+            assert!(
+                j.decision[..24].iter().all(|d| *d != Decision::Particle),
+                "frame {f}: {:?}",
+                j.decision
+            );
+            called.push(j.decision[24]);
+        }
+        assert_eq!(called[1], Decision::Star, "{called:?}");
+        let first = called.iter().position(|d| *d == Decision::Particle);
+        assert!(first.is_some_and(|k| k <= 8), "{called:?}");
+        assert!(
+            called[first.unwrap()..]
+                .iter()
+                .all(|d| *d == Decision::Particle)
+        );
     }
 
     /// Stars standing still and particles moving at 10′/s through a turning reference: after
