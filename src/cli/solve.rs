@@ -5,6 +5,7 @@ use super::config::run_config;
 use super::console::{Progress, interrupt_flag};
 use super::exit::Exit;
 use anyhow::{Result, bail};
+use gpustar::CameraSource;
 use gpustar::batch::{self, RunOptions};
 use gpustar::catalog::Catalog;
 use gpustar::config::RunConfig;
@@ -15,6 +16,7 @@ use gpustar::pipeline::star_lists::StarLists;
 use gpustar::pipeline::{Backend, BackendChoice, BackendNote};
 use gpustar::products::Products;
 use gpustar::sequence::SequenceOptions;
+use gpustar::solve::{FEW_STARS_IN_VIEW, stars_in_view};
 use gpustar::streaks::export::Exports;
 use std::io::Write;
 use std::process::ExitCode;
@@ -78,6 +80,7 @@ pub(crate) fn run_solve(
     }
     let choice = cfg.camera_source(None)?;
     let catalog = Catalog::load_with(cfg.catalog.as_deref(), !cfg.no_cache)?;
+    warn_if_catalog_shallow(&catalog, &choice.0, cfg.mag_limit.or(choice.1));
     // Read before the run, so that a bad file stops it before any frame is done.
     let streak_options = cfg.streak_options()?;
     if let (Some(p), Some(t), false) = (
@@ -303,4 +306,24 @@ pub(crate) fn run_solve(
         Exit::Ok
     }
     .into())
+}
+
+/// Say so when the catalog holds few stars in the camera's field on average (a camera file's,
+/// or `--fov-deg`'s taken as square): the frames toward sparse sky then show too few catalog
+/// stars to identify, where a deeper catalog solves them (docs/radial.md).
+fn warn_if_catalog_shallow(catalog: &Catalog, source: &CameraSource, mag_limit: Option<f64>) {
+    let (fx, fy) = match source {
+        CameraSource::Fixed(c) => (c.fov_x_deg(), c.fov_y_deg()),
+        CameraSource::Fov { fov_x_deg, .. } => (*fov_x_deg, *fov_x_deg),
+        _ => return,
+    };
+    let n = stars_in_view(catalog, fx, fy, mag_limit);
+    if n < FEW_STARS_IN_VIEW {
+        let to = mag_limit.unwrap_or_else(|| catalog.faintest());
+        tracing::warn!(
+            "the catalog holds {n:.0} stars on average in this {fx:.1}°×{fy:.1}° field (to \
+             magnitude {to:.1}): frames toward sparse sky may show too few to identify; a deeper \
+             catalog (`gpustar catalog import`, README § Catalogs) solves more"
+        );
+    }
 }

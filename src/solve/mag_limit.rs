@@ -37,6 +37,27 @@ pub fn mag_limit_in(catalog: &Catalog, camera: &Camera, stars: f64, sky_sr: f64)
     (catalog.mag_of_rank(n) * 10.0).round() / 10.0
 }
 
+/// Fewer catalog stars than this in a field on average, and the sparse parts of the sky show
+/// too few to identify lost in space: at 4° the built-in catalog (Hp ≤ 8) holds 15 on average,
+/// and the frames of docs/radial.md's sets that no identifier solves show 3 or 4.
+pub const FEW_STARS_IN_VIEW: f64 = 20.0;
+
+/// The average number of the catalog's stars (those to `mag_limit`, else all) in a field of
+/// `fov_x_deg` × `fov_y_deg`.
+pub fn stars_in_view(
+    catalog: &Catalog,
+    fov_x_deg: f64,
+    fov_y_deg: f64,
+    mag_limit: Option<f64>,
+) -> f64 {
+    let stars = match mag_limit {
+        Some(m) => catalog.sorted_mags().partition_point(|x| *x <= m),
+        None => catalog.stars.len(),
+    };
+    let fov_sr = (fov_x_deg * fov_y_deg).to_radians().to_radians();
+    stars as f64 * (fov_sr / FULL_SKY_SR).min(1.0)
+}
+
 /// Average number of catalog stars in the field of the shallow pass's selection: a sensor that
 /// shows 4 to 8 stars (a 10° field to Hp 6) leaves them among 40 catalog stars in view of the
 /// automatic selection, whose pairs crowd the vote and whose count weakens the false-match

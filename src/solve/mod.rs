@@ -30,8 +30,8 @@ pub use bands::{
     WIDE_PAIR_TOL_PX, WIDE_SCALE_STEP, scale_bands, scale_hypotheses, scaled, spread_order,
 };
 pub use mag_limit::{
-    AUTO_STARS_IN_VIEW, FULL_SKY_SR, SHALLOW_STARS_IN_VIEW, auto_mag_limit, auto_mag_limit_in,
-    mag_limit_for, mag_limit_in,
+    AUTO_STARS_IN_VIEW, FEW_STARS_IN_VIEW, FULL_SKY_SR, SHALLOW_STARS_IN_VIEW, auto_mag_limit,
+    auto_mag_limit_in, mag_limit_for, mag_limit_in, stars_in_view,
 };
 pub use outcome::{Outcome, Solution, Unsolved};
 pub use report::{ORTHOGONALITY_WARN, attitude_quality};
