@@ -80,7 +80,10 @@ pub(crate) fn run_solve(
     }
     let choice = cfg.camera_source(None)?;
     let catalog = Catalog::load_with(cfg.catalog.as_deref(), !cfg.no_cache)?;
-    warn_if_catalog_shallow(&catalog, &choice.0, cfg.mag_limit.or(choice.1));
+    // A catalog or a magnitude limit the user chose is theirs to judge.
+    if cfg.catalog.is_none() && cfg.mag_limit.or(choice.1).is_none() {
+        warn_if_catalog_shallow(&catalog, &choice.0);
+    }
     // Read before the run, so that a bad file stops it before any frame is done.
     let streak_options = cfg.streak_options()?;
     if let (Some(p), Some(t), false) = (
@@ -308,22 +311,22 @@ pub(crate) fn run_solve(
     .into())
 }
 
-/// Say so when the catalog holds few stars in the camera's field on average (a camera file's,
-/// or `--fov-deg`'s taken as square): the frames toward sparse sky then show too few catalog
-/// stars to identify, where a deeper catalog solves them (docs/radial.md).
-fn warn_if_catalog_shallow(catalog: &Catalog, source: &CameraSource, mag_limit: Option<f64>) {
+/// Say so when the built-in catalog holds few stars in the camera's field on average (a camera
+/// file's, or `--fov-deg`'s taken as square): the frames toward sparse sky then show too few
+/// catalog stars to identify, where a deeper catalog solves them (docs/radial.md).
+fn warn_if_catalog_shallow(catalog: &Catalog, source: &CameraSource) {
     let (fx, fy) = match source {
         CameraSource::Fixed(c) => (c.fov_x_deg(), c.fov_y_deg()),
         CameraSource::Fov { fov_x_deg, .. } => (*fov_x_deg, *fov_x_deg),
         _ => return,
     };
-    let n = stars_in_view(catalog, fx, fy, mag_limit);
+    let n = stars_in_view(catalog, fx, fy);
     if n < FEW_STARS_IN_VIEW {
-        let to = mag_limit.unwrap_or_else(|| catalog.faintest());
         tracing::warn!(
-            "the catalog holds {n:.0} stars on average in this {fx:.1}°×{fy:.1}° field (to \
-             magnitude {to:.1}): frames toward sparse sky may show too few to identify; a deeper \
-             catalog (`gpustar catalog import`, README § Catalogs) solves more"
+            "the built-in catalog holds {n:.0} stars on average in this {fx:.1}°×{fy:.1}° field \
+             (to Hp {:.1}): frames toward sparse sky may show too few to identify; a deeper \
+             catalog (`gpustar catalog import`, README § Catalogs) solves more",
+            catalog.faintest()
         );
     }
 }

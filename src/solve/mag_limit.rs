@@ -42,20 +42,10 @@ pub fn mag_limit_in(catalog: &Catalog, camera: &Camera, stars: f64, sky_sr: f64)
 /// and the frames of docs/radial.md's sets that no identifier solves show 3 or 4.
 pub const FEW_STARS_IN_VIEW: f64 = 20.0;
 
-/// The average number of the catalog's stars (those to `mag_limit`, else all) in a field of
-/// `fov_x_deg` × `fov_y_deg`.
-pub fn stars_in_view(
-    catalog: &Catalog,
-    fov_x_deg: f64,
-    fov_y_deg: f64,
-    mag_limit: Option<f64>,
-) -> f64 {
-    let stars = match mag_limit {
-        Some(m) => catalog.sorted_mags().partition_point(|x| *x <= m),
-        None => catalog.stars.len(),
-    };
+/// The average number of the catalog's stars in a field of `fov_x_deg` × `fov_y_deg`.
+pub fn stars_in_view(catalog: &Catalog, fov_x_deg: f64, fov_y_deg: f64) -> f64 {
     let fov_sr = (fov_x_deg * fov_y_deg).to_radians().to_radians();
-    stars as f64 * (fov_sr / FULL_SKY_SR).min(1.0)
+    catalog.stars.len() as f64 * (fov_sr / FULL_SKY_SR).min(1.0)
 }
 
 /// Average number of catalog stars in the field of the shallow pass's selection: a sensor that

@@ -98,23 +98,29 @@ fn import_of_hip2_reproduces_the_shipped_catalog() {
     );
 }
 
-/// A run warns when the catalog holds few stars in the field on average (the built-in
-/// catalog, 37,622 stars to Hp 8, in a 4° field: 14.6), and not in an 18° field.
+/// A run warns when the built-in catalog holds few stars in the field on average (37,622
+/// stars to Hp 8 in a 4° field: 14.6), and not in an 18° field or under a magnitude limit the
+/// user chose.
 #[test]
 fn a_catalog_too_shallow_for_the_field_is_said() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("sim");
     common::simulate_small(&dir, 1);
-    let run = |fov: &str| {
-        let out = common::run_ok(&["batch", dir.to_str().unwrap(), "--fov-deg", fov, "-q"]);
+    let run = |args: &[&str]| {
+        let out = common::run_ok(&[&["batch", dir.to_str().unwrap(), "-q"], args].concat());
         common::stderr(&out)
     };
-    let narrow = run("4");
+    let narrow = run(&["--fov-deg", "4"]);
     assert!(
         narrow.contains("holds 15 stars on average in this 4.0°×4.0° field")
             && narrow.contains("deeper catalog"),
         "{narrow}"
     );
-    let wide = run("18");
-    assert!(!wide.contains("deeper catalog"), "{wide}");
+    for quiet in [
+        vec!["--fov-deg", "18"],
+        vec!["--fov-deg", "4", "--mag-limit", "7"],
+    ] {
+        let said = run(&quiet);
+        assert!(!said.contains("deeper catalog"), "{quiet:?}: {said}");
+    }
 }
