@@ -39,15 +39,9 @@ const MIN_PX: f64 = 2.0;
 /// Points nearer the frame's border than this (pixels) are left out: a star entering or
 /// leaving the field is cut by the edge and its centroid pulled inward by a pixel or more,
 /// which looks like drift.
-const EDGE_PX: f64 = 5.0;
+pub const EDGE_PX: f64 = 5.0;
 /// Star tracks needed for the velocity field.
 const MIN_STARS: usize = 8;
-
-/// Whether a detection at `p` lies at least [`EDGE_PX`] inside the frame.
-pub fn clear_of_edge(cam: &Camera, p: (f64, f64)) -> bool {
-    let (w, h) = (f64::from(cam.width) - 1.0, f64::from(cam.height) - 1.0);
-    (EDGE_PX..=w - EDGE_PX).contains(&p.0) && (EDGE_PX..=h - EDGE_PX).contains(&p.1)
-}
 
 /// A straight line in time through a track's points, in the pixels of one frame.
 #[derive(Clone, Copy, Debug)]
@@ -190,10 +184,7 @@ struct VelocityField {
 impl VelocityField {
     /// `None` with fewer than [`MIN_STARS`] stars or a degenerate spread of them.
     fn fit(stars: &[(Px, Px)], centre: Px) -> Option<Self> {
-        let row = |p: (f64, f64)| {
-            // Kilopixels, so that the normal equations are well scaled.
-            Vector3::new(1.0, (p.0 - centre.0) / 1e3, (p.1 - centre.1) / 1e3)
-        };
+        let row = |p: Px| terms(centre, p);
         let solve = |keep: &dyn Fn(usize) -> bool| -> Option<[Vector3<f64>; 2]> {
             let (mut a, mut b) = (Matrix3::zeros(), [Vector3::zeros(); 2]);
             let mut n = 0;
@@ -226,14 +217,16 @@ impl VelocityField {
     }
 
     /// The field's velocity at `p` (pixels per second).
-    fn at(&self, p: (f64, f64)) -> (f64, f64) {
-        let r = Vector3::new(
-            1.0,
-            (p.0 - self.centre.0) / 1e3,
-            (p.1 - self.centre.1) / 1e3,
-        );
+    fn at(&self, p: Px) -> Px {
+        let r = terms(self.centre, p);
         (self.coef[0].dot(&r), self.coef[1].dot(&r))
     }
+}
+
+/// The affine field's terms at `p`: 1 and the offsets from `centre` in kilopixels, so that the
+/// normal equations are well scaled.
+fn terms(centre: Px, p: Px) -> Vector3<f64> {
+    Vector3::new(1.0, (p.0 - centre.0) / 1e3, (p.1 - centre.1) / 1e3)
 }
 
 #[cfg(test)]

@@ -101,6 +101,50 @@ struct Track {
     history: Vec<(Vector3<f64>, f64)>,
 }
 
+impl Track {
+    /// Keep a point for the drift test: the reference-frame direction `w` at time `t`, seen at
+    /// pixel `p` of this frame (left out within [`drift::EDGE_PX`] of the border).
+    fn remember(&mut self, cam: &Camera, p: (f64, f64), w: Vector3<f64>, t: f64) {
+        if !inside(cam, p.0, p.1, drift::EDGE_PX) {
+            return;
+        }
+        if self.history.len() == drift::POINTS {
+            self.history.remove(0);
+        }
+        self.history.push((w, t));
+    }
+}
+
+/// The drift test ([`drift`]) on the tracks this frame continued (`owner[j]`: detection `j`'s
+/// track): a track not yet called a particle whose points move steadily against the stars'
+/// velocity field becomes one.
+fn drift_test(
+    tracks: &mut [Track],
+    cam: &Camera,
+    owner: &[Option<usize>],
+    px: &[(f64, f64)],
+    to_px: &drift::Project,
+    sigma: f64,
+) {
+    let continued: Vec<drift::Continued> = owner
+        .iter()
+        .enumerate()
+        .filter_map(|(j, k)| {
+            k.map(|k| drift::Continued {
+                at: px[j],
+                star: tracks[k].decision == Decision::Star,
+                line: drift::line_fit(&tracks[k].history, to_px),
+            })
+        })
+        .collect();
+    let continued_tracks = owner.iter().flatten();
+    for (k, moving) in continued_tracks.zip(drift::drifting(&continued, cam, sigma)) {
+        if moving {
+            tracks[*k].decision = Decision::Particle;
+        }
+    }
+}
+
 /// A frame's detections: pixels, camera-frame directions and fluxes.
 #[derive(Clone, Copy)]
 pub struct Seen<'a> {
@@ -162,9 +206,7 @@ impl Tracker {
         let s = self.s;
         let sigma = sigma_px.max(s.sigma_floor_px);
         let ifov = self.camera.ifov_rad();
-        // Its own copy: the drift test below changes the tracks while projecting.
-        let camera = self.camera.clone();
-        let cam = &camera;
+        let cam = &self.camera;
         let to_px = |w: &Vector3<f64>| cam.vector_to_pixel(&(c * w));
         self.tracks
             .retain(|tr| frame.saturating_sub(tr.last_frame) <= s.max_gap_frames);
@@ -313,14 +355,9 @@ impl Tracker {
             tr.last = (w, t);
             tr.last_frame = frame;
             tr.flux = flux[j];
-            if drift::clear_of_edge(cam, px[j]) {
-                if tr.history.len() == drift::POINTS {
-                    tr.history.remove(0);
-                }
-                tr.history.push((w, t));
-            }
+            tr.remember(cam, px[j], w, t);
         }
-        self.drift_test(&owner, px, &to_px, sigma);
+        drift_test(&mut self.tracks, cam, &owner, px, &to_px, sigma);
         // Detections no track claims start tracks of their own; a bright one where the previous
         // frame looked and saw nothing (no detection within twice the gate of where it would
         // have stood) starts with that evidence.
@@ -341,23 +378,22 @@ impl Tracker {
                 let unseen = seen_before[j] && empty && bright.is_some_and(|b| flux[j] >= b);
                 let llr = if unseen { -s.star_miss_prob.ln() } else { 0.0 };
                 owner[j] = Some(self.tracks.len());
-                self.tracks.push(Track {
-                    last: (c.transpose() * dirs[j], t),
+                let w = c.transpose() * dirs[j];
+                let mut tr = Track {
+                    last: (w, t),
                     prev: None,
                     last_frame: frame,
                     flux: flux[j],
                     llr,
-                    history: if drift::clear_of_edge(cam, px[j]) {
-                        vec![(c.transpose() * dirs[j], t)]
-                    } else {
-                        Vec::new()
-                    },
+                    history: Vec::new(),
                     decision: if llr >= ln_a {
                         Decision::Particle
                     } else {
                         Decision::Undecided
                     },
-                });
+                };
+                tr.remember(cam, px[j], w, t);
+                self.tracks.push(tr);
             }
         }
         self.faintest = flux.iter().copied().reduce(f64::min);
@@ -379,34 +415,6 @@ impl Tracker {
             decision,
             velocity,
             pulled,
-        }
-    }
-
-    /// The drift test ([`drift`]) on the tracks this frame continued: a track not yet called a
-    /// particle whose points move steadily against the stars' velocity field becomes one.
-    fn drift_test(
-        &mut self,
-        owner: &[Option<usize>],
-        px: &[(f64, f64)],
-        to_px: &drift::Project,
-        sigma: f64,
-    ) {
-        let continued: Vec<drift::Continued> = owner
-            .iter()
-            .enumerate()
-            .filter_map(|(j, k)| {
-                k.map(|k| drift::Continued {
-                    at: px[j],
-                    star: self.tracks[k].decision == Decision::Star,
-                    line: drift::line_fit(&self.tracks[k].history, to_px),
-                })
-            })
-            .collect();
-        let tracks = owner.iter().flatten();
-        for (k, moving) in tracks.zip(drift::drifting(&continued, &self.camera, sigma)) {
-            if moving {
-                self.tracks[*k].decision = Decision::Particle;
-            }
         }
     }
 

@@ -29,10 +29,7 @@ pub const FULL_SKY_SR: f64 = 4.0 * std::f64::consts::PI;
 
 /// [`mag_limit_for`] for a catalog that covers `sky_sr` steradians.
 pub fn mag_limit_in(catalog: &Catalog, camera: &Camera, stars: f64, sky_sr: f64) -> f64 {
-    let fov_sr = (camera.fov_x_deg() * camera.fov_y_deg())
-        .to_radians()
-        .to_radians();
-    let fraction = (fov_sr / sky_sr).min(1.0);
+    let fraction = field_share(camera.fov_x_deg(), camera.fov_y_deg(), sky_sr);
     let n = ((stars / fraction).round() as usize).max(1);
     (catalog.mag_of_rank(n) * 10.0).round() / 10.0
 }
@@ -44,8 +41,13 @@ pub const FEW_STARS_IN_VIEW: f64 = 20.0;
 
 /// The average number of the catalog's stars in a field of `fov_x_deg` × `fov_y_deg`.
 pub fn stars_in_view(catalog: &Catalog, fov_x_deg: f64, fov_y_deg: f64) -> f64 {
+    catalog.stars.len() as f64 * field_share(fov_x_deg, fov_y_deg, FULL_SKY_SR)
+}
+
+/// The share of `sky_sr` steradians a field of `fov_x_deg` × `fov_y_deg` covers (at most 1).
+fn field_share(fov_x_deg: f64, fov_y_deg: f64, sky_sr: f64) -> f64 {
     let fov_sr = (fov_x_deg * fov_y_deg).to_radians().to_radians();
-    catalog.stars.len() as f64 * (fov_sr / FULL_SKY_SR).min(1.0)
+    (fov_sr / sky_sr).min(1.0)
 }
 
 /// Average number of catalog stars in the field of the shallow pass's selection: a sensor that
