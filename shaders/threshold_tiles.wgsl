@@ -1,5 +1,6 @@
 // Stage threshold, kernel 1 of 2 (CPU twin: src/cpu/threshold.rs tile_stats): the median and
-// MAD of each tile's even rows. 8-bit frames: one 256-bin histogram of the values gives both (the MAD by
+// MAD of each tile's even rows, and the offset from them (noise_offset: a MAD of a few counts
+// read from the grouped deviations). 8-bit frames: one 256-bin histogram of the values gives both (the MAD by
 // walking outward from the median). Deeper frames: a two-level radix select (high byte, then
 // low byte) for each. Histograms live in workgroup memory. The CPU twin counts instead (one
 // thread: vector compares beat scattered increments); the order statistics are the same.
@@ -12,6 +13,8 @@
 var<workgroup> hist: array<atomic<u32>, 256>;
 // (bin, elements in lower bins) of the rank being selected.
 var<workgroup> pick: vec2<u32>;
+// (deviations below the MAD, deviations equal to it), for noise_offset.
+var<workgroup> ties: vec2<u32>;
 
 fn pixel(img: u32, i: u32) -> u32 {
     let w = pixels[img * u.b.words_per_image + i / 2u];
@@ -96,18 +99,22 @@ fn radix_select(img: u32, x0: u32, y0: u32, tw: u32, n: u32, rank: u32, centre: 
     workgroupBarrier();
     if (lid == 0u) {
         find_bin(rank - first.y);
+        ties = vec2<u32>(first.y + pick.y, atomicLoad(&hist[pick.x]));
     }
     let second = workgroupUniformLoad(&pick);
     return (first.x << 8u) | second.x;
 }
 
-// Thread 0, 8-bit: median and MAD from the value histogram, into `pick`.
+// Thread 0, 8-bit: median and MAD from the value histogram, into `pick` (the MAD's ties into
+// `ties`).
 fn median_mad_8bit(rank: u32) {
     find_bin(rank);
     let median = pick.x;
     var seen = atomicLoad(&hist[median]);
+    var below = 0u;
     var d = 0u;
     while (seen <= rank) {
+        below = seen;
         d++;
         if (median + d < 256u) {
             seen += atomicLoad(&hist[median + d]);
@@ -117,6 +124,36 @@ fn median_mad_8bit(rank: u32) {
         }
     }
     pick = vec2<u32>(median, d);
+    ties = vec2<u32>(below, seen - below);
+}
+
+// The tile's offset (CPU twin: src/cpu/threshold.rs noise_offset, which says why): ceil(k_mad
+// · max(MAD, 1)), a MAD of 1 to GROUPED_MAD_MAX counts taken as the grouped median. Integer
+// counts and exact f32 products only: the same on every GPU as on the CPU.
+const GROUPED_MAD_MAX: u32 = 4u;
+
+fn whole_offset(k_mad: f32, mad: u32) -> u32 {
+    return u32(ceil(k_mad * f32(max(mad, 1u))));
+}
+
+fn noise_offset(k_mad: f32, mad: u32, below: u32, at: u32, rank: u32) -> u32 {
+    if (mad == 0u || mad > GROUPED_MAD_MAX || at == 0u) {
+        return whole_offset(k_mad, mad);
+    }
+    let num = (2u * mad - 1u) * at + 2u * (rank - below) + 1u;
+    let den = 2u * at;
+    if (num <= den) {
+        return whole_offset(k_mad, 1u);
+    }
+    let t = k_mad * f32(num);
+    var o = u32(ceil(t / f32(den)));
+    while (f32(o) * f32(den) < t) {
+        o++;
+    }
+    while (o > 0u && f32(o - 1u) * f32(den) >= t) {
+        o--;
+    }
+    return o;
 }
 
 @compute @workgroup_size(64)
@@ -145,8 +182,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let median = radix_select(wg.z, x0, y0, tw, n, rank, 0u, false, lid);
         stats = vec2<u32>(median, radix_select(wg.z, x0, y0, tw, n, rank, median, true, lid));
     }
+    let counts = workgroupUniformLoad(&ties);
     if (lid == 0u) {
         let t = wg.z * u.b.tiles_per_image + wg.y * p.tiles_x + wg.x;
-        tiles[t] = TileStats(stats.x, u32(ceil(p.k_mad * f32(max(stats.y, 1u)))));
+        tiles[t] = TileStats(stats.x, noise_offset(p.k_mad, stats.y, counts.x, counts.y, rank));
     }
 }

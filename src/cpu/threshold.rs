@@ -1,7 +1,8 @@
 //! Stage `threshold`: local background and noise per tile, and the k·σ mask.
 //!
 //! Background = the median of a tile, noise = 1.4826 · MAD of the tile (robust to the stars in
-//! it; both from every other row); both are interpolated bilinearly between tile centres, so gradients and vignetting do
+//! it; both from every other row; a MAD of a few counts read from the grouped deviations, see
+//! [`noise_offset`]); both are interpolated bilinearly between tile centres, so gradients and vignetting do
 //! not leave steps at tile edges. Everything after the per-tile `offset` is integer arithmetic,
 //! so the GPU twin reproduces the mask bit for bit.
 
@@ -62,8 +63,44 @@ impl DetectParams {
 pub struct TileStats {
     /// Median pixel value.
     pub background: u32,
-    /// ceil(k · 1.4826 · max(MAD, 1)): how far above the background a pixel must be.
+    /// ceil(k · 1.4826 · max(MAD, 1)), the MAD grouped when small ([`noise_offset`]): how far
+    /// above the background a pixel must be.
     pub offset: u32,
+}
+
+/// MADs of up to this many counts are read from the grouped deviations ([`noise_offset`]):
+/// there, whole counts put the MAD up to an eighth of it or more off; above, less than its own
+/// scatter over a tile's 512 values.
+pub const GROUPED_MAD_MAX: u32 = 4;
+
+/// The tile's offset, ceil(k_mad · m), from its MAD `mad` (the deviation of rank `rank`),
+/// with `below` deviations under it and `at` equal to it. Pixel values are whole counts, and
+/// with noise of a count or two (8-bit frames) the MAD takes one of a few values: 8-bit JPEGs
+/// whose noise is 2.1 counts have a MAD of 1 in nine tiles of ten, so a 5σ threshold stood at
+/// 3.7σ and put a few noise pairs into every frame. For MADs of 1 to [`GROUPED_MAD_MAX`], m
+/// is therefore the grouped median, each deviation d spread evenly over [d − ½, d + ½):
+/// m = mad − ½ + (rank + ½ − below) / at, at least 1 as before. Exact in integers and
+/// products of f32 that are exact (both twins, bit for bit): the least o with
+/// o · 2at ≥ fl(k_mad · ((2·mad − 1)·at + 2(rank − below) + 1)).
+pub fn noise_offset(k_mad: f32, mad: u32, below: u32, at: u32, rank: u32) -> u32 {
+    let whole = |m: u32| (k_mad * m.max(1) as f32).ceil() as u32;
+    if mad == 0 || mad > GROUPED_MAD_MAX || at == 0 {
+        return whole(mad);
+    }
+    let num = (2 * mad - 1) * at + 2 * (rank - below) + 1;
+    let den = 2 * at;
+    if num <= den {
+        return whole(1);
+    }
+    let t = k_mad * num as f32;
+    let mut o = (t / den as f32).ceil() as u32;
+    while (o as f32) * (den as f32) < t {
+        o += 1;
+    }
+    while o > 0 && ((o - 1) as f32) * (den as f32) >= t {
+        o -= 1;
+    }
+    o
 }
 
 /// Per-tile median and MAD (lower medians: element (n−1)/2 of the sorted values) of the
@@ -104,9 +141,19 @@ fn tile_stats_in(pixels: &[u16], p: &DetectParams) -> Vec<TileStats> {
             if tx == 0 {
                 row_first = guess;
             }
+            let mad = u32::from(mad);
+            let rank = (vals.len() as u32 - 1) / 2;
+            // `vals` holds the deviations now; their counts about a small MAD.
+            let (below, at) = match mad {
+                1..=GROUPED_MAD_MAX => {
+                    let below = count_at_most(&vals, (mad - 1) as u16) as u32;
+                    (below, count_at_most(&vals, mad as u16) as u32 - below)
+                }
+                _ => (0, 0),
+            };
             out.push(TileStats {
                 background: median as u32,
-                offset: (p.k_mad * mad.max(1) as f32).ceil() as u32,
+                offset: noise_offset(p.k_mad, mad, below, at, rank),
             });
         }
     }

@@ -53,8 +53,9 @@ fn median_and_mad_ignore_a_bright_star() {
     px[20] = 240;
     let t = tile_stats(&px, &p);
     assert_eq!(t[0].background, 102);
-    // |v − 102| over 0..4 cycles: MAD 1 → offset ceil(5 · 1.4826) = 8.
-    assert_eq!(t[0].offset, 8);
+    // |v − 102| over 0..4 cycles: MAD 1, 7 deviations below it and 13 at it, grouped
+    // 0.5 + (15.5 − 7) / 13 = 1.154 → offset ceil(5 · 1.4826 · 1.154) = 9.
+    assert_eq!(t[0].offset, 9);
     let runs = threshold(&px, &t, &p);
     assert_eq!(runs, vec![Run { y: 2, x0: 3, x1: 5 }]);
     assert_eq!(dense_mask(&runs, 8, 8).iter().sum::<u32>(), 2);
@@ -252,7 +253,24 @@ fn tile_stats_are_the_median_and_mad_of_each_tile_s_even_rows() {
             _ => (next() as u16 % 400).saturating_add((i / w) as u16 * 600),
         })
         .collect();
-    for (px, saturation) in [(&eight, 255), (&sixteen, 65535)] {
+    // Noise of a count or two (MADs 0 to 3, read grouped), 8-bit and 16-bit.
+    let quiet = |base: u16| -> Vec<u16> {
+        let mut seed = 5u32;
+        (0..w * h)
+            .map(|i| {
+                seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+                let spread = 1 + (i % w) / 15;
+                base + ((seed >> 16) % (2 * spread + 1)) as u16
+            })
+            .collect()
+    };
+    let (quiet8, quiet16) = (quiet(12), quiet(3000));
+    for (px, saturation) in [
+        (&eight, 255),
+        (&sixteen, 65535),
+        (&quiet8, 255),
+        (&quiet16, 65535),
+    ] {
         let p = DetectParams::new(w, h, 16, 5.0, saturation);
         let got = tile_stats(px, &p);
         let mut offsets = std::collections::BTreeSet::new();
@@ -271,7 +289,7 @@ fn tile_stats_are_the_median_and_mad_of_each_tile_s_even_rows() {
                 dev.sort_unstable();
                 let want = TileStats {
                     background: median as u32,
-                    offset: (p.k_mad * dev[rank].max(1) as f32).ceil() as u32,
+                    offset: grouped_offset(p.k_mad, &dev),
                 };
                 assert_eq!(
                     got[(ty * p.tiles_x + tx) as usize],
@@ -282,6 +300,96 @@ fn tile_stats_are_the_median_and_mad_of_each_tile_s_even_rows() {
             }
         }
         assert!(offsets.len() > 3, "varied tiles: {offsets:?}");
+    }
+}
+
+/// The offset of a tile with sorted deviations `dev`, computed as the definition reads (in
+/// f64): ceil(k_mad · max(m, 1)), m the MAD, or for a MAD of 1 to `GROUPED_MAD_MAX` the grouped
+/// median mad − ½ + (rank + ½ − below) / at.
+fn grouped_offset(k_mad: f32, dev: &[u16]) -> u32 {
+    let rank = (dev.len() - 1) / 2;
+    let mad = dev[rank];
+    let m = if (1..=GROUPED_MAD_MAX as u16).contains(&mad) {
+        let below = dev.iter().filter(|&&d| d < mad).count() as f64;
+        let at = dev.iter().filter(|&&d| d == mad).count() as f64;
+        (mad as f64 - 0.5 + (rank as f64 + 0.5 - below) / at).max(1.0)
+    } else {
+        mad.max(1) as f64
+    };
+    (k_mad as f64 * m).ceil() as u32
+}
+
+/// Whole counts put the MAD of noise of two counts at 1 in most tiles, and a 5σ threshold at
+/// 3.8σ: the grouped MAD puts it back at 5σ. Noise of σ = 2.1 counts in whole counts (as an
+/// 8-bit JPEG's sky): MAD 1, grouped 1.43, σ = 1.4826 · 1.43 = 2.12.
+#[test]
+fn a_mad_of_whole_counts_is_read_grouped() {
+    // 512 sky values (a 32-pixel tile's even rows) with the shares of a Gaussian of σ 2.1
+    // rounded to whole counts: deviations 0, ±1, ±2, ... from 12.
+    let shares = [96, 172, 124, 70, 32, 12, 4, 2];
+    assert_eq!(shares.iter().sum::<u32>(), 512);
+    let mut px: Vec<u16> = Vec::new();
+    for (d, &n) in shares.iter().enumerate() {
+        for k in 0..n {
+            let up = d == 0 || k % 2 == 0;
+            px.push(if up { 12 + d as u16 } else { 12 - d as u16 });
+        }
+    }
+    // One tile of 32 × 32 whose even rows hold those values (odd rows are not sampled).
+    let mut frame = vec![12u16; 32 * 32];
+    for (k, &v) in px.iter().enumerate() {
+        frame[(k / 32) * 2 * 32 + k % 32] = v;
+    }
+    let p = DetectParams::new(32, 32, 32, 5.0, 255);
+    let t = tile_stats(&frame, &p)[0];
+    assert_eq!(t.background, 12);
+    // Below the MAD: 96 zeros; at it: 172 ones. m = 0.5 + (255.5 − 96) / 172 = 1.427.
+    let m: f64 = 0.5 + (255.5 - 96.0) / 172.0;
+    assert_eq!(t.offset, (p.k_mad as f64 * m).ceil() as u32);
+    // Whole counts gave ceil(7.413 · 1) = 8: a 3.8σ threshold for this noise.
+    assert_eq!(t.offset, 11, "ceil(7.413 · 1.427)");
+    assert_eq!(noise_offset(p.k_mad, 1, 96, 172, 255), 11);
+    assert_eq!(
+        noise_offset(p.k_mad, 1, 200, 300, 255),
+        8,
+        "grouped below 1: the floor"
+    );
+    assert_eq!(noise_offset(p.k_mad, 0, 0, 400, 255), 8, "MAD 0: the floor");
+    assert_eq!(
+        noise_offset(p.k_mad, 9, 200, 50, 255),
+        67,
+        "above GROUPED_MAD_MAX: whole"
+    );
+}
+
+/// The grouped MAD's offset is the least o with o · 2at ≥ fl(k_mad · num), exactly, for every
+/// count a tile can hold (both twins compute it so).
+#[test]
+fn the_grouped_offset_is_exact() {
+    for k_sigma in [3.0f32, 4.5, 5.0, 6.0] {
+        let k_mad = k_sigma * 1.4826;
+        for mad in 1..=GROUPED_MAD_MAX {
+            for n in [1u32, 2, 7, 255, 256, 512, 1024, 2048] {
+                let rank = (n - 1) / 2;
+                for below in (0..=rank).step_by(7) {
+                    for at in (rank + 1 - below..=n - below).step_by(5) {
+                        let o = noise_offset(k_mad, mad, below, at, rank);
+                        let num = (2 * mad - 1) * at + 2 * (rank - below) + 1;
+                        let den = 2 * at;
+                        if num <= den {
+                            assert_eq!(o, (k_mad * 1.0).ceil() as u32);
+                            continue;
+                        }
+                        let t = k_mad * num as f32;
+                        assert!(o as f64 * den as f64 >= t as f64, "{mad} {below} {at}");
+                        assert!(
+                            ((o - 1) as f64) * (den as f64) < t as f64,
+                            "{mad} {below} {at}"
+                        );
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -298,6 +406,46 @@ fn gpu_equals_cpu_on_simulated_8_and_16_bit_frames() {
         32,
     );
     assert!(n8 > 50 && n16 > 20, "{n8} and {n16} blobs compared");
+}
+
+/// Quiet frames, whose tiles' MADs of 0 to 4 counts are read grouped: the GPU kernel's counts
+/// about the MAD (from its 8-bit histogram, or its 16-bit radix select) and its offsets are the
+/// CPU twin's.
+#[test]
+fn gpu_equals_cpu_where_the_mad_is_grouped() {
+    let Some(g) = common::gpu("gpu_equals_cpu_where_the_mad_is_grouped") else {
+        return;
+    };
+    let (w, h) = (256u32, 96u32);
+    for (base, saturation) in [(12u16, 255u16), (3000, 65535)] {
+        let mut seed = 17u32;
+        let frames: Vec<gpustar::io::frame::Frame> = (0..2)
+            .map(|k| {
+                let pixels = (0..w * h)
+                    .map(|i| {
+                        seed = seed.wrapping_mul(1664525).wrapping_add(1013904223);
+                        // Noise from 0 to 5 counts wide across the frame, a star now and then.
+                        let spread = (i % w) / 40 + k;
+                        let star = if i % 1013 == 0 { 90 } else { 0 };
+                        base + ((seed >> 16) % (2 * spread + 1)) as u16 + star
+                    })
+                    .collect::<Vec<u16>>();
+                gpustar::io::frame::Frame {
+                    width: w,
+                    height: h,
+                    pixels: pixels.into(),
+                    saturation,
+                }
+            })
+            .collect();
+        let p = DetectParams::new(w, h, 32, 5.0, saturation as u32);
+        let grouped = tile_stats(&frames[0].pixels, &p)
+            .iter()
+            .filter(|t| t.offset % 8 != 0 && t.offset < 40)
+            .count();
+        assert!(grouped > 10, "{grouped} tiles with a grouped offset");
+        common::assert_detect_stages_equal(&g, &frames, 32);
+    }
 }
 
 #[test]
