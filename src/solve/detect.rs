@@ -116,8 +116,13 @@ fn blobs_cpu_with(frame: &Frame, p: &DetectParams, tiles: &[TileStats]) -> Vec<B
 }
 
 /// Smallest component kept with the matched filter: a star of peak SNR 4 sets about five
-/// pixels, a hot pixel one (two with one noisy neighbour).
-pub const MIN_AREA_FILTERED: u32 = 3;
+/// pixels, a hot pixel one (two with one noisy neighbour). Noise smoothed by the filter sets
+/// three: the filter's level takes the noise as white, and a JPEG's is not (its blocks carry
+/// it from pixel to pixel), so that on 8-bit JPEG frames most of the filter's new detections
+/// were of 3 pixels (228 of 293 on f8, docs/speed.md "The matched filter's smallest
+/// component"), none of them a star; on the FITS frames the stars it found were of 4 pixels or
+/// more, and of the detection retry's 3-pixel components none was a star.
+pub const MIN_AREA_FILTERED: u32 = 4;
 
 /// Turn blobs into the star list: drop those smaller than `min_area` (hot pixels), order by
 /// flux (ties by label, so the order is total), keep the brightest `max_stars`.
@@ -366,6 +371,27 @@ mod tests {
             ..ml
         };
         assert_eq!(point_sources(&list, 100, 100, &cog), None);
+    }
+
+    /// The matched filter's list keeps components of 4 pixels or more (the noise it smooths
+    /// sets 3); the pixel threshold's keeps 2 or more (a hot pixel sets 1).
+    #[test]
+    fn the_matched_filter_keeps_components_of_four_pixels() {
+        let blobs: Vec<Blob> = (1..=5)
+            .map(|area| Blob {
+                label: area,
+                area,
+                m0: 100 * area as u64,
+                mx: 1000 * area as u64,
+                my: 1000 * area as u64,
+                ..Blob::default()
+            })
+            .collect();
+        let areas = |s: &DetectSettings| -> Vec<u32> {
+            star_list(&blobs, s).iter().map(|d| d.area).collect()
+        };
+        assert_eq!(areas(&DetectSettings::default()), vec![5, 4, 3, 2]);
+        assert_eq!(areas(&DetectSettings::default().filtered()), vec![5, 4]);
     }
 
     #[test]
