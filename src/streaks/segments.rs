@@ -352,22 +352,128 @@ fn join_collinear(mut pieces: Vec<Segment>, stubs: &[Segment], s: &SegmentSettin
     }
     // A stub's own direction is loose (it is short and wide): it extends the first line its
     // middle lies on, when its axis is within 10° of the line's and the gap is a join's.
-    for p in stubs {
-        let (cx, cy) = p.point(0.5 * (p.t_min + p.t_max));
-        let near = |q: &Segment| {
-            (p.ux * q.ux + p.uy * q.uy).abs() > 10f64.to_radians().cos()
-                && q.across(cx, cy).abs() <= s.band_px
-        };
-        if let Some(j) = out.iter_mut().find(|j| near(&j.line)) {
+    let mut used = vec![false; stubs.len()];
+    for (k, p) in stubs.iter().enumerate() {
+        if let Some(j) = out.iter_mut().find(|j| stub_on(&j.line, p, s)) {
             let q = &mut j.line;
-            let half = 0.5 * p.length();
-            let t = q.along(cx, cy);
-            let gap = (t - half - q.t_max).max(q.t_min - t - half).max(0.0);
-            if gap <= (q.length() + p.length()).max(s.max_join_gap_px) {
+            let (t, half) = (q.along(p.mid().0, p.mid().1), 0.5 * p.length());
+            if stub_gap(q, p) <= (q.length() + p.length()).max(s.max_join_gap_px) {
                 q.t_min = q.t_min.min(t - half);
                 q.t_max = q.t_max.max(t + half);
                 q.pixels += p.pixels;
+                used[k] = true;
             }
+        }
+    }
+    // Stubs that extended no line, chained along the line through them: a streak lit only in
+    // pieces shorter than a piece of its own (a tumbling object's, 11–28 px between dark
+    // stretches). Each chain then joins a line as a piece does, or stands as one.
+    for chain in stub_chains(stubs, &used, s) {
+        match out.iter_mut().find(|j| collinear(&j.line, &chain, s)) {
+            Some(j) => {
+                j.pieces.push(chain);
+                let q = &mut j.line;
+                let (a, b) = (
+                    q.along(chain.cx, chain.cy),
+                    chain.ux * q.ux + chain.uy * q.uy,
+                );
+                let (t0, t1) = (a + b * chain.t_min, a + b * chain.t_max);
+                q.t_min = q.t_min.min(t0.min(t1));
+                q.t_max = q.t_max.max(t0.max(t1));
+                q.pixels += chain.pixels;
+            }
+            None => out.push(Joined {
+                line: chain,
+                pieces: vec![chain],
+            }),
+        }
+    }
+    out
+}
+
+impl Segment {
+    /// The middle of its extent.
+    fn mid(&self) -> (f64, f64) {
+        self.point(0.5 * (self.t_min + self.t_max))
+    }
+}
+
+/// Does stub `p` lie on line `q`: its axis within 10° of the line's and its middle within the
+/// band?
+fn stub_on(q: &Segment, p: &Segment, s: &SegmentSettings) -> bool {
+    let (cx, cy) = p.mid();
+    (p.ux * q.ux + p.uy * q.uy).abs() > 10f64.to_radians().cos()
+        && q.across(cx, cy).abs() <= s.band_px
+}
+
+/// The gap along line `q` between its extent and stub `p`'s (0 where they overlap).
+fn stub_gap(q: &Segment, p: &Segment) -> f64 {
+    let (half, t) = (0.5 * p.length(), q.along(p.mid().0, p.mid().1));
+    (t - half - q.t_max).max(q.t_min - t - half).max(0.0)
+}
+
+/// Chains of two or more of the stubs not `used`, longest first: a chain starts at its longest
+/// stub and takes, nearest first, each stub on the line through the chain's stubs (see
+/// [`stub_on`]; for the first pair, both axes within 10° of the line through their middles)
+/// at a join's gap. Its line runs through its stubs' ends, over their extent.
+fn stub_chains(stubs: &[Segment], used: &[bool], s: &SegmentSettings) -> Vec<Segment> {
+    let mut free: Vec<usize> = (0..stubs.len()).filter(|&k| !used[k]).collect();
+    free.sort_by(|&a, &b| {
+        (stubs[b].length())
+            .total_cmp(&stubs[a].length())
+            .then(a.cmp(&b))
+    });
+    let through = |chain: &[usize]| {
+        let ends: Vec<(f64, f64)> = chain
+            .iter()
+            .flat_map(|&k| {
+                [
+                    stubs[k].point(stubs[k].t_min),
+                    stubs[k].point(stubs[k].t_max),
+                ]
+            })
+            .collect();
+        let mut line = extent(principal_axis(&ends), &ends);
+        line.pixels = chain.iter().map(|&k| stubs[k].pixels).sum();
+        line
+    };
+    let cos10 = 10f64.to_radians().cos();
+    let mut taken = vec![false; stubs.len()];
+    let mut out = Vec::new();
+    for &first in &free {
+        if taken[first] {
+            continue;
+        }
+        let mut chain = vec![first];
+        let mut line = stubs[first];
+        loop {
+            let fits = |m: usize| {
+                let p = &stubs[m];
+                let on = if chain.len() == 1 {
+                    let pair = through(&[first, m]);
+                    let along = |q: &Segment| (q.ux * pair.ux + q.uy * pair.uy).abs() > cos10;
+                    along(&line) && along(p)
+                } else {
+                    stub_on(&line, p, s)
+                };
+                on && stub_gap(&line, p) <= (line.length() + p.length()).max(s.max_join_gap_px)
+            };
+            let next = (free.iter().copied())
+                .filter(|&m| !taken[m] && !chain.contains(&m) && fits(m))
+                .min_by(|&a, &b| {
+                    (stub_gap(&line, &stubs[a]))
+                        .total_cmp(&stub_gap(&line, &stubs[b]))
+                        .then(a.cmp(&b))
+                });
+            let Some(m) = next else { break };
+            chain.push(m);
+            line = through(&chain);
+        }
+        if chain.len() >= 2 {
+            for &k in &chain {
+                taken[k] = true;
+            }
+            out.push(line);
         }
     }
     out
@@ -385,4 +491,44 @@ fn collinear(q: &Segment, p: &Segment, s: &SegmentSettings) -> bool {
     let (ta, tb) = (q.along(ends[0].0, ends[0].1), q.along(ends[1].0, ends[1].1));
     let gap = (ta.min(tb) - q.t_max).max(q.t_min - ta.max(tb)).max(0.0);
     gap <= (q.length() + p.length()).max(s.max_join_gap_px)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The runs (raster order) of filled rectangles of cells, (x0, x1, y0, y1) half-open.
+    fn rects(r: &[(u32, u32, u32, u32)]) -> Vec<Run> {
+        let mut runs: Vec<Run> = r
+            .iter()
+            .flat_map(|&(x0, x1, y0, y1)| (y0..y1).map(move |y| Run { y, x0, x1 }))
+            .collect();
+        runs.sort_by_key(|r| (r.y, r.x0));
+        runs
+    }
+
+    /// Pieces 9 cells long and 4 wide have no line of their own (a line is twice as long as
+    /// its band is wide); three of them on one line are one line over all three, and two side
+    /// by side, their line across their axes, are none.
+    #[test]
+    fn stubs_on_one_line_chain_into_one() {
+        let s = SegmentSettings::default();
+        let three = rects(&[(5, 14, 10, 14), (20, 29, 10, 14), (36, 45, 10, 14)]);
+        let found = segments(&three, 64, &s);
+        assert_eq!(found.len(), 1, "{found:?}");
+        let line = found[0].line;
+        assert!(line.ux.abs() > 0.999, "along x: {line:?}");
+        let (a, b) = (line.point(line.t_min), line.point(line.t_max));
+        let (x0, x1) = (a.0.min(b.0), a.0.max(b.0));
+        assert!(
+            (x0 - 5.0).abs() < 0.5 && (x1 - 44.0).abs() < 0.5,
+            "{x0} {x1}"
+        );
+        assert!((a.1 - 11.5).abs() < 0.1 && (b.1 - 11.5).abs() < 0.1);
+        // Each alone: a stub, no line.
+        assert!(segments(&rects(&[(5, 14, 10, 14)]), 64, &s).is_empty());
+        // Side by side, 6 cells apart across: the line through them is 22° off their axes.
+        let offset = rects(&[(5, 14, 10, 14), (20, 29, 16, 20)]);
+        assert!(segments(&offset, 64, &s).is_empty());
+    }
 }
