@@ -532,6 +532,18 @@ impl Model {
         if !edge[1] && e1 >= hi - reach {
             (edge[1], e1) = (true, hi);
         }
+        // So is an end whose PSF reaches a side across the line, within 2σ of the last pixel
+        // along the normal (−sin θ, cos θ): a streak grazing that side, which it leaves far
+        // along its line. Flagged, and left where it is.
+        let (w, h) = (self.w as f64 - 1.0, self.h as f64 - 1.0);
+        let across = |(x, y): (f64, f64)| {
+            let (ns, nc) = (sc.0.abs(), sc.1.abs());
+            let to = |room: f64, rate: f64| if rate > 1e-12 { room / rate } else { f64::MAX };
+            to(x.min(w - x), ns).min(to(y.min(h - y), nc))
+        };
+        for (k, e) in [e0, e1].into_iter().enumerate() {
+            edge[k] |= across(self.point(q, sc, e)) <= reach;
+        }
         Some(StreakFit {
             ends: [self.point(q, sc, e0), self.point(q, sc, e1)],
             edge,

@@ -219,6 +219,20 @@ fn a_streak_across_the_frame_has_two_edge_ends() {
     }
 }
 
+/// A streak grazing a side, its PSF cut by it along its length, leaves the frame only far
+/// along its line: each end whose PSF reaches the side across the line is an edge end (the
+/// object may have left the frame there). The same streak 10 px in has two inside ends.
+#[test]
+fn ends_of_a_streak_grazing_a_side_are_edge_ends() {
+    for (x0, edge) in [(298.4, true), (289.0, false)] {
+        let (a, b) = ((x0, 60.3), (x0 - 1.5, 220.6));
+        let f = frame(300, 300, &[Thing::Streak(a.0, a.1, b.0, b.1, 12.0)], 5);
+        let found = find(&f);
+        assert_eq!(found.len(), 1, "x {x0}: {found:?}");
+        assert_eq!(found[0].edge, [edge, edge], "x {x0}: {:?}", found[0]);
+    }
+}
+
 #[test]
 fn one_end_inside_one_at_the_edge() {
     let (a, b) = ((150.2, 140.8), (-100.0, 20.0));
