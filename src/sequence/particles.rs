@@ -67,7 +67,10 @@ impl Default for ParticleSettings {
             max_speed_rad_s: 1f64.to_radians(),
             static_gate_px: 3.0,
             sigma_floor_px: 0.2,
-            max_gap_frames: 2,
+            // A particle lost for two frames (behind a star, or below the limit) is found again
+            // where its velocity puts it; with 2, it came back as a new track that looked
+            // still for its first steps (docs/sequences.md, "Tracks that outlive a gap").
+            max_gap_frames: 3,
             star_miss_prob: 2e-3,
             bright_factor: 3.0,
             flux_ratio: 2.0,
@@ -583,6 +586,33 @@ mod tests {
             if f == 3 {
                 // The tripled star starts a track of its own: undecided, not a star's step.
                 assert_eq!(j.decision[1], Decision::Undecided, "{j:?}");
+            }
+        }
+    }
+
+    /// A particle lost for two frames (hidden, or below the limit) is found again where its
+    /// velocity puts it, and is a particle at once: not a new track that has to prove it moves.
+    #[test]
+    fn a_particle_lost_for_two_frames_keeps_its_track() {
+        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
+        let speed_px = (10.0f64 / 60.0).to_radians() / camera.ifov_rad();
+        let mut tracker = Tracker::new(camera.clone(), ParticleSettings::default());
+        let mut last = None;
+        for f in 0..8 {
+            let c = Matrix3::identity();
+            let mut px = vec![(300.0, 300.0), (600.0, 500.0), (800.0, 200.0)];
+            let hidden = f == 4 || f == 5;
+            if !hidden {
+                px.push((100.0 + speed_px * f as f64, 700.0));
+            }
+            let flux = vec![1e4; px.len()];
+            let j = add_frame(&mut tracker, &camera, f, &c, last.as_ref(), &px, &flux);
+            last = Some(c);
+            if f >= 2 && !hidden {
+                assert_eq!(j.decision[3], Decision::Particle, "frame {f}: {j:?}");
+            }
+            if f == 6 {
+                assert!(j.velocity[3].is_some(), "continued, not new: {j:?}");
             }
         }
     }
