@@ -333,22 +333,7 @@ fn join_collinear(mut pieces: Vec<Segment>, stubs: &[Segment], s: &SegmentSettin
     pieces.sort_by(|a, b| b.length().total_cmp(&a.length()));
     let mut out: Vec<Joined> = Vec::new();
     for p in pieces {
-        let joined = out.iter_mut().find(|j| collinear(&j.line, &p, s)).map(|j| {
-            j.pieces.push(p);
-            let q = &mut j.line;
-            // Extend q by p's extent; keep q's line (the longer piece's, the better fixed).
-            let (a, b) = (q.along(p.cx, p.cy), p.ux * q.ux + p.uy * q.uy);
-            let (t0, t1) = (a + b * p.t_min, a + b * p.t_max);
-            q.t_min = q.t_min.min(t0.min(t1));
-            q.t_max = q.t_max.max(t0.max(t1));
-            q.pixels += p.pixels;
-        });
-        if joined.is_none() {
-            out.push(Joined {
-                line: p,
-                pieces: vec![p],
-            });
-        }
+        join_or_start(&mut out, p, s);
     }
     // A stub's own direction is loose (it is short and wide): it extends the first line its
     // middle lies on, when its axis is within 10° of the line's and the gap is a join's.
@@ -369,26 +354,29 @@ fn join_collinear(mut pieces: Vec<Segment>, stubs: &[Segment], s: &SegmentSettin
     // pieces shorter than a piece of its own (a tumbling object's, 11–28 px between dark
     // stretches). Each chain then joins a line as a piece does, or stands as one.
     for chain in stub_chains(stubs, &used, s) {
-        match out.iter_mut().find(|j| collinear(&j.line, &chain, s)) {
-            Some(j) => {
-                j.pieces.push(chain);
-                let q = &mut j.line;
-                let (a, b) = (
-                    q.along(chain.cx, chain.cy),
-                    chain.ux * q.ux + chain.uy * q.uy,
-                );
-                let (t0, t1) = (a + b * chain.t_min, a + b * chain.t_max);
-                q.t_min = q.t_min.min(t0.min(t1));
-                q.t_max = q.t_max.max(t0.max(t1));
-                q.pixels += chain.pixels;
-            }
-            None => out.push(Joined {
-                line: chain,
-                pieces: vec![chain],
-            }),
-        }
+        join_or_start(&mut out, chain, s);
     }
     out
+}
+
+/// Piece `p` joins the first line of `out` it is collinear with, else starts a line of its own.
+/// A line it joins keeps its direction (the longer piece's, the better fixed) and takes `p`'s
+/// extent.
+fn join_or_start(out: &mut Vec<Joined>, p: Segment, s: &SegmentSettings) {
+    let Some(j) = out.iter_mut().find(|j| collinear(&j.line, &p, s)) else {
+        out.push(Joined {
+            line: p,
+            pieces: vec![p],
+        });
+        return;
+    };
+    j.pieces.push(p);
+    let q = &mut j.line;
+    let (a, b) = (q.along(p.cx, p.cy), p.ux * q.ux + p.uy * q.uy);
+    let (t0, t1) = (a + b * p.t_min, a + b * p.t_max);
+    q.t_min = q.t_min.min(t0.min(t1));
+    q.t_max = q.t_max.max(t0.max(t1));
+    q.pixels += p.pixels;
 }
 
 impl Segment {
