@@ -503,6 +503,13 @@ pub fn ln_i0(z: f64) -> f64 {
 mod tests {
     use super::*;
 
+    /// An 18° camera of 1024² pixels, and a tracker of it with the default settings.
+    fn camera_and_tracker() -> (Camera, Tracker) {
+        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
+        let tracker = Tracker::new(camera.clone(), ParticleSettings::default());
+        (camera, tracker)
+    }
+
     /// Frame `f` (at time f seconds, 0.1 px centroid noise) of detections at `px` with `flux`.
     fn add_frame(
         tracker: &mut Tracker,
@@ -552,9 +559,8 @@ mod tests {
     /// while a bright star whose flux triples (merged with a particle) is not continued by it.
     #[test]
     fn faint_particles_are_followed_through_flux_swings() {
-        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
+        let (camera, mut tracker) = camera_and_tracker();
         let speed_px = (10.0f64 / 60.0).to_radians() / camera.ifov_rad();
-        let mut tracker = Tracker::new(camera.clone(), ParticleSettings::default());
         let mut last = None;
         for f in 0..6 {
             let c = Matrix3::identity();
@@ -594,9 +600,8 @@ mod tests {
     /// velocity puts it, and is a particle at once: not a new track that has to prove it moves.
     #[test]
     fn a_particle_lost_for_two_frames_keeps_its_track() {
-        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
+        let (camera, mut tracker) = camera_and_tracker();
         let speed_px = (10.0f64 / 60.0).to_radians() / camera.ifov_rad();
-        let mut tracker = Tracker::new(camera.clone(), ParticleSettings::default());
         let mut last = None;
         for f in 0..8 {
             let c = Matrix3::identity();
@@ -622,8 +627,7 @@ mod tests {
     /// stood, told as a pull of that distance; the other stars are not pulled.
     #[test]
     fn stars_pulled_by_a_particle_are_told() {
-        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
-        let mut tracker = Tracker::new(camera.clone(), ParticleSettings::default());
+        let (camera, mut tracker) = camera_and_tracker();
         let mut last = None;
         for f in 0..4 {
             let c = Matrix3::identity();
@@ -655,8 +659,7 @@ mod tests {
     /// stars around it, stay stars.
     #[test]
     fn slow_particles_drift_and_pulled_stars_do_not() {
-        let camera = Camera::from_fov(1024, 1024, 18.0).unwrap();
-        let mut tracker = Tracker::new(camera.clone(), ParticleSettings::default());
+        let (camera, mut tracker) = camera_and_tracker();
         let stars: Vec<(f64, f64)> = (0..24)
             .map(|i| (100.0 + 35.0 * i as f64, 300.0 + 60.0 * (i % 5) as f64))
             .collect();
