@@ -119,9 +119,9 @@ fn blobs_cpu_with(frame: &Frame, p: &DetectParams, tiles: &[TileStats]) -> Vec<B
 /// pixels, a hot pixel one (two with one noisy neighbour). Noise smoothed by the filter sets
 /// three: the filter's level takes the noise as white, and a JPEG's is not (its blocks carry
 /// it from pixel to pixel), so that on 8-bit JPEG frames most of the filter's new detections
-/// were of 3 pixels (228 of 293 on f8, docs/speed.md "The matched filter's smallest
-/// component"), none of them a star; on the FITS frames the stars it found were of 4 pixels or
-/// more, and of the detection retry's 3-pixel components none was a star.
+/// were of 3 pixels (228 of 293 on f8, docs/speed.md "8-bit noise"), none of them a star;
+/// on the FITS frames the stars it found were of 4 pixels or more, and of the detection
+/// retry's 3-pixel components none was a star.
 pub const MIN_AREA_FILTERED: u32 = 4;
 
 /// Turn blobs into the star list: drop those smaller than `min_area` (hot pixels), order by

@@ -76,7 +76,7 @@ struct Region {
 
 /// Fit the segment's streak in `d(x, y)` (pixel − background) of a `w`×`h` frame.
 pub fn fit(d: &dyn Fn(u32, u32) -> f64, w: u32, h: u32, seg: &Segment) -> Option<StreakFit> {
-    let (cx, cy) = seg.point(0.5 * (seg.t_min + seg.t_max));
+    let (cx, cy) = seg.mid();
     let th0 = seg.uy.atan2(seg.ux);
     let half = 0.5 * seg.length();
     let region = Region::around(d, w, h, (cx, cy), th0, -half - 15.0, half + 15.0, 8.0);
@@ -536,11 +536,9 @@ impl Model {
         // along the normal (−sin θ, cos θ): a streak grazing that side, which it leaves far
         // along its line. Flagged, and left where it is.
         let (w, h) = (self.w as f64 - 1.0, self.h as f64 - 1.0);
-        let across = |(x, y): (f64, f64)| {
-            let (ns, nc) = (sc.0.abs(), sc.1.abs());
-            let to = |room: f64, rate: f64| if rate > 1e-12 { room / rate } else { f64::MAX };
-            to(x.min(w - x), ns).min(to(y.min(h - y), nc))
-        };
+        let to = |room: f64, rate: f64| if rate > 1e-12 { room / rate } else { f64::MAX };
+        let across =
+            |(x, y): (f64, f64)| to(x.min(w - x), sc.0.abs()).min(to(y.min(h - y), sc.1.abs()));
         for (k, e) in [e0, e1].into_iter().enumerate() {
             edge[k] |= across(self.point(q, sc, e)) <= reach;
         }

@@ -39,6 +39,11 @@ impl Segment {
         (self.cx + t * self.ux, self.cy + t * self.uy)
     }
 
+    /// The middle of its extent.
+    pub fn mid(&self) -> (f64, f64) {
+        self.point(0.5 * (self.t_min + self.t_max))
+    }
+
     /// The segment of a grid of `bin`×`bin` blocks in pixels of the frame (block x covers
     /// pixels bin·x … bin·x + bin − 1, so its centre is pixel bin·x + (bin − 1)/2).
     pub fn in_pixels(&self, bin: u32) -> Segment {
@@ -341,7 +346,8 @@ fn join_collinear(mut pieces: Vec<Segment>, stubs: &[Segment], s: &SegmentSettin
     for (k, p) in stubs.iter().enumerate() {
         if let Some(j) = out.iter_mut().find(|j| stub_on(&j.line, p, s)) {
             let q = &mut j.line;
-            let (t, half) = (q.along(p.mid().0, p.mid().1), 0.5 * p.length());
+            let (x, y) = p.mid();
+            let (t, half) = (q.along(x, y), 0.5 * p.length());
             if stub_gap(q, p) <= (q.length() + p.length()).max(s.max_join_gap_px) {
                 q.t_min = q.t_min.min(t - half);
                 q.t_max = q.t_max.max(t + half);
@@ -379,13 +385,6 @@ fn join_or_start(out: &mut Vec<Joined>, p: Segment, s: &SegmentSettings) {
     q.pixels += p.pixels;
 }
 
-impl Segment {
-    /// The middle of its extent.
-    fn mid(&self) -> (f64, f64) {
-        self.point(0.5 * (self.t_min + self.t_max))
-    }
-}
-
 /// Does stub `p` lie on line `q`: its axis within 10° of the line's and its middle within the
 /// band?
 fn stub_on(q: &Segment, p: &Segment, s: &SegmentSettings) -> bool {
@@ -396,7 +395,8 @@ fn stub_on(q: &Segment, p: &Segment, s: &SegmentSettings) -> bool {
 
 /// The gap along line `q` between its extent and stub `p`'s (0 where they overlap).
 fn stub_gap(q: &Segment, p: &Segment) -> f64 {
-    let (half, t) = (0.5 * p.length(), q.along(p.mid().0, p.mid().1));
+    let (x, y) = p.mid();
+    let (half, t) = (0.5 * p.length(), q.along(x, y));
     (t - half - q.t_max).max(q.t_min - t - half).max(0.0)
 }
 
