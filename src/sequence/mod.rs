@@ -14,6 +14,7 @@ pub mod motion;
 pub mod particles;
 pub mod simulate;
 pub mod track;
+pub mod uncatalogued;
 
 use crate::camera::Camera;
 pub use crate::pipeline::Detected;
@@ -238,15 +239,7 @@ impl<'a> Sequencer<'a> {
             .map(|&(x, y)| camera.pixel_to_vector(x, y))
             .collect();
         let flux: Vec<f64> = dets.iter().map(|d| d.flux).collect();
-        let judged = self.judge(t, &camera, &px, &dirs, &flux);
-        for ((p, dec), fl) in px.iter().zip(&judged.decision).zip(&flux) {
-            tracing::trace!(
-                "{}: detection ({:.2}, {:.2}) flux {fl:.0}: {dec:?}",
-                d.name,
-                p.0,
-                p.1
-            );
-        }
+        let mut judged = self.judge(t, &camera, &px, &dirs, &flux);
         let dets = &weighed_for_pulls(dets, &judged.pulled);
         let st = self.state.as_mut().expect("a state");
         let chain = st.chain.as_ref().map(|c| (c.id, c.c));
@@ -271,6 +264,18 @@ impl<'a> Sequencer<'a> {
             None => solver.identify(kept.clone(), d.epoch).outcome,
         };
         let outcome = with_all_detections(solver, outcome, dets, &keep);
+        if let (Outcome::Solved(r, refs), Some(ch)) = (&outcome, st.chain.as_mut()) {
+            let flags = uncatalogued::uncatalogued(r, refs, dets);
+            ch.tracker.not_stars(&flags, &mut judged);
+        }
+        for ((p, dec), fl) in px.iter().zip(&judged.decision).zip(&flux) {
+            tracing::trace!(
+                "{}: detection ({:.2}, {:.2}) flux {fl:.0}: {dec:?}",
+                d.name,
+                p.0,
+                p.1
+            );
+        }
         let identify_ms = t_identify.elapsed().as_secs_f64() * 1e3;
         if let Outcome::Solved(r, _) = &outcome {
             st.solved.push(Solved {

@@ -179,6 +179,9 @@ pub struct Tracker {
     faintest: Option<f64>,
     /// The last frame's detections, in the reference frame.
     previous: Vec<Vector3<f64>>,
+    /// The last frame's camera frame, and the track of each of its detections.
+    last_c: Matrix3<f64>,
+    last_owner: Vec<usize>,
 }
 
 impl Tracker {
@@ -189,6 +192,8 @@ impl Tracker {
             tracks: Vec::new(),
             faintest: None,
             previous: Vec::new(),
+            last_c: Matrix3::identity(),
+            last_owner: Vec::new(),
         }
     }
 
@@ -414,10 +419,29 @@ impl Tracker {
                     .flatten()
             })
             .collect();
+        self.last_c = *c;
+        self.last_owner = owner.iter().map(|k| k.expect("owned")).collect();
         Judged {
             decision,
             velocity,
             pulled,
+        }
+    }
+
+    /// Detections of the last frame added known to be no star (`flags`, in its order; from
+    /// [`super::uncatalogued`]): their tracks are particles from now on, and `judged` (that
+    /// frame's) says so, with their velocities.
+    pub fn not_stars(&mut self, flags: &[bool], judged: &mut Judged) {
+        for (j, _) in flags.iter().enumerate().filter(|(_, f)| **f) {
+            let Some(&k) = self.last_owner.get(j) else {
+                continue;
+            };
+            if judged.decision[j] == Decision::Particle {
+                continue;
+            }
+            self.tracks[k].decision = Decision::Particle;
+            judged.decision[j] = Decision::Particle;
+            judged.velocity[j] = self.velocity(k, &self.last_c);
         }
     }
 
@@ -592,6 +616,35 @@ mod tests {
             if f == 3 {
                 // The tripled star starts a track of its own: undecided, not a star's step.
                 assert_eq!(j.decision[1], Decision::Undecided, "{j:?}");
+            }
+        }
+    }
+
+    /// A track said to be no star (the catalog lacks it) is a particle in that frame's
+    /// judgement and from then on, though its steps of a fifth of a pixel look like a star's;
+    /// the tracks beside it are left as they are.
+    #[test]
+    fn a_track_found_to_be_no_star_stays_a_particle() {
+        let (camera, mut tracker) = camera_and_tracker();
+        let mut last = None;
+        for f in 0..5 {
+            let c = Matrix3::identity();
+            let px = vec![
+                (300.0, 300.0),
+                (600.0, 500.0),
+                (400.0 + 0.2 * f as f64, 700.0),
+            ];
+            let mut j = add_frame(&mut tracker, &camera, f, &c, last.as_ref(), &px, &[1e4; 3]);
+            last = Some(c);
+            if f == 1 {
+                assert_eq!(j.decision, [Decision::Star; 3]);
+                tracker.not_stars(&[false, false, true], &mut j);
+                assert_eq!(j.decision[2], Decision::Particle);
+                assert!(j.velocity[2].is_some());
+            }
+            if f >= 2 {
+                assert_eq!(j.decision[..2], [Decision::Star; 2], "frame {f}");
+                assert_eq!(j.decision[2], Decision::Particle, "frame {f}: {j:?}");
             }
         }
     }

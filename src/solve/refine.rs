@@ -116,6 +116,32 @@ fn in_view_of(
         .collect()
 }
 
+/// Reference stars projecting within `margin` pixels of the image under `r`, its edges
+/// included: (ref id, pixel). A star just beyond an edge still lights the pixels along it.
+pub fn stars_around_view(
+    r: &Matrix3<f64>,
+    refs: &RefCatalog,
+    camera: &Camera,
+    margin: f64,
+) -> Vec<(u32, f64, f64)> {
+    let boresight = r.transpose() * camera.centre_vector();
+    let half = view_half_angle(camera);
+    let (w, h) = (f64::from(camera.width), f64::from(camera.height));
+    refs.within(&boresight, half)
+        .into_iter()
+        .map(|id| (id, refs.v(id as usize)))
+        .filter(|(_, v)| v.dot(&boresight) >= half.cos())
+        .filter_map(|(id, v)| {
+            let (x, y) = camera.vector_to_pixel(&(r * v))?;
+            let inside = x >= -0.5 - margin
+                && y >= -0.5 - margin
+                && x <= w - 0.5 + margin
+                && y <= h - 0.5 + margin;
+            inside.then_some((id, x, y))
+        })
+        .collect()
+}
+
 /// The half-angle of the cone [`stars_in_view`] tests around the boresight.
 fn view_half_angle(camera: &Camera) -> f64 {
     (camera.diagonal_rad() * 0.5 + 0.01).min(std::f64::consts::PI)
