@@ -1,7 +1,7 @@
 // Stage threshold, kernel 2 of 2 (CPU twin: src/cpu/threshold.rs threshold): the mask
 // pixel · s² > interpolated (background + offset) · s², in integers; with the matched filter
-// (matched = 1, twin threshold_filtered) the pixel and its 3x3 binomial smoothing both above
-// the filter's level. One invocation per 32
+// (matched = its noise gain, 6..16; twin threshold_filtered) the pixel and its 3x3 binomial
+// smoothing both above the filter's level. One invocation per 32
 // pixels (in raster order) writes one mask word; each set pixel starts as its own label and
 // its index is appended to the set list, which the later kernels walk instead of the frame
 // (the list's order does not matter to them). Dispatch (blocks, images), striding.
@@ -27,7 +27,7 @@ fn level(img: u32, tx: u32, ty: u32) -> u32 {
 // The matched filter's tile level in 1/16 ADU (src/cpu/threshold.rs filtered_tile_level).
 fn flevel(img: u32, tx: u32, ty: u32) -> u32 {
     let t = tiles[img * u.b.tiles_per_image + ty * u.p.tiles_x + tx];
-    return 16u * t.background + 6u * min(t.offset, 1u << 20u);
+    return 16u * t.background + u.p.matched * min(t.offset, 1u << 20u);
 }
 
 // The 3x3 binomial sum at (x, y), edges repeated (src/cpu/threshold.rs binomial3).
@@ -105,7 +105,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         for (var i = first; i < last; i++) {
             let a = axis_value(ax, p.tiles_x);
             let tx1 = min(a.x + 1u, p.tiles_x - 1u);
-            if (p.matched == 1u) {
+            if (p.matched != 0u) {
                 // The matched filter: floored interpolation between rows, then columns.
                 let c0 = ((s - ay.y) * flevel(img, a.x, ay.x) + ay.y * flevel(img, a.x, ty1)) / s;
                 let c1 = ((s - ay.y) * flevel(img, tx1, ay.x) + ay.y * flevel(img, tx1, ty1)) / s;

@@ -10,7 +10,8 @@ struct DetectParams {
     tiles_y: u32,
     saturation: u32,
     k_mad: f32,
-    // 0: the pixel against its level; 1: also its 3x3 binomial smoothing (the matched filter).
+    // 0: the pixel against its level; else also its 3x3 binomial smoothing (the matched
+    // filter), against 16 · background + matched · offset (matched: the filter's noise gain).
     matched: u32,
 }
 

@@ -22,16 +22,20 @@ pub struct DetectParams {
     pub saturation: u32,
     /// k · 1.4826, where k is the threshold in noise sigmas: offset = ceil(k_mad · MAD).
     pub k_mad: f32,
-    /// [`FILTER_NONE`], or [`FILTER_BINOMIAL3`]: the threshold applies to the frame smoothed
-    /// by the matched filter (see [`threshold_filtered`]).
+    /// [`FILTER_NONE`], or the matched filter's noise gain ([`WHITE_GAIN`] to [`MAX_GAIN`]):
+    /// the threshold applies to the frame smoothed by the matched filter (see
+    /// [`threshold_filtered`]), at the tile's offset times this gain (1/16 ADU).
     pub matched: u32,
 }
 
 /// The mask compares each pixel with its level.
 pub const FILTER_NONE: u32 = 0;
-/// The mask compares the 3×3 binomial smoothing of the frame with its level (see
-/// [`threshold_filtered`]).
-pub const FILTER_BINOMIAL3: u32 = 1;
+/// The matched filter's gain for white noise: the 3×3 binomial ([1 2 1]ᵀ[1 2 1], weights
+/// summing to 16) multiplies its σ by √(Σw²) = 6 in 1/16 ADU.
+pub const WHITE_GAIN: u32 = 6;
+/// ... and for noise alike over the 3×3 (Σw = 16): the largest gain, which keeps every level
+/// below 2²⁵ (see [`filtered_level_at`]).
+pub const MAX_GAIN: u32 = 16;
 
 impl DetectParams {
     pub fn new(width: u32, height: u32, tile: u32, k_sigma: f32, saturation: u32) -> Self {
@@ -48,10 +52,19 @@ impl DetectParams {
         }
     }
 
-    /// The same with the matched filter on or off.
+    /// The same with the matched filter on (for white noise) or off.
     pub fn with_filter(self, on: bool) -> Self {
+        self.with_filter_gain(if on { WHITE_GAIN } else { FILTER_NONE })
+    }
+
+    /// The same with the matched filter at `gain` ([`filter_gain`]; [`FILTER_NONE`]: off).
+    pub fn with_filter_gain(self, gain: u32) -> Self {
         DetectParams {
-            matched: if on { FILTER_BINOMIAL3 } else { FILTER_NONE },
+            matched: if gain == FILTER_NONE {
+                FILTER_NONE
+            } else {
+                gain.clamp(WHITE_GAIN, MAX_GAIN)
+            },
             ..self
         }
     }
@@ -299,7 +312,7 @@ pub fn threshold(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<R
 /// [`threshold`], compiled where it is inlined (see [`crate::simd`]).
 #[inline(always)]
 fn threshold_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
-    if p.matched == FILTER_BINOMIAL3 {
+    if p.matched != FILTER_NONE {
         return threshold_filtered_in(pixels, tiles, p);
     }
     scan(pixels, tiles, p, &Plain::new(p))
@@ -529,18 +542,65 @@ fn block_binomial_above(pixels: &[u16], p: &DetectParams, x: usize, y: u32, floo
     }) != 0
 }
 
-/// A tile's level for the matched filter, in 1/16 ADU: 16 · background + 6 · offset. The 3×3
-/// binomial ([1 2 1]ᵀ[1 2 1], weights summing to 16) multiplies white noise by
-/// √(Σw²) = 6 in the same units: the offset of k raw sigmas becomes k sigmas of the smoothed
-/// frame.
+/// A tile's level for the matched filter, in 1/16 ADU: 16 · background + gain · offset. The
+/// 3×3 binomial multiplies the noise's σ by the gain in the same units ([`WHITE_GAIN`] for
+/// white noise, more where neighbours correlate, [`filter_gain`]): the offset of k raw sigmas
+/// becomes k sigmas of the smoothed frame.
 #[inline]
-pub fn filtered_tile_level(t: &TileStats) -> u32 {
-    16 * t.background + 6 * t.offset.min(1 << 20)
+pub fn filtered_tile_level(t: &TileStats, gain: u32) -> u32 {
+    16 * t.background + gain * t.offset.min(1 << 20)
+}
+
+/// The matched filter's noise gain for a frame: the σ of its 3×3 binomial sums over the σ of
+/// its pixels, rounded, from [`WHITE_GAIN`] to [`MAX_GAIN`]. Each σ is the MAD of differences
+/// 4 px apart along the rows (a sky's level and gradients cancel; stars are few of them; the
+/// sums 4 px apart share no pixel, so their differences hold twice the sums' variance as the
+/// pixels' do theirs), every 16th row and 4th column, the MAD of whole counts read as the median
+/// of grouped data as in [`noise_offset`]. White noise gives 6.0; JPEG's (q 90 on docs/speed.md's
+/// f8 set) 9–10: at 6 the filter's threshold stood near 3σ of its own noise and passed noise as
+/// stars (docs/speed.md, "The matched filter's noise, measured"). Computed on the CPU for
+/// either backend, from the pixels alone.
+pub fn filter_gain(pixels: &[u16], width: u32, height: u32) -> u32 {
+    const LAG: u32 = 4;
+    if width < 2 + LAG + 2 || height < 3 {
+        return WHITE_GAIN;
+    }
+    let (mut raw, mut sums) = (Vec::new(), Vec::new());
+    for y in (1..height - 1).step_by(16) {
+        let row = (y * width) as usize;
+        for x in (1..width - 1 - LAG).step_by(4) {
+            let (a, b) = (row + x as usize, row + (x + LAG) as usize);
+            raw.push(pixels[a].abs_diff(pixels[b]) as u32);
+            let (sa, sb) = (
+                binomial3(pixels, width, height, x, y),
+                binomial3(pixels, width, height, x + LAG, y),
+            );
+            sums.push(sa.abs_diff(sb));
+        }
+    }
+    let (r, s) = (grouped_median(&mut raw), grouped_median(&mut sums));
+    if r < 0.5 {
+        return WHITE_GAIN;
+    }
+    ((s / r).round() as u32).clamp(WHITE_GAIN, MAX_GAIN)
+}
+
+/// The median of whole numbers read as grouped data: m − ½ + (n/2 − below)/at, where `at`
+/// values equal the median m and `below` are less.
+fn grouped_median(v: &mut [u32]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let half = v.len() / 2;
+    let (_, &mut m, _) = v.select_nth_unstable(half);
+    let below = v.iter().filter(|&&x| x < m).count();
+    let at = v.iter().filter(|&&x| x == m).count();
+    f64::from(m) - 0.5 + (v.len() as f64 / 2.0 - below as f64) / at as f64
 }
 
 /// The matched filter's level at (x, y), in 1/16 ADU: interpolated between tile rows, floored,
-/// then between tile columns, floored (so that every product fits u32: levels < 2^23 times
-/// weights ≤ 128).
+/// then between tile columns, floored (so that every product fits u32: levels below
+/// 16 · 2^16 + 16 · 2^20 < 2^25 times weights ≤ 128).
 #[inline]
 pub fn filtered_level_at(tiles: &[TileStats], p: &DetectParams, x: u32, y: u32) -> u32 {
     let (tx, wx) = axis_weight(x, p.tile, p.tiles_x);
@@ -548,7 +608,8 @@ pub fn filtered_level_at(tiles: &[TileStats], p: &DetectParams, x: u32, y: u32) 
     let s = 2 * p.tile;
     let tx1 = (tx + 1).min(p.tiles_x - 1);
     let ty1 = (ty + 1).min(p.tiles_y - 1);
-    let at = |tx: u32, ty: u32| filtered_tile_level(&tiles[(ty * p.tiles_x + tx) as usize]);
+    let at =
+        |tx: u32, ty: u32| filtered_tile_level(&tiles[(ty * p.tiles_x + tx) as usize], p.matched);
     let c0 = ((s - wy) * at(tx, ty) + wy * at(tx, ty1)) / s;
     let c1 = ((s - wy) * at(tx1, ty) + wy * at(tx1, ty1)) / s;
     ((s - wx) * c0 + wx * c1) / s
@@ -568,11 +629,11 @@ pub fn binomial3(pixels: &[u16], width: u32, height: u32, x: u32, y: u32) -> u32
     row(yu) + 2 * row(y) + row(yd)
 }
 
-/// The mask with the matched filter (the threshold kernel's FILTER_BINOMIAL3 mode): a pixel is
+/// The mask with the matched filter (the threshold kernel with `matched` set): a pixel is
 /// set when both its 3×3 binomial smoothing (a filter of about the size of a star's PSF, which
 /// raises a star's peak SNR about twofold for PSF σ ≈ 1 px) is above its tile level at k
-/// sigmas of the smoothed noise, and the pixel itself is above the same level (k · 6/16 ≈ 0.4 k
-/// of its own sigmas): a lone hot pixel lifts its smoothed neighbours but not their pixels, so
+/// sigmas of the smoothed noise, and the pixel itself is above the same level (k · gain/16: 0.4 k
+/// of its own sigmas for white noise): a lone hot pixel lifts its smoothed neighbours but not their pixels, so
 /// it stays one pixel and `min_area` drops it. Integer arithmetic throughout: the GPU's mask is
 /// the same bit for bit.
 pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
@@ -597,7 +658,7 @@ struct Filtered<'a> {
 impl Rule for Filtered<'_> {
     #[inline(always)]
     fn tile_level(&self, t: &TileStats) -> u32 {
-        filtered_tile_level(t)
+        filtered_tile_level(t, self.p.matched)
     }
     #[inline(always)]
     fn between_rows(&self, a: u32, b: u32, wy: u32) -> u32 {
@@ -675,5 +736,50 @@ mod tests {
             };
             assert_eq!(median_mad(&mut v, guess), want, "case {case}");
         }
+    }
+
+    /// Gaussian noise of σ `sigma` about `base`, 512 × 384, from `seed`; with `box2` each pixel
+    /// the mean of a 2 × 2 box of it (neighbours correlate by ½ along each axis, and not at a
+    /// distance of 2), rounded to whole counts.
+    fn noise(sigma: f64, base: f64, box2: bool, seed: u64) -> Vec<u16> {
+        let (w, h) = (512usize, 384usize);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let white: Vec<f64> = (0..(w + 1) * (h + 1))
+            .map(|_| {
+                // Box–Muller.
+                let (u, v): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
+                (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+            })
+            .collect();
+        let at = |x: usize, y: usize| white[y * (w + 1) + x];
+        (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let n = if box2 {
+                    // The mean of four has σ/2: times 2 keeps σ.
+                    at(x, y) + at(x + 1, y) + at(x, y + 1) + at(x + 1, y + 1)
+                } else {
+                    at(x, y)
+                };
+                (base + sigma * n / if box2 { 2.0 } else { 1.0 }).round() as u16
+            })
+            .collect()
+    }
+
+    /// The gain is the binomial's on the noise itself: 6 for white noise, 16-bit or in whole
+    /// counts of an 8-bit frame (σ 2 and 1.5: the grouped median; the plain one of σ 1.5's
+    /// differences, 1 for 1.43, made it 9), and 10 where neighbours correlate by
+    /// ½ (per axis 6 + 8ρ₁ + 2ρ₂ = 10 against 6, so the σ of the sums over that of the
+    /// pixels is 10). A flat frame, or one too small, keeps the white-noise gain.
+    #[test]
+    fn the_filter_gain_is_the_noise_s_own() {
+        let (w, h) = (512, 384);
+        assert_eq!(filter_gain(&noise(40.0, 3000.0, false, 1), w, h), 6);
+        assert_eq!(filter_gain(&noise(2.0, 12.0, false, 2), w, h), 6);
+        assert_eq!(filter_gain(&noise(1.5, 12.0, false, 5), w, h), 6);
+        assert_eq!(filter_gain(&noise(40.0, 3000.0, true, 3), w, h), 10);
+        assert_eq!(filter_gain(&noise(3.0, 20.0, true, 4), w, h), 10);
+        assert_eq!(filter_gain(&vec![500; (w * h) as usize], w, h), WHITE_GAIN);
+        assert_eq!(filter_gain(&[1, 2, 3, 4, 5, 6], 3, 2), WHITE_GAIN);
     }
 }

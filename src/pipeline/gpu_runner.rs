@@ -5,6 +5,7 @@ use super::cpu_runner::{decoded_frame, solve_with};
 use super::solvers::{BACKEND_CPU, Decoded, DetectKey, Detected, Global, SizeGroup, Solvers};
 use crate::cpu::centroid::Blob;
 use crate::cpu::pattern::Rows;
+use crate::cpu::threshold::DetectParams;
 use crate::error::{Result, error};
 use crate::gpu::Gpu;
 use crate::gpu::pattern::GpuPatterns;
@@ -142,8 +143,7 @@ impl GpuRunner {
             let stars = if self.failed {
                 Err(error!(Gpu, "the GPU failed earlier"))
             } else {
-                self.gpu
-                    .detect(&batch, &detect::params(batch[0], s))
+                by_gain(&batch, s, |f, p| self.gpu.detect(f, p))
                     .and_then(|blobs| gpu_stars(&self.gpu, &batch, &blobs, s))
             };
             match stars {
@@ -264,21 +264,23 @@ impl GpuRunner {
         streak_opts: Option<&StreakOptions>,
     ) -> Result<GroupOut> {
         let t0 = Instant::now();
-        let p = detect::params(frames[0], settings);
         let (blobs, found) = match streak_opts {
-            None => (self.gpu.detect(frames, &p)?, vec![None; frames.len()]),
-            Some(o) => {
-                let sp = o.settings.params(&p, settings.k_sigma);
-                let (blobs, pixels) = self.gpu.detect_streaks(frames, &p, &sp)?;
-                let mut kept = Vec::with_capacity(blobs.len());
-                let mut found = Vec::with_capacity(blobs.len());
-                for ((b, px), f) in blobs.iter().zip(&pixels).zip(frames) {
-                    let s = streaks::measure(f, &px.tiles, &px.mask, &p, &o.settings);
-                    kept.push(streaks::off_streaks(b, &s));
-                    found.push(Some(s));
-                }
-                (kept, found)
-            }
+            None => (
+                by_gain(frames, settings, |f, p| self.gpu.detect(f, p))?,
+                vec![None; frames.len()],
+            ),
+            Some(o) => by_gain(frames, settings, |f, p| {
+                let sp = o.settings.params(p, settings.k_sigma);
+                let (blobs, pixels) = self.gpu.detect_streaks(f, p, &sp)?;
+                Ok((blobs.iter().zip(&pixels).zip(f))
+                    .map(|((b, px), f)| {
+                        let s = streaks::measure(f, &px.tiles, &px.mask, p, &o.settings);
+                        (streaks::off_streaks(b, &s), Some(s))
+                    })
+                    .collect())
+            })?
+            .into_iter()
+            .unzip(),
         };
         let detections = gpu_stars(&self.gpu, frames, &blobs, settings)?;
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -371,6 +373,32 @@ fn uploaded<K: std::hash::Hash + Eq, T>(
         .map_err(Clone::clone)
 }
 
+/// `run` (a GPU detection of frames of one size under one uniform) on the frames of each
+/// matched-filter gain apart ([`detect::gain_groups`]: one group without the filter, and
+/// mostly one with it), its results back in the frames' order.
+fn by_gain<T>(
+    frames: &[&Frame],
+    s: &DetectSettings,
+    mut run: impl FnMut(&[&Frame], &DetectParams) -> Result<Vec<T>>,
+) -> Result<Vec<T>> {
+    let groups = detect::gain_groups(frames, s);
+    if let [(gain, _)] = groups.as_slice() {
+        return run(frames, &detect::params_at(frames[0], s, *gain));
+    }
+    let mut out: Vec<Option<T>> = (0..frames.len()).map(|_| None).collect();
+    for (gain, which) in groups {
+        let sub: Vec<&Frame> = which.iter().map(|&i| frames[i]).collect();
+        let found = run(&sub, &detect::params_at(sub[0], s, gain))?;
+        for (i, t) in which.into_iter().zip(found) {
+            out[i] = Some(t);
+        }
+    }
+    Ok(out
+        .into_iter()
+        .map(|t| t.expect("every frame is in a group"))
+        .collect())
+}
+
 /// A GPU batch's kernels: its frames (one size) and the runner's uploads, made on first use.
 struct GpuKernels<'r, 'f> {
     runner: &'r mut GpuRunner,
@@ -386,10 +414,10 @@ impl Kernels for GpuKernels<'_, '_> {
         s: &DetectSettings,
     ) -> Result<Vec<Vec<Detection>>> {
         let subset: Vec<&Frame> = which.iter().map(|&i| self.frames[i]).collect();
-        let Some(first) = subset.first() else {
+        if subset.is_empty() {
             return Ok(Vec::new());
-        };
-        let blobs = self.runner.gpu.detect(&subset, &detect::params(first, s))?;
+        }
+        let blobs = by_gain(&subset, s, |f, p| self.runner.gpu.detect(f, p))?;
         gpu_stars(&self.runner.gpu, &subset, &blobs, s)
     }
 

@@ -86,8 +86,27 @@ impl DetectSettings {
     }
 }
 
-/// The stage parameters for a frame under these settings.
+/// The stage parameters for a frame under these settings: with the matched filter, at the
+/// frame's own noise gain ([`filter_gain_of`]).
 pub fn params(frame: &Frame, s: &DetectSettings) -> DetectParams {
+    params_at(frame, s, filter_gain_of(frame, s))
+}
+
+/// The matched filter's noise gain for a frame under these settings
+/// ([`cpu::threshold::filter_gain`]; [`cpu::threshold::FILTER_NONE`] without the filter):
+/// frames of a GPU batch are detected together where their gains agree.
+pub fn filter_gain_of(frame: &Frame, s: &DetectSettings) -> u32 {
+    if s.matched_filter {
+        let gain = cpu::threshold::filter_gain(&frame.pixels, frame.width, frame.height);
+        tracing::debug!("the matched filter's noise gain: {gain} (6 for white noise)");
+        gain
+    } else {
+        cpu::threshold::FILTER_NONE
+    }
+}
+
+/// [`params`] with the matched filter's gain given.
+pub fn params_at(frame: &Frame, s: &DetectSettings, gain: u32) -> DetectParams {
     DetectParams::new(
         frame.width,
         frame.height,
@@ -95,7 +114,17 @@ pub fn params(frame: &Frame, s: &DetectSettings) -> DetectParams {
         s.k_sigma,
         frame.saturation as u32,
     )
-    .with_filter(s.matched_filter)
+    .with_filter_gain(gain)
+}
+
+/// Indices of `frames` grouped by their matched filter's gain under `s` (one group, in order,
+/// without the filter), each group with its gain.
+pub fn gain_groups(frames: &[&Frame], s: &DetectSettings) -> Vec<(u32, Vec<usize>)> {
+    let mut groups: std::collections::BTreeMap<u32, Vec<usize>> = Default::default();
+    for (i, f) in frames.iter().enumerate() {
+        groups.entry(filter_gain_of(f, s)).or_default().push(i);
+    }
+    groups.into_iter().collect()
 }
 
 /// Run the CPU twins of the detection kernels: the blobs in label order.

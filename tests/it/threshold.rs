@@ -567,17 +567,31 @@ fn gpu_equals_cpu_with_the_matched_filter() {
     let Some(g) = common::gpu("gpu_equals_cpu_with_the_matched_filter") else {
         return;
     };
-    let n8 = common::assert_detect_stages_equal_with(
-        &g,
-        &common::sim_frames(3, (640, 480), 18.0, 8, 21),
-        32,
-        true,
-    );
+    // At the white-noise gain, at the measured gain of noise that neighbours share, and at
+    // the largest: the kernel takes its gain from the parameters.
+    let frames8 = common::sim_frames(3, (640, 480), 18.0, 8, 21);
+    let mut n8 = 0;
+    for gain in [WHITE_GAIN, 10, MAX_GAIN] {
+        n8 += common::assert_detect_stages_equal_with(&g, &frames8, 32, gain);
+    }
+    // ... and the masks those gains give differ.
+    let set = |gain: u32| {
+        let f = &frames8[0];
+        let p = DetectParams::new(f.width, f.height, 32, 5.0, f.saturation as u32)
+            .with_filter_gain(gain);
+        let tiles = gpustar::cpu::tile_clip::clipped_tile_stats(&f.pixels, &p);
+        threshold(&f.pixels, &tiles, &p)
+            .iter()
+            .map(|r| r.x1 - r.x0)
+            .sum::<u32>()
+    };
+    let (at6, at10) = (set(WHITE_GAIN), set(10));
+    assert!(at6 > at10, "pixels set at gains 6 and 10: {at6}, {at10}");
     let n16 = common::assert_detect_stages_equal_with(
         &g,
         &common::sim_frames(2, (333, 77), 10.0, 16, 22),
         16,
-        true,
+        WHITE_GAIN,
     );
     for (w, h, v) in [(1, 1, 7u16), (2, 5, 0), (3, 1, 65535)] {
         let f = gpustar::io::frame::Frame {
@@ -586,7 +600,7 @@ fn gpu_equals_cpu_with_the_matched_filter() {
             pixels: vec![v; (w * h) as usize].into(),
             saturation: 65535,
         };
-        common::assert_detect_stages_equal_with(&g, &[f], 4, true);
+        common::assert_detect_stages_equal_with(&g, &[f], 4, WHITE_GAIN);
     }
     assert!(n8 > 50 && n16 > 5, "{n8} and {n16} blobs compared");
 }

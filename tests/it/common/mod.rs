@@ -115,15 +115,16 @@ pub fn assert_detect_stages_equal(
     frames: &[gpustar::io::frame::Frame],
     tile: u32,
 ) -> usize {
-    assert_detect_stages_equal_with(g, frames, tile, false)
+    assert_detect_stages_equal_with(g, frames, tile, gpustar::cpu::threshold::FILTER_NONE)
 }
 
-/// As [`assert_detect_stages_equal`], with the matched filter on or off.
+/// As [`assert_detect_stages_equal`], with the matched filter at `gain`
+/// (`cpu::threshold::FILTER_NONE`: off; `WHITE_GAIN` for white noise).
 pub fn assert_detect_stages_equal_with(
     g: &gpustar::gpu::Gpu,
     frames: &[gpustar::io::frame::Frame],
     tile: u32,
-    matched_filter: bool,
+    gain: u32,
 ) -> usize {
     let f0 = &frames[0];
     let p = gpustar::cpu::threshold::DetectParams::new(
@@ -133,7 +134,7 @@ pub fn assert_detect_stages_equal_with(
         5.0,
         f0.saturation as u32,
     )
-    .with_filter(matched_filter);
+    .with_filter_gain(gain);
     let refs: Vec<&gpustar::io::frame::Frame> = frames.iter().collect();
     let (blobs, ins) = g.detect_inspect(&refs, &p).unwrap();
     let mut n = 0;
