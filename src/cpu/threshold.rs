@@ -633,9 +633,9 @@ pub fn binomial3(pixels: &[u16], width: u32, height: u32, x: u32, y: u32) -> u32
 /// set when both its 3×3 binomial smoothing (a filter of about the size of a star's PSF, which
 /// raises a star's peak SNR about twofold for PSF σ ≈ 1 px) is above its tile level at k
 /// sigmas of the smoothed noise, and the pixel itself is above the same level (k · gain/16: 0.4 k
-/// of its own sigmas for white noise): a lone hot pixel lifts its smoothed neighbours but not their pixels, so
-/// it stays one pixel and `min_area` drops it. Integer arithmetic throughout: the GPU's mask is
-/// the same bit for bit.
+/// of its own sigmas for white noise): a lone hot pixel lifts its smoothed neighbours but not
+/// their pixels, so it stays one pixel and `min_area` drops it. Integer arithmetic throughout:
+/// the GPU's mask is the same bit for bit.
 pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
     crate::simd::fast!(threshold_filtered_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run>)
 }
