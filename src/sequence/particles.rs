@@ -428,9 +428,9 @@ impl Tracker {
         }
     }
 
-    /// Detections of the last frame added known to be no star (`flags`, in its order; from
-    /// [`super::uncatalogued`]): their tracks are particles from now on, and `judged` (that
-    /// frame's) says so, with their velocities.
+    /// Detections of the last frame added known to be no star (`flags`, in its order; from the
+    /// catalog test, `sequence/uncatalogued.rs`): their tracks are particles from now on, and
+    /// `judged` (that frame's) says so, with their velocities.
     pub fn not_stars(&mut self, flags: &[bool], judged: &mut Judged) {
         for (j, _) in flags.iter().enumerate().filter(|(_, f)| **f) {
             let Some(&k) = self.last_owner.get(j) else {
