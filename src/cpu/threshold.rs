@@ -555,7 +555,7 @@ pub fn filtered_tile_level(t: &TileStats, gain: u32) -> u32 {
 /// its pixels, rounded, from [`WHITE_GAIN`] to [`MAX_GAIN`]. Each σ is the MAD of differences
 /// 4 px apart along the rows (a sky's level and gradients cancel; stars are few of them; the
 /// sums 4 px apart share no pixel, so their differences hold twice the sums' variance as the
-/// pixels' do theirs), every 16th row and 4th column, the MAD of whole counts read as the median
+/// pixels' do theirs): those of consecutive samples every 4th column of every 16th row, the MAD of whole counts read as the median
 /// of grouped data as in [`noise_offset`]. White noise gives 6.0; JPEG's (q 90 on docs/speed.md's
 /// f8 set) 9–10: at 6 the filter's threshold stood near 3σ of its own noise and passed noise as
 /// stars (docs/speed.md, "The matched filter's noise, measured"). Computed on the CPU for
@@ -568,14 +568,19 @@ pub fn filter_gain(pixels: &[u16], width: u32, height: u32) -> u32 {
     let (mut raw, mut sums) = (Vec::new(), Vec::new());
     for y in (1..height - 1).step_by(16) {
         let row = (y * width) as usize;
-        for x in (1..width - 1 - LAG).step_by(4) {
-            let (a, b) = (row + x as usize, row + (x + LAG) as usize);
-            raw.push(pixels[a].abs_diff(pixels[b]) as u32);
-            let (sa, sb) = (
-                binomial3(pixels, width, height, x, y),
-                binomial3(pixels, width, height, x + LAG, y),
-            );
-            sums.push(sa.abs_diff(sb));
+        // Each sample once: (pixel, binomial sum) at x = 1, 1 + LAG, ... ≤ width − 2.
+        let samples: Vec<(u16, u32)> = (1..width - 1)
+            .step_by(LAG as usize)
+            .map(|x| {
+                (
+                    pixels[row + x as usize],
+                    binomial3(pixels, width, height, x, y),
+                )
+            })
+            .collect();
+        for pair in samples.windows(2) {
+            raw.push(u32::from(pair[0].0.abs_diff(pair[1].0)));
+            sums.push(pair[0].1.abs_diff(pair[1].1));
         }
     }
     let (r, s) = (grouped_median(&mut raw), grouped_median(&mut sums));

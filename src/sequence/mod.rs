@@ -267,7 +267,7 @@ impl<'a> Sequencer<'a> {
         if let (Outcome::Solved(r, refs), Some(ch)) = (&outcome, st.chain.as_mut()) {
             let mut flags = uncatalogued::uncatalogued(r, refs, dets);
             outcome = without_blends(&solver.settings, outcome, dets, &mut flags);
-            ch.tracker.not_stars(&flags, &mut judged);
+            ch.tracker.not_stars(&flags, &ch.c, &mut judged);
         }
         for ((p, dec), fl) in px.iter().zip(&judged.decision).zip(&flux) {
             tracing::trace!(

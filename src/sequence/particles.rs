@@ -179,8 +179,7 @@ pub struct Tracker {
     faintest: Option<f64>,
     /// The last frame's detections, in the reference frame.
     previous: Vec<Vector3<f64>>,
-    /// The last frame's camera frame, and the track of each of its detections.
-    last_c: Matrix3<f64>,
+    /// The track of each of the last frame's detections.
     last_owner: Vec<usize>,
 }
 
@@ -192,7 +191,6 @@ impl Tracker {
             tracks: Vec::new(),
             faintest: None,
             previous: Vec::new(),
-            last_c: Matrix3::identity(),
             last_owner: Vec::new(),
         }
     }
@@ -419,7 +417,6 @@ impl Tracker {
                     .flatten()
             })
             .collect();
-        self.last_c = *c;
         self.last_owner = owner.iter().map(|k| k.expect("owned")).collect();
         Judged {
             decision,
@@ -430,8 +427,8 @@ impl Tracker {
 
     /// Detections of the last frame added known to be no star (`flags`, in its order; from the
     /// catalog test, `sequence/uncatalogued.rs`): their tracks are particles from now on, and
-    /// `judged` (that frame's) says so, with their velocities.
-    pub fn not_stars(&mut self, flags: &[bool], judged: &mut Judged) {
+    /// `judged` (that frame's, whose camera frame is `c`) says so, with their velocities.
+    pub fn not_stars(&mut self, flags: &[bool], c: &Matrix3<f64>, judged: &mut Judged) {
         for (j, _) in flags.iter().enumerate().filter(|(_, f)| **f) {
             let Some(&k) = self.last_owner.get(j) else {
                 continue;
@@ -441,7 +438,7 @@ impl Tracker {
             }
             self.tracks[k].decision = Decision::Particle;
             judged.decision[j] = Decision::Particle;
-            judged.velocity[j] = self.velocity(k, &self.last_c);
+            judged.velocity[j] = self.velocity(k, c);
         }
     }
 
@@ -638,7 +635,7 @@ mod tests {
             last = Some(c);
             if f == 1 {
                 assert_eq!(j.decision, [Decision::Star; 3]);
-                tracker.not_stars(&[false, false, true], &mut j);
+                tracker.not_stars(&[false, false, true], &c, &mut j);
                 assert_eq!(j.decision[2], Decision::Particle);
                 assert!(j.velocity[2].is_some());
             }

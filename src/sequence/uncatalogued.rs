@@ -22,7 +22,7 @@ use crate::catalog::{DoubleStars, RefCatalog};
 use crate::solve::detect::Detection;
 use crate::solve::refine::{self, Refined};
 
-/// How much brighter than the faintest reference star in view a detection must be: the
+/// How much brighter than any reference star that could be it a detection must be: the
 /// catalog's band and the sensor's differ by star colour (Hp against a bare silicon sensor,
 /// a few tenths for most stars), and a component's flux by how much of a wide PSF clears the
 /// threshold.

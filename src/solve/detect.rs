@@ -257,7 +257,9 @@ pub struct Detector<'f> {
 impl<'f> Detector<'f> {
     /// The frame's tile statistics under `settings`.
     pub fn new(frame: &'f Frame<'f>, settings: &DetectSettings) -> Self {
-        let tiles = cpu::tile_clip::clipped_tile_stats(&frame.pixels, &params(frame, settings));
+        // The tiles do not depend on the matched filter: its gain is measured when it runs.
+        let p = params_at(frame, settings, cpu::threshold::FILTER_NONE);
+        let tiles = cpu::tile_clip::clipped_tile_stats(&frame.pixels, &p);
         Detector {
             frame,
             settings: *settings,
