@@ -348,7 +348,7 @@ fn join_collinear(mut pieces: Vec<Segment>, stubs: &[Segment], s: &SegmentSettin
             let q = &mut j.line;
             let (x, y) = p.mid();
             let (t, half) = (q.along(x, y), 0.5 * p.length());
-            if stub_gap(q, p) <= (q.length() + p.length()).max(s.max_join_gap_px) {
+            if stub_within_join(q, p, s) {
                 q.t_min = q.t_min.min(t - half);
                 q.t_max = q.t_max.max(t + half);
                 q.pixels += p.pixels;
@@ -400,6 +400,12 @@ fn stub_gap(q: &Segment, p: &Segment) -> f64 {
     (t - half - q.t_max).max(q.t_min - t - half).max(0.0)
 }
 
+/// Is stub `p` within a join's gap of line `q`: at most their lengths together, or the
+/// settings' least join gap?
+fn stub_within_join(q: &Segment, p: &Segment, s: &SegmentSettings) -> bool {
+    stub_gap(q, p) <= (q.length() + p.length()).max(s.max_join_gap_px)
+}
+
 /// Chains of two or more of the stubs not `used`, longest first: a chain starts at its longest
 /// stub and takes, nearest first, each stub on the line through the chain's stubs (see
 /// [`stub_on`]; for the first pair, both axes within 10° of the line through their middles)
@@ -444,7 +450,7 @@ fn stub_chains(stubs: &[Segment], used: &[bool], s: &SegmentSettings) -> Vec<Seg
                 } else {
                     stub_on(&line, p, s)
                 };
-                on && stub_gap(&line, p) <= (line.length() + p.length()).max(s.max_join_gap_px)
+                on && stub_within_join(&line, p, s)
             };
             let next = (free.iter().copied())
                 .filter(|&m| !taken[m] && !chain.contains(&m) && fits(m))
