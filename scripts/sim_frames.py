@@ -30,11 +30,12 @@ Model
 * Epoch: Julian year uniform in [2015, 2025) per frame, taken as a UTC instant and rounded to
   the whole millisecond; truth "epoch" is the Julian year of that instant and FITS DATE-OBS its
   ISO form (UTC, ms).
-* Stars: Hipparcos-2 (catalog/hip2_hp8.csv, ICRS at J1991.25), proper motion applied linearly
-  on the tangent plane to the frame epoch (u = u0 + dt (pmra e_ra + pmdec e_dec), normalised;
-  pmra includes cos dec). No aberration, parallax or refraction: the sky is the catalogue
-  itself. Every star with Hp <= --mag-limit (default 6.0) in front of the camera is rendered
-  whose render window (below) touches the detector, also those whose centre is just off it.
+* Stars: Hipparcos-2 (the Hp <= 8 stars of catalog/hip2_hp9.csv, or a --catalog file's,
+  ICRS at J1991.25), proper motion applied linearly on the tangent plane to the frame epoch
+  (u = u0 + dt (pmra e_ra + pmdec e_dec), normalised; pmra includes cos dec). No aberration,
+  parallax or refraction: the sky is the catalogue itself. Every star with Hp <= --mag-limit
+  (default 6.0) in front of the camera is rendered whose render window (below) touches the
+  detector, also those whose centre is just off it.
 * PSF: circular Gaussian, sigma = --psf-sigma px (default 1.2), integrated EXACTLY over each
   pixel: the value of pixel (j, i) for a unit-flux source at (x, y) is
       [Phi((j+0.5-x)/s) - Phi((j-0.5-x)/s)] * [Phi((i+0.5-y)/s) - Phi((i-0.5-y)/s)],
@@ -100,7 +101,10 @@ iers.conf.auto_download = False
 from astropy.io import fits  # noqa: E402
 from astropy.time import Time  # noqa: E402
 
-DEFAULT_CATALOG = Path(__file__).resolve().parent.parent / "catalog" / "hip2_hp8.csv"
+DEFAULT_CATALOG = Path(__file__).resolve().parent.parent / "catalog" / "hip2_hp9.csv"
+# The stars drawn from it: those of the Hp <= 8 catalog the repository shipped before, so that
+# every set made since is made again byte for byte (a --catalog file is read whole).
+DEFAULT_CATALOG_MAX_MAG = 8.0
 
 EPOCH_CAT_JYEAR = 1991.25
 EPOCH_RANGE = (2015.0, 2025.0)
@@ -372,6 +376,9 @@ def load_catalog(path, max_mag, seed):
             for k in cols:
                 cols[k].append(float(row[k]))
     rows = {k: np.array(v) for k, v in cols.items()}
+    if Path(path).resolve() == DEFAULT_CATALOG:
+        shipped = rows["hp_mag"] <= DEFAULT_CATALOG_MAX_MAG
+        rows = {k: v[shipped] for k, v in rows.items()}
     scatter = np.exp(np.random.default_rng([seed, 1]).normal(0.0, SCATTER_LN, len(rows["hip"])))
     keep = rows["hp_mag"] <= max_mag
     rows = {k: v[keep] for k, v in rows.items()}

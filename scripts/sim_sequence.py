@@ -31,7 +31,7 @@ Model
   n equal slices of the exposure, each with 1/n of the flux; n = max(8, ceil(smear / 0.25 px))
   so consecutive sub-images are <= 0.25 px apart. Star and particle positions are computed
   exactly (attitude and particle motion) at each sub-step.
-* Stars: Hipparcos-2 (catalog/hip2_hp8.csv, ICRS at J1991.25), proper motion applied on the
+* Stars: Hipparcos-2 (catalog/hip2_hp9.csv, ICRS at J1991.25), proper motion applied on the
   tangent plane to each frame's mid-exposure epoch; every star with Hp <= 6.0 is rendered (also
   those just off the frame whose PSF window reaches in). No aberration/refraction: the "sky" is
   the catalogue itself.
@@ -101,7 +101,7 @@ from astropy.io import fits  # noqa: E402
 from astropy.time import Time  # noqa: E402
 from astropy.wcs import WCS  # noqa: E402
 
-DEFAULT_CATALOG = Path(__file__).resolve().parent.parent / "catalog" / "hip2_hp8.csv"
+DEFAULT_CATALOG = Path(__file__).resolve().parent.parent / "catalog" / "hip2_hp9.csv"
 
 MAG_LIMIT = 6.0  # render (and list in the truth) every star this bright
 EPOCH_CAT_JYEAR = 1991.25

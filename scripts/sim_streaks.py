@@ -20,10 +20,11 @@ Model
   R maps ICRS unit vectors to camera (v_cam = R v_icrs); x = cx + fx X/Z, y = cy + fy Y/Z.
 * Attitude: uniform random rotation (normalised 4-D Gaussian quaternion). Exposure start:
   uniform UTC instant in [2020-01-01, 2024-06-30]; exposure time uniform 2..20 s.
-* Stars: Hipparcos-2 (catalog/hip2_hp8.csv, ICRS at J1991.25), proper motion applied on the
-  tangent plane to mid-exposure; every star with Hp <= 8 is rendered (also those just off the
-  frame whose halo reaches in). No aberration/refraction: the "sky" is the catalogue itself,
-  so a plate solution maps pixels straight to catalogue ICRS, as gpustar's RA/Dec claim.
+* Stars: Hipparcos-2 (the Hp <= 8 stars of catalog/hip2_hp9.csv, or a --catalog file's, ICRS at
+  J1991.25), proper motion applied on the tangent plane to mid-exposure; every star is rendered
+  (also those just off the frame whose halo reaches in). No aberration/refraction: the "sky" is
+  the catalogue itself, so a plate solution maps pixels straight to catalogue ICRS, as
+  gpustar's RA/Dec claim.
 * Photometry: the zero point is set per frame so that a Hp 6.0 star centred on a pixel has
   peak SNR 8 (peak noise-free signal / sqrt(sky + read^2), all in electrons); each star's flux
   gets lognormal scatter (sigma 0.15 in ln). Exposure time does not scale the flux (only the
@@ -85,7 +86,10 @@ from astropy.io import fits  # noqa: E402
 from astropy.time import Time  # noqa: E402
 from astropy.wcs import WCS  # noqa: E402
 
-DEFAULT_CATALOG = Path(__file__).resolve().parent.parent / "catalog" / "hip2_hp8.csv"
+DEFAULT_CATALOG = Path(__file__).resolve().parent.parent / "catalog" / "hip2_hp9.csv"
+# The stars drawn from it: those of the Hp <= 8 catalog the repository shipped before, so that
+# every set made since is made again byte for byte (a --catalog file is read whole).
+DEFAULT_CATALOG_MAX_MAG = 8.0
 
 BETA = 3.0
 READ_NOISE = 8.0  # e-
@@ -507,6 +511,9 @@ def load_catalog(path):
             for k in cols:
                 cols[k].append(float(row[k]))
     rows = {k: np.array(v) for k, v in cols.items()}
+    if Path(path).resolve() == DEFAULT_CATALOG:
+        shipped = rows["hp_mag"] <= DEFAULT_CATALOG_MAX_MAG
+        rows = {k: v[shipped] for k, v in rows.items()}
     ra, dec = rows["ra_rad"], rows["dec_rad"]
     u = radec_to_vec(ra, dec)
     e_ra = np.stack([-np.sin(ra), np.cos(ra), np.zeros_like(ra)], axis=-1)

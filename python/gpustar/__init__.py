@@ -357,7 +357,7 @@ class Solver:
     horizontal field of view in degrees (centred, no distortion, size from each image; square
     pixels unless the option ``pixel_aspect`` gives a pixel's height over its width), or a
     ``(low, high)`` range to search. ``catalog``: a file ``gpustar catalog
-    import`` made (default: the built-in Hipparcos-2, Hp <= 8). ``backend``: "auto", "gpu"
+    import`` made (default: the built-in Hipparcos-2, Hp <= 9). ``backend``: "auto", "gpu"
     or "cpu", as ``--backend``.
 
     ``**options`` are the command line's, with ``_`` for ``-``: ``fov_tolerance``, ``fov_walk``, ``fit``

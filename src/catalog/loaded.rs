@@ -25,6 +25,11 @@ pub struct Catalog {
     pub(super) index: Arc<OnceLock<SkyIndex>>,
     /// The stars' magnitudes in ascending order, sorted on first use.
     pub(super) mags: Arc<OnceLock<Vec<f64>>>,
+    /// The magnitude to which the catalog holds nearly every star of the sky: the automatic
+    /// selection goes fainter only where a field would hold too few stars to identify
+    /// (`solve::auto_mag_limit`). Infinite unless set ([`Catalog::complete_to`]): a
+    /// user's catalog is as deep as its user made it.
+    pub complete_mag: f64,
 }
 
 impl Catalog {
@@ -46,6 +51,16 @@ impl Catalog {
             content_hash,
             index: Arc::default(),
             mags: Arc::default(),
+            complete_mag: f64::INFINITY,
+        }
+    }
+
+    /// The same catalog, said to hold nearly every star of the sky to `mag`
+    /// ([`Catalog::complete_mag`]).
+    pub fn complete_to(self, mag: f64) -> Catalog {
+        Catalog {
+            complete_mag: mag,
+            ..self
         }
     }
 
@@ -97,6 +112,7 @@ impl Catalog {
             content_hash: 0,
             index: Arc::default(),
             mags: Arc::default(),
+            complete_mag: self.complete_mag,
         }
     }
 

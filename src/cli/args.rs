@@ -174,7 +174,7 @@ Examples:
   gpustar catalog import gaia_merged.bin -o gaia_g10.gpustarcat
   gpustar catalog import tyc2.dat --max-mag 10 -o tycho2_v10.gpustarcat
   gpustar solve frame.fits --fov-deg 2 --catalog gaia_g10.gpustarcat
-  gpustar catalog import hip2.dat --max-mag 8 -o catalog/hip2_hp8.csv";
+  gpustar catalog import hip2.dat --max-mag 9 -o catalog/hip2_hp9.csv";
 
 #[derive(Args, Debug, Clone)]
 pub struct CameraOpts {
@@ -268,7 +268,7 @@ pub(crate) fn parse_pixel_aspect(s: &str) -> std::result::Result<f64, String> {
 #[derive(Args, Debug, Clone)]
 pub struct CatalogOpts {
     /// Catalog: a file `gpustar catalog import` made (binary or CSV) [default: the built-in
-    /// Hipparcos-2 catalog, Hp ≤ 8].
+    /// Hipparcos-2 catalog, Hp ≤ 9].
     #[arg(long, help_heading = "Camera and sky")]
     pub catalog: Option<PathBuf>,
     /// Observation epoch (decimal year) for proper motion.

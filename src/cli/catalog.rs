@@ -8,8 +8,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-/// The magnitude cut of the CSV output when none is given (what catalog/hip2_hp8.csv holds).
-const CSV_MAX_MAG: f64 = 8.0;
+/// The magnitude cut of the CSV output when none is given (what catalog/hip2_hp9.csv holds).
+const CSV_MAX_MAG: f64 = 9.0;
 
 /// Import `inputs` and write them to `output`: the binary catalog file (several inputs make
 /// one catalog, a star in more than one kept once), or for a `.csv` name (or stdout)

@@ -91,16 +91,16 @@ fn import_of_hip2_reproduces_the_shipped_catalog() {
         return;
     };
     let text = std::fs::read_to_string(shared.join("catalog/hip2.dat")).unwrap();
-    let csv = gpustar::catalog::import_hip2(&text, 8.0).unwrap();
+    let csv = gpustar::catalog::import_hip2(&text, 9.0).unwrap();
     assert!(
         csv == gpustar::catalog::BUILTIN_CSV,
-        "catalog/hip2_hp8.csv differs from `gpustar catalog import hip2.dat --max-mag 8`"
+        "catalog/hip2_hp9.csv differs from `gpustar catalog import hip2.dat --max-mag 9`"
     );
 }
 
-/// A run warns when the built-in catalog holds few stars in the field on average (37,622
-/// stars to Hp 8 in a 4° field: 14.6), and not in an 18° field or under a magnitude limit the
-/// user chose.
+/// A run warns when the built-in catalog holds few stars in the field on average (78,352
+/// stars to Hp 9 in a 3° field: 17.1), and not in a 4° field (30.4), an 18° field or under a
+/// magnitude limit the user chose.
 #[test]
 fn a_catalog_too_shallow_for_the_field_is_said() {
     let tmp = tempfile::tempdir().unwrap();
@@ -110,15 +110,16 @@ fn a_catalog_too_shallow_for_the_field_is_said() {
         let out = common::run_ok(&[&["batch", dir.to_str().unwrap(), "-q"], args].concat());
         common::stderr(&out)
     };
-    let narrow = run(&["--fov-deg", "4"]);
+    let narrow = run(&["--fov-deg", "3"]);
     assert!(
-        narrow.contains("holds 15 stars on average in this 4.0°×4.0° field")
+        narrow.contains("holds 17 stars on average in this 3.0°×3.0° field")
             && narrow.contains("deeper catalog"),
         "{narrow}"
     );
     for quiet in [
+        vec!["--fov-deg", "4"],
         vec!["--fov-deg", "18"],
-        vec!["--fov-deg", "4", "--mag-limit", "7"],
+        vec!["--fov-deg", "3", "--mag-limit", "7"],
     ] {
         let said = run(&quiet);
         assert!(!said.contains("deeper catalog"), "{quiet:?}: {said}");

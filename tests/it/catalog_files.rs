@@ -47,7 +47,7 @@ fn the_shipped_catalog_as_a_binary_file_identifies_the_same_stars() {
     let dir = tempfile::tempdir().unwrap();
     let bin = dir.path().join("hip.gpustarcat");
     let bin = bin.to_str().unwrap();
-    run_ok(&["catalog", "import", "catalog/hip2_hp8.csv", "-o", bin]);
+    run_ok(&["catalog", "import", "catalog/hip2_hp9.csv", "-o", bin]);
     let sim = dir.path().join("sim");
     common::simulate_small(&sim, 2);
     let records = |catalog: Option<&str>| {

@@ -153,7 +153,7 @@ fn resume_goes_on_only_with_the_options_and_catalog_the_records_were_made_with()
     for part in [
         "gpustar = ",
         "[catalog]",
-        "builtin:hip2_hp8.csv",
+        "builtin:hip2_hp9.csv",
         "[config]",
         "fov_deg = 18.0",
     ] {

@@ -9,7 +9,7 @@ use crate::error::{Result, fail};
 /// Epoch of a user catalog's positions when it has no `epoch` column (J2000.0).
 pub const USER_EPOCH: f64 = 2000.0;
 
-/// gpustar's own catalog CSV (what `catalog/hip2_hp8.csv` is).
+/// gpustar's own catalog CSV (what `catalog/hip2_hp9.csv` is).
 pub(super) fn is_gpustar_csv(text: &str) -> bool {
     text.lines()
         .map(str::trim)
