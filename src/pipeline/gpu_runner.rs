@@ -125,9 +125,10 @@ impl GpuRunner {
             .collect()
     }
 
-    /// The pixel stages alone (`--sequence`), keeping the brightest `max_stars`: each size as
-    /// one GPU batch; on a GPU error the CPU takes over for good. One result per frame, in the
-    /// order given.
+    /// The pixel stages alone (`--sequence`), completed by the matched filter's faint sources
+    /// (`detect::faint`: both lists from the kernels, merged on the CPU), keeping the brightest
+    /// `max_stars`: each size as one GPU batch; on a GPU error the CPU takes over for good. One
+    /// result per frame, in the order given.
     pub fn detect(
         &mut self,
         solvers: &Solvers,
@@ -143,8 +144,7 @@ impl GpuRunner {
             let stars = if self.failed {
                 Err(error!(Gpu, "the GPU failed earlier"))
             } else {
-                by_gain(&batch, s, |f, p| self.gpu.detect(f, p))
-                    .and_then(|blobs| gpu_stars(&self.gpu, &batch, &blobs, s))
+                self.detect_with_faint(&batch, s)
             };
             match stars {
                 Ok(stars) => {
@@ -160,7 +160,7 @@ impl GpuRunner {
                     }
                     for &i in &group {
                         let t0 = Instant::now();
-                        let dets = detect::detect(decoded_frame(&frames[i]), s);
+                        let dets = detect::faint::detect_with_faint(decoded_frame(&frames[i]), s);
                         found[i] = Some((dets, t0.elapsed().as_secs_f64() * 1e3));
                     }
                 }
@@ -184,6 +184,29 @@ impl GpuRunner {
                 }
             })
             .collect()
+    }
+
+    /// A batch's detections under `s`, completed by the matched filter's (the filter's alone
+    /// when `s` asks for it), as `detect::faint::detect_with_faint` makes them on the CPU.
+    fn detect_with_faint(
+        &self,
+        batch: &[&Frame],
+        s: &DetectSettings,
+    ) -> Result<Vec<Vec<Detection>>> {
+        let stars = |s: &DetectSettings| {
+            by_gain(batch, s, |f, p| self.gpu.detect(f, p))
+                .and_then(|blobs| gpu_stars(&self.gpu, batch, &blobs, s))
+        };
+        let plain = stars(s)?;
+        if s.matched_filter {
+            return Ok(plain);
+        }
+        let filtered = stars(&s.filtered())?;
+        Ok(plain
+            .into_iter()
+            .zip(&filtered)
+            .map(|(p, f)| detect::faint::with_faint(p, f, s.max_stars))
+            .collect())
     }
 
     /// The records' `backend` field.

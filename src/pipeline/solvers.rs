@@ -213,12 +213,13 @@ impl Solvers {
         Solver::new(&self.catalog, camera, self.settings)
     }
 
-    /// The pixel stages alone on the CPU (`--sequence`), keeping the brightest `max_stars`.
+    /// The pixel stages alone on the CPU (`--sequence`), completed by the matched filter's
+    /// faint sources (`detect::faint`), keeping the brightest `max_stars`.
     pub fn detect_cpu(&self, decoded: Decoded<'static>, max_stars: usize) -> Detected {
         let t0 = Instant::now();
         let s = self.settings.detect.for_sequence(max_stars);
         let detections = match &decoded.frame {
-            Ok(f) => Ok(detect::detect(f, &s)),
+            Ok(f) => Ok(detect::faint::detect_with_faint(f, &s)),
             Err(e) => Err(e.clone()),
         };
         Detected {

@@ -10,6 +10,7 @@ use crate::io::frame::Frame;
 pub mod caption;
 pub mod deblend;
 mod detection;
+pub mod faint;
 
 pub use detection::{Detection, QUAD_STARS};
 

@@ -1,0 +1,110 @@
+//! Faint sources for `--sequence`, where particles may be as faint as the stars: the frame is
+//! thresholded twice, as pixels and smoothed by the matched filter, and the filter's detections
+//! complete the plain ones. The filter alone merges neighbours (a particle beside a star becomes
+//! one blob, and the star a particle); taken this way, it adds sources without merging any.
+
+use super::{DetectSettings, Detection, Detector, detect};
+use crate::io::frame::Frame;
+
+/// Extra distance (pixels) beyond a filtered component's own radius within which a plain
+/// detection is of the same source.
+pub const APART_PX: f64 = 2.0;
+
+/// A filtered detection this much brighter than the one plain detection of its source replaces
+/// it: the plain component held only the source's peak, and its flux, which the tracker
+/// compares from frame to frame, swung with the noise.
+pub const FLUX_GAIN: f64 = 1.5;
+
+/// A frame's detections under `s` (`DetectSettings::for_sequence`), completed by the matched
+/// filter's ([`with_faint`]); the filter's alone when `s` asks for it. On the CPU; the GPU
+/// runner makes the two lists with its kernels and merges them the same way.
+pub fn detect_with_faint(frame: &Frame, s: &DetectSettings) -> Vec<Detection> {
+    if s.matched_filter {
+        return detect(frame, s);
+    }
+    let d = Detector::new(frame, s);
+    with_faint(d.detect(), &d.detect_filtered(), s.max_stars)
+}
+
+/// `plain` completed by `filtered`, brightest first (ties in the order given, plain first), the
+/// brightest `max_stars` kept. Each filtered detection, by the plain ones within its radius
+/// (from its area) plus [`APART_PX`]:
+/// - none: a source only the filter found; added;
+/// - one, [`FLUX_GAIN`] times fainter or more: the same source, measured whole; replaces it;
+/// - one brighter, or two and more: the plain ones stay (a star's wings, or neighbours merged).
+pub fn with_faint(
+    plain: Vec<Detection>,
+    filtered: &[Detection],
+    max_stars: usize,
+) -> Vec<Detection> {
+    let within = |f: &Detection| -> Vec<usize> {
+        let r = (f64::from(f.area) / std::f64::consts::PI).sqrt() + APART_PX;
+        (0..plain.len())
+            .filter(|&i| (plain[i].x - f.x).powi(2) + (plain[i].y - f.y).powi(2) <= r * r)
+            .collect()
+    };
+    let mut replaced = vec![false; plain.len()];
+    let mut taken = Vec::new();
+    for f in filtered {
+        match within(f)[..] {
+            [] => taken.push(*f),
+            [i] if !replaced[i] && f.flux >= FLUX_GAIN * plain[i].flux => {
+                replaced[i] = true;
+                taken.push(*f);
+            }
+            _ => {}
+        }
+    }
+    let mut out: Vec<Detection> = plain
+        .into_iter()
+        .zip(replaced)
+        .filter_map(|(d, r)| (!r).then_some(d))
+        .collect();
+    out.extend(taken);
+    out.sort_by(|a, b| b.flux.total_cmp(&a.flux));
+    out.truncate(max_stars);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn det(x: f64, y: f64, flux: f64, area: u32) -> Detection {
+        Detection {
+            x,
+            y,
+            flux,
+            area,
+            peak: 0,
+            saturated: false,
+            sigma_px: None,
+        }
+    }
+
+    #[test]
+    fn the_filter_adds_and_completes_sources_without_merging_any() {
+        let star = det(100.0, 100.0, 5000.0, 30);
+        let faint_peak = det(300.0, 300.0, 40.0, 2);
+        let neighbour = det(106.0, 100.0, 900.0, 12);
+        let plain = vec![star, neighbour, faint_peak];
+        let filtered = [
+            // The star and its neighbour merged into one blob between them.
+            det(101.0, 100.0, 6100.0, 60),
+            // The faint source's peak measured whole.
+            det(300.3, 299.8, 95.0, 9),
+            // A source only the filter found.
+            det(500.0, 40.0, 60.0, 6),
+            // A star's blob a little wider than the plain one: the plain stays.
+            det(100.1, 100.0, 5200.0, 40),
+        ];
+        let out = with_faint(plain.clone(), &filtered, 100);
+        assert_eq!(
+            out,
+            vec![star, neighbour, filtered[1], filtered[2]],
+            "brightest first"
+        );
+        // Kept to the brightest.
+        assert_eq!(with_faint(plain, &filtered, 2), vec![star, neighbour]);
+    }
+}
