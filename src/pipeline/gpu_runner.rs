@@ -187,26 +187,23 @@ impl GpuRunner {
     }
 
     /// A batch's detections under `s`, completed by the matched filter's (the filter's alone
-    /// when `s` asks for it), as `detect::faint::detect_with_faint` makes them on the CPU.
+    /// when `s` asks for it), as `detect::faint::detect_with_faint` makes them on the CPU: the
+    /// PSF fits of each list in one submission.
     fn detect_with_faint(
         &self,
         batch: &[&Frame],
         s: &DetectSettings,
     ) -> Result<Vec<Vec<Detection>>> {
-        let stars = |s: &DetectSettings| {
-            by_gain(batch, s, |f, p| self.gpu.detect(f, p))
-                .and_then(|blobs| gpu_stars(&self.gpu, batch, &blobs, s))
-        };
-        let plain = stars(s)?;
+        let blobs = |s: &DetectSettings| by_gain(batch, s, |f, p| self.gpu.detect(f, p));
+        let plain = gpu_stars(&self.gpu, batch, &blobs(s)?, s)?;
         if s.matched_filter {
             return Ok(plain);
         }
-        let filtered = stars(&s.filtered())?;
-        Ok(plain
-            .into_iter()
-            .zip(&filtered)
-            .map(|(p, f)| detect::faint::with_faint(p, f, s.max_stars))
-            .collect())
+        let filtered = s.filtered();
+        let blobs = blobs(&filtered)?;
+        let blobs: Vec<&[Blob]> = blobs.iter().map(Vec::as_slice).collect();
+        let candidates = detect::unfitted_stars(batch, &blobs, &filtered);
+        detect::faint::complete(batch, plain, candidates, s, |w| self.gpu.psf_fit(w))
     }
 
     /// The records' `backend` field.

@@ -186,23 +186,31 @@ pub fn star_list(blobs: &[Blob], s: &DetectSettings) -> Vec<Detection> {
 /// The star list of a frame's blobs, with each position measured as the settings say (the
 /// PSF fits by the CPU twin).
 pub fn stars(frame: &Frame, blobs: &[Blob], s: &DetectSettings) -> Vec<Detection> {
-    let fit_cpu = |w: &[Window]| Ok(w.iter().map(cpu::psf_fit::psf_fit).collect());
     let mut out = stars_with(&[frame], &[blobs], s, fit_cpu).expect("the CPU fits");
     out.pop().unwrap_or_default()
 }
 
 /// The star lists of a batch of frames (with their blobs), without burned-in captions
 /// (`caption`), deblended when the settings say
-/// (`deblend`, on the CPU for both backends), each position measured as the settings say: with
-/// `--centroid ml` every unsaturated star's window goes to `fit` in one call (the CPU twin, or
-/// the GPU kernel in one submission for the batch); a star whose window leaves the frame, or
-/// whose fit does not settle, keeps its centre of gravity.
+/// (`deblend`, on the CPU for both backends), each position measured as the settings say
+/// ([`fit_positions`]).
 pub fn stars_with(
     frames: &[&Frame],
     blobs: &[&[Blob]],
     s: &DetectSettings,
     fit: impl FnOnce(&[Window]) -> crate::error::Result<Vec<Option<PsfFit>>>,
 ) -> crate::error::Result<Vec<Vec<Detection>>> {
+    let mut lists = unfitted_stars(frames, blobs, s);
+    fit_positions(frames, &mut lists, s, fit)?;
+    Ok(lists)
+}
+
+/// [`stars_with`] before the positions are measured: each star at its centre of gravity.
+pub fn unfitted_stars(
+    frames: &[&Frame],
+    blobs: &[&[Blob]],
+    s: &DetectSettings,
+) -> Vec<Vec<Detection>> {
     let mut lists: Vec<Vec<Detection>> = blobs.iter().map(|b| star_list(b, s)).collect();
     for (list, frame) in lists.iter_mut().zip(frames) {
         caption::drop_caption_rows(list, frame.height);
@@ -212,13 +220,26 @@ pub fn stars_with(
             *list = deblend::deblend(frame, list, s.k_sigma as f64, s.max_stars);
         }
     }
+    lists
+}
+
+/// Each star's position measured as the settings say: with `--centroid ml` every unsaturated
+/// star's window goes to `fit` in one call (the CPU twin, or the GPU kernel in one submission
+/// for the batch); a star whose window leaves the frame, or whose fit does not settle, keeps
+/// its centre of gravity.
+pub fn fit_positions(
+    frames: &[&Frame],
+    lists: &mut [Vec<Detection>],
+    s: &DetectSettings,
+    fit: impl FnOnce(&[Window]) -> crate::error::Result<Vec<Option<PsfFit>>>,
+) -> crate::error::Result<()> {
     if s.centroid != Centroid::Ml {
-        return Ok(lists);
+        return Ok(());
     }
     // (frame, star) of each window, in order.
     let mut at = Vec::new();
     let mut windows = Vec::new();
-    for (f, (frame, list)) in frames.iter().zip(&lists).enumerate() {
+    for (f, (frame, list)) in frames.iter().zip(lists.iter()).enumerate() {
         for (k, d) in list.iter().enumerate().filter(|(_, d)| !d.saturated) {
             let w = cpu::psf_fit::window(&frame.pixels, frame.width, frame.height, d.x, d.y);
             if let Some(w) = w {
@@ -238,7 +259,12 @@ pub fn stars_with(
             d.sigma_px = Some(((p.sx * p.sx + p.sy * p.sy) / 2.0).sqrt());
         }
     }
-    Ok(lists)
+    Ok(())
+}
+
+/// The CPU twin of the PSF fit over windows, as [`stars_with`] takes it.
+pub fn fit_cpu(w: &[Window]) -> crate::error::Result<Vec<Option<PsfFit>>> {
+    Ok(w.iter().map(cpu::psf_fit::psf_fit).collect())
 }
 
 /// Detect stars in a frame on the CPU.
@@ -281,8 +307,12 @@ impl<'f> Detector<'f> {
     /// [`detect`] under `s` (this detector's tile statistics: `s` may differ from its settings
     /// only in the matched filter).
     pub fn detect_with(&self, s: &DetectSettings) -> Vec<Detection> {
-        let p = params(self.frame, s);
-        stars(self.frame, &blobs_cpu_with(self.frame, &p, &self.tiles), s)
+        stars(self.frame, &self.blobs_with(s), s)
+    }
+
+    /// The blobs under `s` (as [`Detector::detect_with`]).
+    pub fn blobs_with(&self, s: &DetectSettings) -> Vec<Blob> {
+        blobs_cpu_with(self.frame, &params(self.frame, s), &self.tiles)
     }
 }
 

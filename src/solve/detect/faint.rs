@@ -3,7 +3,9 @@
 //! complete the plain ones. The filter alone merges neighbours (a particle beside a star becomes
 //! one blob, and the star a particle); taken this way, it adds sources without merging any.
 
-use super::{DetectSettings, Detection, Detector, detect};
+use super::{DetectSettings, Detection, Detector, detect, fit_cpu, fit_positions, unfitted_stars};
+use crate::cpu::psf_fit::{PsfFit, Window};
+use crate::error::Result;
 use crate::io::frame::Frame;
 
 /// Extra distance (pixels) beyond a filtered component's own radius within which a plain
@@ -16,14 +18,42 @@ pub const APART_PX: f64 = 2.0;
 pub const FLUX_GAIN: f64 = 1.5;
 
 /// A frame's detections under `s` (`DetectSettings::for_sequence`), completed by the matched
-/// filter's ([`with_faint`]); the filter's alone when `s` asks for it. On the CPU; the GPU
-/// runner makes the two lists with its kernels and merges them the same way.
+/// filter's ([`complete`]); the filter's alone when `s` asks for it. On the CPU; the GPU
+/// runner makes the two lists with its kernels and completes them the same way.
 pub fn detect_with_faint(frame: &Frame, s: &DetectSettings) -> Vec<Detection> {
     if s.matched_filter {
         return detect(frame, s);
     }
     let d = Detector::new(frame, s);
-    with_faint(d.detect(), &d.detect_filtered(), s.max_stars)
+    let filtered = s.filtered();
+    let candidates = unfitted_stars(&[frame], &[&d.blobs_with(&filtered)], &filtered);
+    let mut out =
+        complete(&[frame], vec![d.detect()], candidates, s, fit_cpu).expect("the CPU fits");
+    out.pop().unwrap_or_default()
+}
+
+/// A batch's `plain` star lists (positions measured) completed by the matched filter's
+/// `filtered` ones (at their centres of gravity, as [`unfitted_stars`] leaves them) as
+/// [`with_faint`] says, the positions of the filtered stars taken measured by `fit` in one call:
+/// most of the filter's stars are the plain ones again, and are not fitted twice.
+pub fn complete(
+    frames: &[&Frame],
+    plain: Vec<Vec<Detection>>,
+    filtered: Vec<Vec<Detection>>,
+    s: &DetectSettings,
+    fit: impl FnOnce(&[Window]) -> Result<Vec<Option<PsfFit>>>,
+) -> Result<Vec<Vec<Detection>>> {
+    let (kept, mut taken): (Vec<_>, Vec<_>) = plain
+        .into_iter()
+        .zip(&filtered)
+        .map(|(p, f)| choose(p, f))
+        .unzip();
+    fit_positions(frames, &mut taken, &s.filtered(), fit)?;
+    Ok(kept
+        .into_iter()
+        .zip(taken)
+        .map(|(k, t)| merged(k, t, s.max_stars))
+        .collect())
 }
 
 /// `plain` completed by `filtered`, brightest first (ties in the order given, plain first), the
@@ -37,6 +67,12 @@ pub fn with_faint(
     filtered: &[Detection],
     max_stars: usize,
 ) -> Vec<Detection> {
+    let (kept, taken) = choose(plain, filtered);
+    merged(kept, taken, max_stars)
+}
+
+/// The plain detections [`with_faint`] keeps, and the filtered ones it takes.
+fn choose(plain: Vec<Detection>, filtered: &[Detection]) -> (Vec<Detection>, Vec<Detection>) {
     let within = |f: &Detection| -> Vec<usize> {
         let r = (f64::from(f.area) / std::f64::consts::PI).sqrt() + APART_PX;
         (0..plain.len())
@@ -55,15 +91,20 @@ pub fn with_faint(
             _ => {}
         }
     }
-    let mut out: Vec<Detection> = plain
+    let kept = plain
         .into_iter()
         .zip(replaced)
         .filter_map(|(d, r)| (!r).then_some(d))
         .collect();
-    out.extend(taken);
-    out.sort_by(|a, b| b.flux.total_cmp(&a.flux));
-    out.truncate(max_stars);
-    out
+    (kept, taken)
+}
+
+/// `kept` and `taken` in one list, brightest first (ties: `kept` first), cut to `max_stars`.
+fn merged(mut kept: Vec<Detection>, taken: Vec<Detection>, max_stars: usize) -> Vec<Detection> {
+    kept.extend(taken);
+    kept.sort_by(|a, b| b.flux.total_cmp(&a.flux));
+    kept.truncate(max_stars);
+    kept
 }
 
 #[cfg(test)]
