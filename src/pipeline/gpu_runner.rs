@@ -125,10 +125,10 @@ impl GpuRunner {
             .collect()
     }
 
-    /// The pixel stages alone (`--sequence`), completed by the matched filter's faint sources
-    /// (`detect::faint`: both lists from the kernels, merged on the CPU), keeping the brightest
-    /// `max_stars`: each size as one GPU batch; on a GPU error the CPU takes over for good. One
-    /// result per frame, in the order given.
+    /// The pixel stages alone (`--sequence`): the brightest `max_stars`, completed by the matched
+    /// filter's faint sources (`detect::faint`: both lists from the kernels, merged on the CPU);
+    /// each size as one GPU batch; on a GPU error the CPU takes over for good. One result per
+    /// frame, in the order given.
     pub fn detect(
         &mut self,
         solvers: &Solvers,

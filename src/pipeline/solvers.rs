@@ -213,8 +213,8 @@ impl Solvers {
         Solver::new(&self.catalog, camera, self.settings)
     }
 
-    /// The pixel stages alone on the CPU (`--sequence`), completed by the matched filter's
-    /// faint sources (`detect::faint`), keeping the brightest `max_stars`.
+    /// The pixel stages alone on the CPU (`--sequence`): the brightest `max_stars`, completed by
+    /// the matched filter's faint sources (`detect::faint`).
     pub fn detect_cpu(&self, decoded: Decoded<'static>, max_stars: usize) -> Detected {
         let t0 = Instant::now();
         let s = self.settings.detect.for_sequence(max_stars);
