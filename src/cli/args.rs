@@ -328,7 +328,9 @@ pub struct SolveOpts {
     pub sigma: f64,
     /// Detection's matched filter: `binomial` thresholds each pixel's 3x3 binomial smoothing
     /// (about a star's PSF) at --sigma sigmas of the smoothed noise, and the pixel at 0.375 of
-    /// that, which finds stars of about half the peak SNR; `none` thresholds the pixels alone.
+    /// that, which finds stars of about half the peak SNR; `none` thresholds the pixels alone
+    /// (with --sequence, the filter's sources apart from theirs are added, without merging
+    /// neighbours).
     #[arg(long, value_parser = choice::<DetectFilter>(), default_value_t = DEFAULTS.detect_filter, help_heading = "Detection and identification", hide_short_help = true)]
     pub detect_filter: DetectFilter,
     /// How star positions are measured: a maximum-likelihood fit of a pixel-integrated

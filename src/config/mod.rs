@@ -179,7 +179,8 @@ crate::choice! {
     /// Detection's matched filter (`detect_filter`).
     #[derive(Clone, Copy, Debug, PartialEq, Eq)]
     pub enum DetectFilter {
-        None = "none", "The pixels alone are thresholded",
+        None = "none", "The pixels alone are thresholded (with --sequence, the filter's \
+            sources apart from theirs are added)",
         Binomial = "binomial", "Each pixel's 3x3 binomial smoothing is thresholded as well",
     }
 }
