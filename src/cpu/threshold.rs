@@ -2,9 +2,12 @@
 //!
 //! Background = the median of a tile, noise = 1.4826 · MAD of the tile (robust to the stars in
 //! it; both from every other row; a MAD of a few counts read from the grouped deviations, see
-//! [`noise_offset`]); both are interpolated bilinearly between tile centres, so gradients and vignetting do
-//! not leave steps at tile edges. Everything after the per-tile `offset` is integer arithmetic,
-//! so the GPU twin reproduces the mask bit for bit.
+//! [`noise_offset`]); both are interpolated bilinearly between tile centres, so gradients and
+//! vignetting do not leave steps at tile edges. Everything after the per-tile `offset` is
+//! integer arithmetic, so the GPU twin reproduces the mask bit for bit.
+//!
+//! About 700 lines: the CPU twins of both threshold kernels (the pixel and the matched filter)
+//! and the filter's noise gain share the tile levels and their interpolation, kept in one place.
 
 use bytemuck::{Pod, Zeroable};
 
@@ -555,11 +558,11 @@ pub fn filtered_tile_level(t: &TileStats, gain: u32) -> u32 {
 /// its pixels, rounded, from [`WHITE_GAIN`] to [`MAX_GAIN`]. Each σ is the MAD of differences
 /// 4 px apart along the rows (a sky's level and gradients cancel; stars are few of them; the
 /// sums 4 px apart share no pixel, so their differences hold twice the sums' variance as the
-/// pixels' do theirs): those of consecutive samples every 4th column of every 16th row, the MAD of whole counts read as the median
-/// of grouped data as in [`noise_offset`]. White noise gives 6.0; JPEG's (q 90 on docs/speed.md's
-/// f8 set) 9–10: at 6 the filter's threshold stood near 3σ of its own noise and passed noise as
-/// stars (docs/speed.md, "The matched filter's noise, measured"). Computed on the CPU for
-/// either backend, from the pixels alone.
+/// pixels' do theirs): those of consecutive samples every 4th column of every 16th row, the
+/// MAD of whole counts read as the median of grouped data as in [`noise_offset`]. White noise
+/// gives 6.0; JPEG's (q 90 on docs/speed.md's f8 set) 9–10: at 6 the filter's threshold stood
+/// near 3σ of its own noise and passed noise as stars (docs/speed.md, "The matched filter's
+/// noise, measured"). Computed on the CPU for either backend, from the pixels alone.
 pub fn filter_gain(pixels: &[u16], width: u32, height: u32) -> u32 {
     const LAG: u32 = 4;
     if width < 2 + LAG + 2 || height < 3 {
@@ -637,10 +640,10 @@ pub fn binomial3(pixels: &[u16], width: u32, height: u32, x: u32, y: u32) -> u32
 /// The mask with the matched filter (the threshold kernel with `matched` set): a pixel is
 /// set when both its 3×3 binomial smoothing (a filter of about the size of a star's PSF, which
 /// raises a star's peak SNR about twofold for PSF σ ≈ 1 px) is above its tile level at k
-/// sigmas of the smoothed noise, and the pixel itself is above the same level (k · gain/16: 0.4 k
-/// of its own sigmas for white noise): a lone hot pixel lifts its smoothed neighbours but not
-/// their pixels, so it stays one pixel and `min_area` drops it. Integer arithmetic throughout:
-/// the GPU's mask is the same bit for bit.
+/// sigmas of the smoothed noise, and the pixel itself is above the same level (k · gain/16:
+/// 0.4 k of its own sigmas for white noise): a lone hot pixel lifts its smoothed neighbours but
+/// not their pixels, so it stays one pixel and `min_area` drops it. Integer arithmetic
+/// throughout: the GPU's mask is the same bit for bit.
 pub fn threshold_filtered(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run> {
     crate::simd::fast!(threshold_filtered_in(pixels: &[u16], tiles: &[TileStats], p: &DetectParams) -> Vec<Run>)
 }

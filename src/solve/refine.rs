@@ -93,27 +93,7 @@ pub struct Refined {
 
 /// Reference stars projecting inside the image under `r`: (ref id, pixel).
 pub fn stars_in_view(r: &Matrix3<f64>, refs: &RefCatalog, camera: &Camera) -> Vec<(u32, f64, f64)> {
-    let boresight = r.transpose() * camera.centre_vector();
-    let cone = refs.within(&boresight, view_half_angle(camera));
-    in_view_of(r, refs, camera, cone.into_iter())
-}
-
-/// Those of the reference stars `ids` (rising) that project inside the image under `r`.
-fn in_view_of(
-    r: &Matrix3<f64>,
-    refs: &RefCatalog,
-    camera: &Camera,
-    ids: impl Iterator<Item = u32>,
-) -> Vec<(u32, f64, f64)> {
-    let boresight = r.transpose() * camera.centre_vector();
-    let cos_half = view_half_angle(camera).cos();
-    ids.map(|id| (id, refs.v(id as usize)))
-        .filter(|(_, v)| v.dot(&boresight) >= cos_half)
-        .filter_map(|(id, v)| {
-            let (x, y) = camera.vector_to_pixel(&(r * v))?;
-            camera.contains(x, y).then_some((id, x, y))
-        })
-        .collect()
+    stars_around_view(r, refs, camera, 0.0)
 }
 
 /// Reference stars projecting within `margin` pixels of the image under `r`, its edges
@@ -125,12 +105,24 @@ pub fn stars_around_view(
     margin: f64,
 ) -> Vec<(u32, f64, f64)> {
     let boresight = r.transpose() * camera.centre_vector();
-    let half = view_half_angle(camera);
+    let cone = refs.within(&boresight, view_half_angle(camera));
+    in_view_of(r, refs, camera, cone.into_iter(), margin)
+}
+
+/// Those of the reference stars `ids` (rising) that project inside the image under `r`, or
+/// within `margin` pixels of it.
+fn in_view_of(
+    r: &Matrix3<f64>,
+    refs: &RefCatalog,
+    camera: &Camera,
+    ids: impl Iterator<Item = u32>,
+    margin: f64,
+) -> Vec<(u32, f64, f64)> {
+    let boresight = r.transpose() * camera.centre_vector();
+    let cos_half = view_half_angle(camera).cos();
     let (w, h) = (f64::from(camera.width), f64::from(camera.height));
-    refs.within(&boresight, half)
-        .into_iter()
-        .map(|id| (id, refs.v(id as usize)))
-        .filter(|(_, v)| v.dot(&boresight) >= half.cos())
+    ids.map(|id| (id, refs.v(id as usize)))
+        .filter(|(_, v)| v.dot(&boresight) >= cos_half)
         .filter_map(|(id, v)| {
             let (x, y) = camera.vector_to_pixel(&(r * v))?;
             let inside = x >= -0.5 - margin
@@ -184,7 +176,7 @@ fn stars_in_view_near(
             })
         }
     };
-    in_view_of(r, refs, camera, near.ids.iter().copied())
+    in_view_of(r, refs, camera, near.ids.iter().copied(), 0.0)
 }
 
 /// One-to-one matches: a detection and a projected star that are each other's nearest, within
