@@ -425,14 +425,23 @@ fn read_grey_png(
         e => error!(Input, "cannot decode {shown}: {e}"),
     };
     let (pixels, saturation) = if depth == png::BitDepth::Eight {
-        let mut buf = Vec::new();
-        buf.try_reserve_exact(size + 2 * (w as usize) * (h as usize))
-            .map_err(|_| no_memory())?;
-        buf.resize(size, 0);
-        reader.next_frame(&mut buf).map_err(decode_error)?;
-        (buf.into_iter().map(u16::from).collect::<Vec<u16>>(), 255)
+        // Each row widened into the pixels as it is unfiltered, while in cache: no frame of
+        // bytes to zero, fill and read again.
+        let mut px: Vec<u16> = Vec::new();
+        px.try_reserve_exact(size).map_err(|_| no_memory())?;
+        while let Some(row) = reader.next_row().map_err(decode_error)? {
+            px.extend(row.data().iter().map(|&v| u16::from(v)));
+        }
+        if px.len() != size {
+            fail!(
+                Input,
+                "cannot decode {shown}: the image has fewer rows than its header says"
+            );
+        }
+        (px, 255)
     } else {
-        // Decoded into the pixels' own bytes and swapped in place: no second buffer.
+        // Decoded into the pixels' own bytes and swapped in place: no second buffer (row by
+        // row, the byte pairs' conversion is not vectorised, and 16-bit frames decode slower).
         let mut px: Vec<u16> = Vec::new();
         px.try_reserve_exact(size / 2).map_err(|_| no_memory())?;
         px.resize(size / 2, 0);
@@ -591,9 +600,10 @@ fn jpeg_reaches_end(b: &[u8]) -> bool {
             marker => {
                 let next = i + 2 + u16::from_be_bytes([b[i + 2], b[i + 3]]) as usize;
                 if marker == 0xDA {
+                    // Searched from the end, where a whole file has its EOI.
                     return b
                         .get(next..)
-                        .is_some_and(|scan| scan.windows(2).any(|w| w == [0xFF, 0xD9]));
+                        .is_some_and(|scan| scan.windows(2).rev().any(|w| w == [0xFF, 0xD9]));
                 }
                 i = next;
             }
