@@ -4,6 +4,7 @@
 use super::id::StarId;
 use super::loaded::Catalog;
 use super::star::{HIPPARCOS_EPOCH, Star, fnv1a};
+use super::stars::Stars;
 use super::{checked, formats, store, table};
 use crate::error::{Context, Error, IntoKind, Result, error, fail};
 use std::path::Path;
@@ -30,29 +31,40 @@ pub const BUILTIN_COMPLETE_MAG: f64 = 8.0;
 /// file: a new catalog file needs the new value, which the test prints.
 pub(super) const BUILTIN_HASH: u64 = 0x5423_0b16_ad9f_f372;
 
+/// Bytes of a built-in star's record (build.rs): HIP (u32), then RA, Dec (rad), the proper
+/// motions (mas/yr) and Hp (f64), little-endian.
+const BUILTIN_RECORD: usize = 44;
+
+/// The `k`-th f64 of a built-in record.
+fn builtin_f64(b: &[u8], k: usize) -> f64 {
+    f64::from_le_bytes(b[4 + 8 * k..12 + 8 * k].try_into().expect("8 bytes"))
+}
+
+/// The star of a built-in record.
+fn builtin_star(b: &[u8]) -> Star {
+    let hip = u32::from_le_bytes(b[..4].try_into().expect("4 bytes"));
+    Star {
+        id: StarId::Hip(hip),
+        hip: Some(hip),
+        ra_rad: builtin_f64(b, 0),
+        dec_rad: builtin_f64(b, 1),
+        pmra_mas_yr: builtin_f64(b, 2),
+        pmdec_mas_yr: builtin_f64(b, 3),
+        mag: builtin_f64(b, 4),
+        epoch: HIPPARCOS_EPOCH,
+    }
+}
+
 impl Catalog {
     /// The catalog compiled into the binary: [`BUILTIN_CSV`]'s stars, parsed at build time
     /// (parsing its text would take most of a one-frame run).
+    /// Its records are parsed when something reads the stars whole: a run whose selection
+    /// is cached reads only their magnitudes.
     pub fn builtin() -> Catalog {
-        let f64_at =
-            |b: &[u8], k: usize| f64::from_le_bytes(b[4 + 8 * k..12 + 8 * k].try_into().unwrap());
-        let stars = BUILTIN_STARS
-            .chunks_exact(44)
-            .map(|b| {
-                let hip = u32::from_le_bytes(b[..4].try_into().unwrap());
-                Star {
-                    id: StarId::Hip(hip),
-                    hip: Some(hip),
-                    ra_rad: f64_at(b, 0),
-                    dec_rad: f64_at(b, 1),
-                    pmra_mas_yr: f64_at(b, 2),
-                    pmdec_mas_yr: f64_at(b, 3),
-                    mag: f64_at(b, 4),
-                    epoch: HIPPARCOS_EPOCH,
-                }
-            })
-            .collect();
-        Catalog::new(stars, Vec::new(), BUILTIN_NAME, BUILTIN_HASH)
+        let stars = Stars::compiled(BUILTIN_STARS, BUILTIN_RECORD, builtin_star, |b| {
+            builtin_f64(b, 4)
+        });
+        Catalog::of_stars(stars, Vec::new(), BUILTIN_NAME, BUILTIN_HASH)
             .complete_to(BUILTIN_COMPLETE_MAG)
     }
 
