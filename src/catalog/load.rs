@@ -58,6 +58,7 @@ fn builtin_star(b: &[u8]) -> Star {
 impl Catalog {
     /// The catalog compiled into the binary: [`BUILTIN_CSV`]'s stars, parsed at build time
     /// (parsing its text would take most of a one-frame run).
+    ///
     /// Its records are parsed when something reads the stars whole: a run whose selection
     /// is cached reads only their magnitudes.
     pub fn builtin() -> Catalog {

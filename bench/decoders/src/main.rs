@@ -5,8 +5,9 @@
 //! Every file is read into memory once; then, for R interleaved rounds, each decoder turns every
 //! file's bytes into grey pixels (8-bit stays 8-bit, 16-bit native-endian), and the median time a
 //! frame of each decoder over the rounds is printed, beside a plain memory copy of the same bytes.
-//! Every decoder's pixels are checked against the first decoder's: a decoder that differs is
-//! reported and its time not counted.
+//! Every decoder's pixels are checked against the first decoder's, value for value (8-bit pixels
+//! widened to 16 bits, as gpustar's frames hold them, equal their bytes): a decoder that differs
+//! is reported and its time not counted.
 //!
 //! With INFLATE_ONLY set, "libdeflate + unfilter" stops after the inflate (its pixels then
 //! differ, as reported): how its time splits between inflating and unfiltering.
@@ -16,10 +17,23 @@ use std::time::Instant;
 
 type Decoded = (u32, u32, Pixels);
 
-#[derive(PartialEq)]
 enum Pixels {
     U8(Vec<u8>),
     U16(Vec<u16>),
+}
+
+/// The same values, whichever width holds them.
+impl PartialEq for Pixels {
+    fn eq(&self, other: &Pixels) -> bool {
+        let widened = |a: &[u8], b: &[u16]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(&x, &y)| u16::from(x) == y)
+        };
+        match (self, other) {
+            (Pixels::U8(a), Pixels::U8(b)) => a == b,
+            (Pixels::U16(a), Pixels::U16(b)) => a == b,
+            (Pixels::U8(a), Pixels::U16(b)) | (Pixels::U16(b), Pixels::U8(a)) => widened(a, b),
+        }
+    }
 }
 
 type Decoder = fn(&[u8]) -> Result<Decoded, String>;
@@ -40,8 +54,25 @@ fn png_crate(b: &[u8]) -> Result<Decoded, String> {
     Ok((w, h, png_pixels(buf, depth == png::BitDepth::Sixteen)))
 }
 
+/// png 0.18 as gpustar decodes a frame: 16-bit samples byte-swapped in the pixels' own memory;
+/// 8-bit rows widened into the pixels as they are unfiltered (since c73465a).
+fn png_gpustar(b: &[u8]) -> Result<Decoded, String> {
+    let mut d = png::Decoder::new(std::io::Cursor::new(b));
+    d.set_transformations(png::Transformations::IDENTITY);
+    let mut r = d.read_info().map_err(|e| e.to_string())?;
+    if r.info().bit_depth == png::BitDepth::Sixteen {
+        return png_into_u16(b);
+    }
+    let (w, h) = (r.info().width, r.info().height);
+    let mut px: Vec<u16> = Vec::with_capacity(r.output_buffer_size().ok_or("size")?);
+    while let Some(row) = r.next_row().map_err(|e| e.to_string())? {
+        px.extend(row.data().iter().map(|&v| u16::from(v)));
+    }
+    Ok((w, h, Pixels::U16(px)))
+}
+
 /// png 0.18 decoding straight into the frame's buffer: 16-bit samples byte-swapped in place,
-/// 8-bit widened once.
+/// 8-bit bytes left as they are.
 fn png_into_u16(b: &[u8]) -> Result<Decoded, String> {
     let mut d = png::Decoder::new(std::io::Cursor::new(b));
     d.set_transformations(png::Transformations::IDENTITY);
@@ -274,8 +305,9 @@ fn main() {
     let is_png = data[0].starts_with(b"\x89PNG");
     let decoders: Vec<(&str, Decoder)> = if is_png {
         vec![
-            ("png 0.18, bytes converted (gpustar before)", png_crate),
-            ("png 0.18 into the pixels (gpustar)", png_into_u16),
+            ("png 0.18, bytes converted", png_crate),
+            ("png 0.18 into the pixels, 8-bit unwidened", png_into_u16),
+            ("png 0.18, gpustar's path (8-bit widened)", png_gpustar),
             ("image 0.25", image_crate),
             ("zune-png 0.5", zune_png),
             ("libdeflate + unfilter", libdeflate_png),
