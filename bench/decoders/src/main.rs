@@ -54,6 +54,20 @@ fn png_crate(b: &[u8]) -> Result<Decoded, String> {
     Ok((w, h, png_pixels(buf, depth == png::BitDepth::Sixteen)))
 }
 
+/// png 0.18 as gpustar decoded 8-bit frames before c73465a: a frame of bytes, then widened.
+fn png_frame_widened(b: &[u8]) -> Result<Decoded, String> {
+    let mut d = png::Decoder::new(std::io::Cursor::new(b));
+    d.set_transformations(png::Transformations::IDENTITY);
+    let mut r = d.read_info().map_err(|e| e.to_string())?;
+    if r.info().bit_depth == png::BitDepth::Sixteen {
+        return png_into_u16(b);
+    }
+    let (w, h) = (r.info().width, r.info().height);
+    let mut buf = vec![0u8; r.output_buffer_size().ok_or("size")?];
+    r.next_frame(&mut buf).map_err(|e| e.to_string())?;
+    Ok((w, h, Pixels::U16(buf.into_iter().map(u16::from).collect())))
+}
+
 /// png 0.18 as gpustar decodes a frame: 16-bit samples byte-swapped in the pixels' own memory;
 /// 8-bit rows widened into the pixels as they are unfiltered (since c73465a).
 fn png_gpustar(b: &[u8]) -> Result<Decoded, String> {
@@ -308,6 +322,7 @@ fn main() {
             ("png 0.18, bytes converted", png_crate),
             ("png 0.18 into the pixels, 8-bit unwidened", png_into_u16),
             ("png 0.18, gpustar's path (8-bit widened)", png_gpustar),
+            ("png 0.18, gpustar's path before c73465a", png_frame_widened),
             ("image 0.25", image_crate),
             ("zune-png 0.5", zune_png),
             ("libdeflate + unfilter", libdeflate_png),
