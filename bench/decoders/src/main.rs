@@ -43,10 +43,15 @@ fn memcpy(b: &[u8]) -> Result<Decoded, String> {
     Ok((v.len() as u32, 1, Pixels::U8(v)))
 }
 
-fn png_crate(b: &[u8]) -> Result<Decoded, String> {
+/// A png 0.18 reader of `b`, its header read, samples as stored.
+fn png_reader(b: &[u8]) -> Result<png::Reader<std::io::Cursor<&[u8]>>, String> {
     let mut d = png::Decoder::new(std::io::Cursor::new(b));
     d.set_transformations(png::Transformations::IDENTITY);
-    let mut r = d.read_info().map_err(|e| e.to_string())?;
+    d.read_info().map_err(|e| e.to_string())
+}
+
+fn png_crate(b: &[u8]) -> Result<Decoded, String> {
+    let mut r = png_reader(b)?;
     let (w, h) = (r.info().width, r.info().height);
     let depth = r.info().bit_depth;
     let mut buf = vec![0u8; r.output_buffer_size().ok_or("size")?];
@@ -56,9 +61,7 @@ fn png_crate(b: &[u8]) -> Result<Decoded, String> {
 
 /// png 0.18 as gpustar decoded 8-bit frames before c73465a: a frame of bytes, then widened.
 fn png_frame_widened(b: &[u8]) -> Result<Decoded, String> {
-    let mut d = png::Decoder::new(std::io::Cursor::new(b));
-    d.set_transformations(png::Transformations::IDENTITY);
-    let mut r = d.read_info().map_err(|e| e.to_string())?;
+    let mut r = png_reader(b)?;
     if r.info().bit_depth == png::BitDepth::Sixteen {
         return png_into_u16(b);
     }
@@ -71,9 +74,7 @@ fn png_frame_widened(b: &[u8]) -> Result<Decoded, String> {
 /// png 0.18 as gpustar decodes a frame: 16-bit samples byte-swapped in the pixels' own memory;
 /// 8-bit rows widened into the pixels as they are unfiltered (since c73465a).
 fn png_gpustar(b: &[u8]) -> Result<Decoded, String> {
-    let mut d = png::Decoder::new(std::io::Cursor::new(b));
-    d.set_transformations(png::Transformations::IDENTITY);
-    let mut r = d.read_info().map_err(|e| e.to_string())?;
+    let mut r = png_reader(b)?;
     if r.info().bit_depth == png::BitDepth::Sixteen {
         return png_into_u16(b);
     }
@@ -88,9 +89,7 @@ fn png_gpustar(b: &[u8]) -> Result<Decoded, String> {
 /// png 0.18 decoding straight into the frame's buffer: 16-bit samples byte-swapped in place,
 /// 8-bit bytes left as they are.
 fn png_into_u16(b: &[u8]) -> Result<Decoded, String> {
-    let mut d = png::Decoder::new(std::io::Cursor::new(b));
-    d.set_transformations(png::Transformations::IDENTITY);
-    let mut r = d.read_info().map_err(|e| e.to_string())?;
+    let mut r = png_reader(b)?;
     let (w, h) = (r.info().width, r.info().height);
     let size = r.output_buffer_size().ok_or("size")?;
     if r.info().bit_depth == png::BitDepth::Sixteen {
