@@ -47,8 +47,7 @@ fn main() {
         };
         // Lost-in-space on the brightest 100, as `batch` without --sequence.
         let frames = detected();
-        let solver = solvers.get(1024, 1024);
-        let solver = solver.as_ref().as_ref().unwrap();
+        let solver = solvers.get(1024, 1024).unwrap();
         let max = solver.settings.detect.max_stars;
         let lists: Vec<_> = frames
             .iter()

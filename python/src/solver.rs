@@ -91,11 +91,9 @@ impl Solver {
 
     /// Build the distance table for frames of this size now rather than on the first solve.
     fn prepare(&self, py: Python<'_>, width: u32, height: u32) -> PyResult<()> {
-        let s = py.detach(|| self.solvers.get(width, height));
-        match s.as_ref() {
-            Ok(_) => Ok(()),
-            Err(e) => Err(py_err(e.clone())),
-        }
+        py.detach(|| self.solvers.get(width, height))
+            .map(drop)
+            .map_err(py_err)
     }
 
     /// One frame: its record (a C-contiguous uint16 array is solved where it lies).

@@ -10,7 +10,6 @@ use crate::solve::detect;
 use crate::solve::driver::{identify_list_cpu, solve_frame_cpu};
 use crate::solve::{Outcome, Solution, Solver, Unsolved};
 use crate::streaks::{self, fit::StreakFit};
-use std::sync::Mutex;
 use std::time::Instant;
 
 impl Solvers {
@@ -92,10 +91,9 @@ impl Solvers {
             let global = Global::Lazy(self, (frame.width, frame.height), scale.clone());
             solve_with(self, &r, Some(&r), &global, &d, frame)
         } else {
-            let solver = self.get_scaled(frame.width, frame.height, scale.as_ref());
-            match solver.as_ref() {
-                Ok(s) => solve_with(self, s, None, &Global::Ready(s), &d, frame),
-                Err(e) => self.error_record(&d.name, e, BACKEND_CPU),
+            match self.get_scaled(frame.width, frame.height, scale.as_ref()) {
+                Ok(s) => solve_with(self, &s, None, &Global::Ready(s.clone()), &d, frame),
+                Err(e) => self.error_record(&d.name, &e, BACKEND_CPU),
             }
         };
         record.pixel_scale = scale.map(|s| crate::record::PixelScaleRecord {
@@ -130,10 +128,9 @@ impl Solvers {
         epoch: Option<f64>,
         read_ms: f64,
     ) -> (Record, Option<Solution>) {
-        let solver = self.get(width, height);
-        let solver = match solver.as_ref() {
+        let solver = match self.get(width, height) {
             Ok(s) => s,
-            Err(e) => return (self.error_record(name, e, BACKEND_CPU), None),
+            Err(e) => return (self.error_record(name, &e, BACKEND_CPU), None),
         };
         let t0 = Instant::now();
         stars.sort_by(|a, b| b.flux.total_cmp(&a.flux));
@@ -223,43 +220,6 @@ pub(super) fn solve_with(
         timing,
         BACKEND_CPU,
     )
-}
-
-/// Solve decoded frames on the CPU over `threads` threads: one record per frame, in the
-/// order given (what `batch::run` does with files, for frames a library user already holds).
-pub fn solve_cpu_many(solvers: &Solvers, frames: Vec<Decoded>, threads: usize) -> Vec<Record> {
-    let n = frames.len();
-    if n <= 1 || threads <= 1 {
-        // On the caller's thread: a thread started per call costs a one-frame solve its
-        // start-up (milliseconds on a loaded machine).
-        return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
-    }
-    let work: Vec<Mutex<Option<Decoded>>> =
-        frames.into_iter().map(|d| Mutex::new(Some(d))).collect();
-    let done: Vec<Mutex<Option<Record>>> = (0..n).map(|_| Mutex::new(None)).collect();
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    std::thread::scope(|scope| {
-        for _ in 0..threads.clamp(1, n.max(1)) {
-            scope.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    if i >= n {
-                        break;
-                    }
-                    let d = work[i].lock().unwrap_or_else(|e| e.into_inner()).take();
-                    let r = solvers.solve_cpu(d.expect("each frame taken once"));
-                    *done[i].lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
-                }
-            });
-        }
-    });
-    done.into_iter()
-        .map(|r| {
-            r.into_inner()
-                .unwrap_or_else(|e| e.into_inner())
-                .expect("one record per frame")
-        })
-        .collect()
 }
 
 /// The frame of a decoded input that was grouped for solving (only decoded ones are).

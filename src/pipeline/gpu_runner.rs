@@ -2,7 +2,7 @@
 
 use super::camera_source::CameraSource;
 use super::cpu_runner::{decoded_frame, solve_with};
-use super::solvers::{BACKEND_CPU, Decoded, DetectKey, Detected, Global, SizeGroup, Solvers};
+use super::solvers::{BACKEND_CPU, Decoded, DetectKey, Detected, Global, Solvers};
 use crate::cpu::centroid::Blob;
 use crate::cpu::pattern::Rows;
 use crate::cpu::threshold::DetectParams;
@@ -56,65 +56,14 @@ impl GpuRunner {
             // camera from its header (the GPU's tables are kept by frame size): the CPU twins.
             return frames.into_iter().map(|d| solvers.solve_cpu(d)).collect();
         }
-        let mut records: Vec<Option<Record>> = (0..frames.len()).map(|_| None).collect();
-        for (i, d) in frames.iter().enumerate() {
-            if let Err(e) = &d.frame {
-                records[i] = Some(solvers.error_record(&d.name, e, &self.name()));
-            }
-        }
-        let groups = size_groups(&frames);
-        let mut frames: Vec<Option<Decoded>> = frames.into_iter().map(Some).collect();
-        let by_size: Vec<SizeGroup> = groups
-            .into_iter()
-            .map(|(size, idx)| {
-                let g = idx
-                    .into_iter()
-                    .map(|i| (i, frames[i].take().expect("each frame in one group")))
-                    .collect();
-                (size, g)
+        let mut records: Vec<Option<Record>> = (frames.iter())
+            .map(|d| {
+                (d.frame.as_ref().err()).map(|e| solvers.error_record(&d.name, e, &self.name()))
             })
             .collect();
-        for ((w, h, _), group) in by_size {
-            let indices: Vec<usize> = group.iter().map(|(i, _)| *i).collect();
-            let regional: Vec<Option<Solver>> = group
-                .iter()
-                .map(|(_, d)| solvers.regional(d, decoded_frame(d)))
-                .collect();
-            // When every frame has a hint, the lost-in-space solver (its distance table) is
-            // built only if a region does not solve its frame.
-            let shared;
-            let global = if regional.iter().all(Option::is_some) {
-                Global::Lazy(solvers, (w, h), None)
-            } else {
-                shared = solvers.get(w, h);
-                match shared.as_ref() {
-                    Ok(s) => Global::Ready(s),
-                    Err(e) => {
-                        // No lost-in-space solver: frames with a hint are solved within its
-                        // region, on the CPU; the others carry the reason.
-                        let recs = group.iter().zip(&regional).map(|((_, d), r)| match r {
-                            Some(r) => {
-                                let lazy = Global::Lazy(solvers, (w, h), None);
-                                solve_with(solvers, r, Some(r), &lazy, d, decoded_frame(d))
-                            }
-                            None => solvers.error_record(&d.name, e, &self.name()),
-                        });
-                        for (i, r) in indices.into_iter().zip(recs) {
-                            records[i] = Some(r);
-                        }
-                        continue;
-                    }
-                }
-            };
-            let recs: Vec<Record> = if self.failed {
-                group
-                    .iter()
-                    .zip(&regional)
-                    .map(|((_, d), r)| cpu_record(solvers, r, &global, d))
-                    .collect()
-            } else {
-                self.solve_group(solvers, &global, &group, &regional)
-            };
+        for ((w, h, _), indices) in size_groups(&frames) {
+            let group: Vec<&Decoded> = indices.iter().map(|&i| &frames[i]).collect();
+            let recs = self.solve_size(solvers, (w, h), &group);
             for (i, r) in indices.into_iter().zip(recs) {
                 records[i] = Some(r);
             }
@@ -123,6 +72,45 @@ impl GpuRunner {
             .into_iter()
             .map(|r| r.expect("one record per frame"))
             .collect()
+    }
+
+    /// Frames of one size: each within its hint's region first, then lost in space; on the
+    /// GPU unless it has failed.
+    fn solve_size(
+        &mut self,
+        solvers: &Solvers,
+        (w, h): (u32, u32),
+        group: &[&Decoded],
+    ) -> Vec<Record> {
+        let regional: Vec<Option<Solver>> = (group.iter())
+            .map(|d| solvers.regional(d, decoded_frame(d)))
+            .collect();
+        // When every frame has a hint, the lost-in-space solver (its distance table) is built
+        // only if a region does not solve its frame.
+        let global = if regional.iter().all(Option::is_some) {
+            Global::Lazy(solvers, (w, h), None)
+        } else {
+            match solvers.get(w, h) {
+                Ok(s) => Global::Ready(s),
+                Err(e) => {
+                    // No lost-in-space solver: frames with a hint are solved within its
+                    // region, on the CPU; the others carry the reason.
+                    let lazy = Global::Lazy(solvers, (w, h), None);
+                    let recs = group.iter().zip(&regional).map(|(d, r)| match r {
+                        Some(r) => solve_with(solvers, r, Some(r), &lazy, d, decoded_frame(d)),
+                        None => solvers.error_record(&d.name, &e, &self.name()),
+                    });
+                    return recs.collect();
+                }
+            }
+        };
+        if self.failed {
+            let recs = group.iter().zip(&regional);
+            return recs
+                .map(|(d, r)| cpu_record(solvers, r, &global, d))
+                .collect();
+        }
+        self.solve_group(solvers, &global, group, &regional)
     }
 
     /// The pixel stages alone (`--sequence`): the brightest `max_stars`, completed by the matched
@@ -220,11 +208,11 @@ impl GpuRunner {
         &mut self,
         solvers: &Solvers,
         global: &Global,
-        group: &[(usize, Decoded)],
+        group: &[&Decoded],
         regional: &[Option<Solver>],
     ) -> Vec<Record> {
-        let frames: Vec<&Frame> = group.iter().map(|(_, d)| decoded_frame(d)).collect();
-        let epochs: Vec<Option<f64>> = group.iter().map(|(_, d)| d.epoch).collect();
+        let frames: Vec<&Frame> = group.iter().map(|d| decoded_frame(d)).collect();
+        let epochs: Vec<Option<f64>> = group.iter().map(|d| d.epoch).collect();
         match self.gpu_group(
             &solvers.settings.detect,
             global,
@@ -242,7 +230,7 @@ impl GpuRunner {
                     .zip(found)
                     .zip(&frames)
                     .zip(regional)
-                    .map(|(((((_, d), sol), found), frame), r)| {
+                    .map(|((((d, sol), found), frame), r)| {
                         let timing = Timing {
                             decode: d.decode_ms,
                             detect: detect_ms / n,
@@ -261,7 +249,7 @@ impl GpuRunner {
                 group
                     .iter()
                     .zip(regional)
-                    .map(|((_, d), r)| cpu_record(solvers, r, global, d))
+                    .map(|(d, r)| cpu_record(solvers, r, global, d))
                     .collect()
             }
         }

@@ -16,7 +16,6 @@ use crate::gpu::Gpu;
 use crate::record::Record;
 use crate::solve::Settings;
 pub use camera_source::{CameraSource, MIN_SIDE};
-pub use cpu_runner::solve_cpu_many;
 pub use gpu_runner::GpuRunner;
 pub use solvers::{BACKEND_CPU, DEFAULT_MAX_PIXELS, Decoded, Detected, SharedSolver, Solvers};
 use std::path::PathBuf;

@@ -21,11 +21,7 @@ pub const BACKEND_CPU: &str = "cpu";
 
 /// A frame size's solver, or why it could not be built: the error every record of that size
 /// carries.
-pub type SharedSolver = Arc<Result<Solver>>;
-
-/// Frames of one size and bit depth (they share the detection parameters), with their
-/// positions in the batch.
-pub(super) type SizeGroup<'a> = (DetectKey, Vec<(usize, Decoded<'a>)>);
+pub type SharedSolver = Result<Arc<Solver>>;
 
 /// Frame width, height and saturation level: frames alike in these share detection's
 /// parameters.
@@ -199,7 +195,7 @@ impl Solvers {
         });
         let mut map = self.map.lock().unwrap_or_else(|e| e.into_inner());
         map.entry((width, height, bits.0, bits.1))
-            .or_insert_with(|| Arc::new(self.build(width, height, scale.as_ref())))
+            .or_insert_with(|| self.build(width, height, scale.as_ref()).map(Arc::new))
             .clone()
     }
 
@@ -233,7 +229,7 @@ impl Solvers {
 
 /// A frame's lost-in-space solver: at hand, or the size's, built when first needed.
 pub(crate) enum Global<'a> {
-    Ready(&'a Solver),
+    Ready(Arc<Solver>),
     Lazy(&'a Solvers, (u32, u32), Option<PixelScale>),
 }
 
@@ -249,39 +245,13 @@ impl Global<'_> {
     /// The solver, built now if it is lazy and was not yet; None when the size has none (the
     /// catalog or camera cannot make one: the message is in the records of frames without a
     /// hint).
-    pub(crate) fn solver(&self) -> Option<GlobalSolver<'_>> {
+    pub(crate) fn solver(&self) -> Option<Arc<Solver>> {
         match self {
-            Global::Ready(s) => Some(GlobalSolver::Borrowed(s)),
-            Global::Lazy(solvers, (w, h), scale) => {
-                let shared = solvers.get_scaled(*w, *h, scale.as_ref());
-                match shared.as_ref() {
-                    Ok(_) => Some(GlobalSolver::Shared(shared)),
-                    Err(e) => {
-                        tracing::debug!("no lost-in-space search after the hint's: {e}");
-                        None
-                    }
-                }
-            }
-        }
-    }
-}
-
-/// A lost-in-space solver at hand: borrowed, or the size's shared one (only ever a built one).
-pub(crate) enum GlobalSolver<'a> {
-    Borrowed(&'a Solver),
-    Shared(SharedSolver),
-}
-
-impl std::ops::Deref for GlobalSolver<'_> {
-    type Target = Solver;
-
-    fn deref(&self) -> &Solver {
-        match self {
-            GlobalSolver::Borrowed(s) => s,
-            GlobalSolver::Shared(shared) => shared
-                .as_ref()
-                .as_ref()
-                .expect("Global::solver wraps built solvers only"),
+            Global::Ready(s) => Some(s.clone()),
+            Global::Lazy(solvers, (w, h), scale) => solvers
+                .get_scaled(*w, *h, scale.as_ref())
+                .inspect_err(|e| tracing::debug!("no lost-in-space search after the hint's: {e}"))
+                .ok(),
         }
     }
 }

@@ -192,11 +192,11 @@ impl<'a> Sequencer<'a> {
                 return Record::error(&d.name, e.to_string(), &f.backend);
             }
         };
-        let solver = self.solvers.get_for(d, frame);
-        let solver = match solver.as_ref() {
+        let solver = match self.solvers.get_for(d, frame) {
             Ok(s) => s,
             Err(e) => return Record::error(&d.name, e.to_string(), &f.backend),
         };
+        let solver = &*solver;
         let t_start = Instant::now();
         let mut warnings = Vec::new();
         let t = self.time_of(d, index, &mut warnings);

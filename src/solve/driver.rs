@@ -23,7 +23,6 @@ use super::outcome::{Outcome, Solution, Unsolved};
 use super::scale_free::Checked;
 use super::solver::{Prepared, Solver};
 use crate::io::frame::Frame;
-use std::convert::Infallible;
 use std::ops::Deref;
 use std::time::Instant;
 
@@ -64,7 +63,7 @@ where
                 .filter(|&i| regional[i].is_none() && !solved(&outcomes[i]))
                 .collect();
             if !todo.is_empty() {
-                let stars = kernels.detect_filtered(&todo, &g.filtered_settings())?;
+                let stars = kernels.detect_filtered(&todo, &g.settings.detect.filtered())?;
                 for (&i, s) in todo.iter().zip(stars) {
                     filtered[i] = Some(s);
                 }
@@ -130,7 +129,7 @@ fn within_regions(
     let mut outcomes = vec![Outcome::Unsolved(Unsolved::TooFewStars); dets.len()];
     for &i in which {
         if let Some(r) = regional[i] {
-            outcomes[i] = identify_cpu(r, dets[i].clone(), epochs[i]).outcome;
+            outcomes[i] = r.identify(dets[i].clone(), epochs[i]).outcome;
         }
     }
     outcomes
@@ -208,7 +207,7 @@ fn scale_free<K: Kernels + ?Sized>(
         live.clear();
         for ((k, l), rows) in lookups.iter().zip(rows) {
             let c = &mut checked[*k];
-            match g.finish_scale_free_within(lists[*k], l, &rows, epochs[*k], c) {
+            match g.finish_scale_free(lists[*k], l, &rows, epochs[*k], c) {
                 Some(o) => found[*k] = Some(o),
                 None if !c.spent => live.push(*k),
                 None => {}
@@ -340,7 +339,7 @@ fn retry<K: Kernels + ?Sized>(
     let (passed, missing): (Vec<usize>, Vec<usize>) =
         (unsolved.iter()).partition(|&&i| filtered[i].is_some());
     if !missing.is_empty() {
-        let stars = kernels.detect_filtered(&missing, &lead.filtered_settings())?;
+        let stars = kernels.detect_filtered(&missing, &lead.settings.detect.filtered())?;
         for (&i, s) in missing.iter().zip(stars) {
             filtered[i] = Some(s);
         }
@@ -377,19 +376,6 @@ fn retry<K: Kernels + ?Sized>(
     Ok(())
 }
 
-/// A result of the CPU twins, which cannot fail.
-fn cpu<T>(r: Result<T, Infallible>) -> T {
-    match r {
-        Ok(t) => t,
-        Err(never) => match never {},
-    }
-}
-
-/// [`Solver::identify`]: one star list through steps 2 and 4 on the CPU.
-fn identify_cpu(solver: &Solver, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-    identify_list_cpu(None, || Some(solver), detections, epoch)
-}
-
 /// One star list on the CPU (no detection stage: star lists, `--streaks`): within `regional`'s
 /// region first, then lost in space (`global`, made only when the region does not solve it).
 pub fn identify_list_cpu<G: Deref<Target = Solver>>(
@@ -398,14 +384,15 @@ pub fn identify_list_cpu<G: Deref<Target = Solver>>(
     detections: Vec<Detection>,
     epoch: Option<f64>,
 ) -> Solution {
-    let sols = cpu(identify_batch(
+    // The CPU twins cannot fail.
+    let Ok(sols) = identify_batch(
         &mut CpuKernels::star_lists(),
         &[regional],
         global,
         vec![detections],
         &[epoch],
         None,
-    ));
+    );
     only(sols, epoch)
 }
 
@@ -421,21 +408,21 @@ fn only(sols: Vec<Solution>, epoch: Option<f64>) -> Solution {
 impl Solver {
     /// Identify the stars of a detection list on the CPU: the scale-free pass, then the walk.
     pub fn identify(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-        identify_cpu(self, detections, epoch)
+        identify_list_cpu(None, || Some(self), detections, epoch)
     }
 
     /// The walk alone (step 4) on the CPU, as after a scale-free pass that did not solve.
     pub fn identify_walk(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
         let dets = vec![detections];
         let mut outcomes = vec![Outcome::Unsolved(Unsolved::TooFewStars)];
-        cpu(walk(
+        let Ok(()) = walk(
             &mut CpuKernels::star_lists(),
             self,
             &dets,
             &[epoch],
             &[0],
             &mut outcomes,
-        ));
+        );
         let outcome = outcomes
             .pop()
             .unwrap_or(Outcome::Unsolved(Unsolved::TooFewStars));
@@ -471,14 +458,8 @@ pub fn solve_frame_cpu<G: Deref<Target = Solver>>(
     let (mut k, first) = CpuKernels::detect(&[frame], detect);
     let first_ms = t0.elapsed().as_secs_f64() * 1e3;
     let sizes = [(frame.width, frame.height)];
-    let sols = cpu(identify_batch(
-        &mut k,
-        regional,
-        global,
-        first,
-        &[epoch],
-        Some(&sizes),
-    ));
+    // The CPU twins cannot fail.
+    let Ok(sols) = identify_batch(&mut k, regional, global, first, &[epoch], Some(&sizes));
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     let detect_ms = first_ms + k.detect_ms;
     (only(sols, epoch), detect_ms, total_ms - detect_ms)

@@ -13,7 +13,7 @@ use super::bands::{
     WIDE_MATCH_RADIUS_PX, WIDE_PAIR_TOL_PX, band_for, scale_bands, scale_hypotheses, scaled,
     spread_order,
 };
-use super::detect::{DetectSettings, Detection};
+use super::detect::Detection;
 use super::identify::{self, IdentifySettings};
 use super::mag_limit::{SHALLOW_STARS_IN_VIEW, mag_limit_in};
 use super::outcome::{Outcome, Unsolved};
@@ -479,12 +479,9 @@ impl Solver {
         p: &Prepared,
         epoch: Option<f64>,
     ) -> Outcome {
-        if p.triangle_stars < 4 {
-            return Outcome::Unsolved(Unsolved::TooFewStars);
-        }
-        let refs = self.bands[p.band].refs_at(epoch);
-        match self.finish_triangles(detections, p, &refs) {
-            Some(a) => self.conclude(detections, p, a, epoch),
+        match self.fallback(detections, p, epoch) {
+            Some(o) => o,
+            None if !Self::falls_back(p) => Outcome::Unsolved(Unsolved::TooFewStars),
             None => Outcome::Unsolved(Unsolved::NoConsistentMatch),
         }
     }
@@ -667,11 +664,6 @@ impl Solver {
         } else {
             1
         }
-    }
-
-    /// Detection's settings with the matched filter on (the detection retry).
-    pub fn filtered_settings(&self) -> DetectSettings {
-        self.settings.detect.filtered()
     }
 
     /// The band (of the scale search; never the shallow pass's) a focal-length factor falls in.

@@ -446,15 +446,6 @@ fn check_code(c: char, what: &str) -> Result<char, String> {
     }
 }
 
-/// Does this text look like IOD lines (each starts with a 5-digit object number and a blank,
-/// at most 80 columns)? Used before replacing a file: only one gpustar could have written.
-pub fn iod_like(text: &str) -> bool {
-    text.lines().filter(|l| !l.is_empty()).all(|l| {
-        let b = l.as_bytes();
-        b.len() <= 80 && b.len() > 6 && b[..5].iter().all(u8::is_ascii_digit) && b[5] == b' '
-    })
-}
-
 /// The IOD line of `o`: angle format 2, epoch code 5 (J2000), magnitude and flash
 /// columns blank, right-trimmed (no trailing blanks: 66 characters with a behaviour
 /// code, 61-64 without), as stvid writes it. Errors name the field that cannot be written:

@@ -156,9 +156,9 @@ fn frame_errors_keep_their_kind() {
     // No camera: the solver of every size is a configuration error.
     let shared = solvers.get(SIZE, SIZE);
     assert!(
-        matches!(shared.as_ref(), Err(Error::Config(_))),
+        matches!(shared, Err(Error::Config(_))),
         "{:?}",
-        shared.as_ref().as_ref().err()
+        shared.err()
     );
     // A directory median of one frame: an input error, the same for each frame there.
     let one = tmp.path().join("one.png");

@@ -103,7 +103,9 @@ fn pass_alone(
     let dets = gpustar::solve::detect::detect(frame, &solver.settings.detect);
     let lookup = solver.scale_free_lookup(&dets, 0..solver.scale_free_rounds(dets.len()))?;
     let rows = scale_free::rows_cpu(sf, &lookup);
-    let Some(Outcome::Solved(r, _)) = solver.finish_scale_free(&dets, &lookup, &rows, None) else {
+    let Some(Outcome::Solved(r, _)) =
+        solver.finish_scale_free(&dets, &lookup, &rows, None, &mut Default::default())
+    else {
         return None;
     };
     // A frame whose pass has checked its share of patterns already checks no more.
@@ -112,7 +114,7 @@ fn pass_alone(
         refined: 0,
         spent: false,
     };
-    let over = solver.finish_scale_free_within(&dets, &lookup, &rows, None, &mut spent);
+    let over = solver.finish_scale_free(&dets, &lookup, &rows, None, &mut spent);
     assert!(over.is_none() && spent.spent && spent.patterns == scale_free::MAX_PATTERNS);
     // Looked up one round at a time (the CPU's way), what the earlier rounds checked and
     // refined carried over: the same solution as all rounds at once (the GPU's way).
@@ -121,7 +123,7 @@ fn pass_alone(
     for round in 0..solver.scale_free_rounds(dets.len()) {
         let l = solver.scale_free_lookup(&dets, round..round + 1)?;
         let rows = scale_free::rows_cpu(sf, &l);
-        by_round = solver.finish_scale_free_within(&dets, &l, &rows, None, &mut checked);
+        by_round = solver.finish_scale_free(&dets, &l, &rows, None, &mut checked);
         if by_round.is_some() || checked.spent {
             break;
         }
@@ -175,7 +177,7 @@ fn known_fields_solve_in_the_pass_with_the_camera_given() {
     let solver = Solver::new(&Catalog::builtin(), camera.clone(), settings).unwrap();
     assert!(solver.scale_free.is_some(), "a known scale has the pass");
     assert_eq!(
-        solver.scale_free_share(),
+        solver.scale_free.as_ref().map(|sf| sf.limits.share),
         Some(scale_free::KNOWN_SCALE_SHARE)
     );
     assert!(

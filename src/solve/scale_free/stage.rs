@@ -20,12 +20,6 @@ enum RoundEnd {
 }
 
 impl Solver {
-    /// The share of the false-match budget the scale-free pass takes is `1 / share`; None
-    /// without the pass.
-    pub fn scale_free_share(&self) -> Option<u64> {
-        self.scale_free.as_ref().map(|sf| sf.limits.share)
-    }
-
     /// The rounds of the pass for a frame of `n` detections (see [`rounds_for`],
     /// [`PassLimits::rounds`]).
     pub fn scale_free_rounds(&self, n: usize) -> usize {
@@ -74,22 +68,12 @@ impl Solver {
     }
 
     /// The scale-free pass after the lookup (`rows[q]` answers `lookup.queries[q]`): round
-    /// by round (those the lookup holds), the quad hypotheses that pass the geometric checks, each refined in turn
-    /// (the first [`MAX_REFINED`] of a round); the first accepted concludes as the vote's
-    /// solutions do. None when none is accepted.
+    /// by round (those the lookup holds: some or all of the frame's), the quad hypotheses that
+    /// pass the geometric checks, each refined in turn (the first [`MAX_REFINED`] of a round);
+    /// the first accepted concludes as the vote's solutions do. `checked` is what the frame's
+    /// earlier lookups checked and refined ([`MAX_PATTERNS`], `max_refined`). None when none
+    /// is accepted.
     pub fn finish_scale_free(
-        &self,
-        detections: &[Detection],
-        lookup: &Lookup,
-        rows: &[Rows],
-        epoch: Option<f64>,
-    ) -> Option<Outcome> {
-        self.finish_scale_free_within(detections, lookup, rows, epoch, &mut Checked::default())
-    }
-
-    /// [`Solver::finish_scale_free`] of a lookup holding some of a frame's rounds, `checked`
-    /// what its earlier rounds checked and refined ([`MAX_PATTERNS`], `max_refined`).
-    pub fn finish_scale_free_within(
         &self,
         detections: &[Detection],
         lookup: &Lookup,
@@ -126,6 +110,7 @@ impl Solver {
                 break;
             }
             checked.patterns += found;
+            tracing::debug!("scale-free round {round}: {found} patterns found");
             let before = refinable;
             let end = self.scale_free_round(
                 detections,
@@ -189,13 +174,8 @@ impl Solver {
                 }
             }
         }
-        let found: u64 = quads
-            .clone()
-            .flat_map(|q| &rows[q.queries.clone()])
-            .map(|r| u64::from(r.end.saturating_sub(r.start)))
-            .sum();
         tracing::debug!(
-            "scale-free round: {} quads, {found} patterns found, {} pass the checks",
+            "scale-free round: {} quads, {} hypotheses pass the checks",
             quads.count(),
             hyps.len()
         );
