@@ -119,10 +119,9 @@ pub fn identify(
     })?;
     // As lost-in-space does after a scale search: checked against the catalog as deep as the
     // fitted field calls for.
-    let (h, fixed) = (accepted.hypotheses, accepted.fixed);
     Some(
         solver
-            .deepen(&accepted, dets, band, rs, epoch, h, fixed)
+            .deepen(&accepted, dets, band, rs, epoch)
             .unwrap_or((accepted, refs)),
     )
 }

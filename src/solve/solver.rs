@@ -390,7 +390,7 @@ impl Solver {
     ) -> Outcome {
         let refs = self.bands[p.band].refs_at(epoch);
         match self.finish_vote(detections, p, voted, &refs) {
-            Ok(accepted) => self.conclude(detections, p, accepted, epoch),
+            Ok(accepted) => self.conclude(detections, p.band, &p.refine, accepted, epoch),
             Err(reason) => Outcome::Unsolved(reason),
         }
     }
@@ -417,7 +417,7 @@ impl Solver {
         }
         let refs = self.bands[p.band].refs_at(epoch);
         let accepted = self.finish_triangles(detections, p, &refs)?;
-        Some(self.conclude(detections, p, accepted, epoch))
+        Some(self.conclude(detections, p.band, &p.refine, accepted, epoch))
     }
 
     /// The triangle fallbacks of the passes whose vote failed (`fallbacks`: each pass's index
@@ -467,7 +467,7 @@ impl Solver {
             return Outcome::Unsolved(Unsolved::NoConsistentMatch);
         }
         match self.first_accepted(detections, p, &refs, &triangles, triangles.len() as u64) {
-            Some(a) => self.conclude(detections, p, a, epoch),
+            Some(a) => self.conclude(detections, p.band, &p.refine, a, epoch),
             None => Outcome::Unsolved(Unsolved::LowConfidence),
         }
     }
@@ -491,50 +491,30 @@ impl Solver {
     pub(crate) fn conclude(
         &self,
         detections: &[Detection],
-        p: &Prepared,
-        accepted: (Refined, u64, usize),
+        band: usize,
+        rs: &RefineSettings,
+        accepted: Refined,
         epoch: Option<f64>,
     ) -> Outcome {
-        let refs = self.bands[p.band].refs_at(epoch);
-        let (refined, hypotheses, fixed) = accepted;
-        if Some(p.band) == self.shallow_band {
+        let again = if Some(band) == self.shallow_band {
             // Found against the shallow selection: the automatic one matches the fainter stars
-            // too, judged by the same test.
-            let main = self.bands[0].refs_at(epoch);
-            return match refine::refine(
-                refined.r,
-                detections,
-                &main,
-                &refined.camera,
-                hypotheses,
-                fixed,
-                &p.refine,
-            ) {
-                Some(r)
-                    if r.false_match_prob <= p.refine.max_false_prob
-                        && r.matches.len() >= refined.matches.len() =>
-                {
-                    Outcome::Solved(r, main)
-                }
-                _ => Outcome::Solved(refined, refs),
-            };
-        }
-        match self.deepen(
-            &refined, detections, p.band, &p.refine, epoch, hypotheses, fixed,
-        ) {
-            Some((deeper, deep_refs)) => Outcome::Solved(deeper, deep_refs),
-            None => Outcome::Solved(refined, refs),
+            // too.
+            refine_again(&accepted, detections, self.bands[0].refs_at(epoch), rs)
+        } else {
+            self.deepen(&accepted, detections, band, rs, epoch)
+        };
+        match again {
+            Some((refined, refs)) => Outcome::Solved(refined, refs),
+            None => Outcome::Solved(accepted, self.bands[band].refs_at(epoch)),
         }
     }
 
     /// After a scale search the reference stars were chosen for the middle of a band, and a
     /// frame at its narrow end holds fewer of them (27 instead of [`AUTO_STARS_IN_VIEW`] for a
     /// band of [`BAND_RATIO`]; 8 at 10° with one selection for 5° to 40°). The accepted
-    /// attitude is refined again against the selection its fitted field calls for, judged by
-    /// the same false-match test with the same hypotheses; None = nothing deeper to check
-    /// against, or the deeper refinement matched fewer stars or failed the test (the accepted
-    /// one then stands).
-    #[allow(clippy::too_many_arguments)]
+    /// attitude is refined again against the selection its fitted field calls for (see
+    /// [`refine_again`]); None = nothing deeper to check against, or the accepted solution
+    /// stands.
     pub(crate) fn deepen(
         &self,
         accepted: &Refined,
@@ -542,8 +522,6 @@ impl Solver {
         band: usize,
         rs: &RefineSettings,
         epoch: Option<f64>,
-        hypotheses: u64,
-        fixed: usize,
     ) -> Option<(Refined, Arc<RefCatalog>)> {
         let refs = self.deeper.as_ref()?.refs_for(
             &accepted.camera,
@@ -551,30 +529,18 @@ impl Solver {
             self.bands[band].refs.selection,
             epoch,
         )?;
-        let refined = refine::refine(
-            accepted.r,
-            detections,
-            &refs,
-            &accepted.camera,
-            hypotheses,
-            fixed,
-            rs,
-        )?;
-        (refined.matches.len() >= accepted.matches.len()
-            && refined.false_match_prob <= rs.max_false_prob)
-            .then_some((refined, refs))
+        refine_again(accepted, detections, refs, rs)
     }
 
     /// The vote's path: the consistent set of candidates, Wahba, refinement. The accepted
-    /// solution with the hypotheses and fixed stars its false-match test counted, or why
-    /// there is none.
+    /// solution, or why there is none.
     fn finish_vote(
         &self,
         detections: &[Detection],
         p: &Prepared,
         voted: &identify::VoteResult,
         refs: &RefCatalog,
-    ) -> Result<(Refined, u64, usize), Unsolved> {
+    ) -> Result<Refined, Unsolved> {
         let vectors = &p.vectors;
         let n_vote = voted.candidates.len() / voted.k.max(1);
         let ids = identify::verify(
@@ -610,7 +576,7 @@ impl Solver {
             );
             return Err(Unsolved::LowConfidence);
         }
-        Ok((refined, hypotheses, 2))
+        Ok(refined)
     }
 
     /// The triangle fallback (see [`triangle`]): the first confirmed triangle, in brightness
@@ -622,7 +588,7 @@ impl Solver {
         detections: &[Detection],
         p: &Prepared,
         refs: &RefCatalog,
-    ) -> Option<(Refined, u64, usize)> {
+    ) -> Option<Refined> {
         let band = &self.bands[p.band];
         let (hyps, matched) = self.triangles_either(&p.vectors[..p.triangle_stars], |v| {
             triangle::triangles(band.table(), &p.ranges, v, band.directions())
@@ -640,7 +606,7 @@ impl Solver {
         refs: &RefCatalog,
         hyps: &[triangle::Triangle],
         matched: u64,
-    ) -> Option<(Refined, u64, usize)> {
+    ) -> Option<Refined> {
         let vectors = &p.vectors[..p.n_vote];
         let hypotheses = matched.saturating_mul(self.hypothesis_factor(detections.len(), p.method));
         hyps.iter().find_map(|t| {
@@ -648,8 +614,7 @@ impl Solver {
             let icrs = t.refs.map(|id| refs.v(id as usize));
             let (r0, camera) = self.first_attitude(&cam, &icrs, &p.camera)?;
             let refined = refine::refine(r0, detections, refs, &camera, hypotheses, 3, &p.refine)?;
-            (refined.false_match_prob <= p.refine.max_false_prob)
-                .then_some((refined, hypotheses, 3))
+            (refined.false_match_prob <= p.refine.max_false_prob).then_some(refined)
         })
     }
 
@@ -673,4 +638,28 @@ impl Solver {
             scale,
         )
     }
+}
+
+/// An accepted solution refined again against `refs`, judged by the same false-match test with
+/// the same hypotheses and fixed stars: None when it matched fewer stars or failed the test
+/// (the accepted one then stands).
+fn refine_again(
+    accepted: &Refined,
+    detections: &[Detection],
+    refs: Arc<RefCatalog>,
+    rs: &RefineSettings,
+) -> Option<(Refined, Arc<RefCatalog>)> {
+    let (h, fixed) = (accepted.hypotheses, accepted.fixed);
+    let refined = refine::refine(
+        accepted.r,
+        detections,
+        &refs,
+        &accepted.camera,
+        h,
+        fixed,
+        rs,
+    )?;
+    (refined.matches.len() >= accepted.matches.len()
+        && refined.false_match_prob <= rs.max_false_prob)
+        .then_some((refined, refs))
 }

@@ -1,13 +1,14 @@
 //! The scale-free pass as a stage of a [`Solver`]: the rounds of a frame's quads looked up,
 //! checked, refined and judged against the pass's share of the false-match budget.
 
-use super::super::bands::{SCALE_STEP, scaled};
+use super::super::bands::scaled;
 use super::super::detect::Detection;
 use super::super::outcome::Outcome;
-use super::super::refine::{self, CameraFit};
-use super::super::solver::{Prepared, Solver};
+use super::super::refine::{self, CameraFit, RefineSettings};
+use super::super::solver::Solver;
 use super::check::permutations;
 use super::{Checked, Hypothesis, Lookup, MAX_PATTERNS, MAX_REFINED, Quad, lookup, rounds_for};
+use crate::camera::Camera;
 use crate::catalog::patterns;
 use crate::cpu::pattern::Rows;
 
@@ -193,11 +194,10 @@ impl Solver {
         );
         for h in hyps.iter().take(MAX_REFINED.min(*refinable)) {
             *refinable -= 1;
-            let mut p = self.scale_free_prepared(h.scale);
-            p.camera.mirrored ^= h.mirrored;
-            let refs = self.bands[p.band].refs_at(epoch);
-            let Some(refined) =
-                refine::refine(h.r, detections, &refs, &p.camera, hypotheses, 4, &p.refine)
+            let (mut camera, band, rs) = self.scale_free_camera(h.scale);
+            camera.mirrored ^= h.mirrored;
+            let refs = self.bands[band].refs_at(epoch);
+            let Some(refined) = refine::refine(h.r, detections, &refs, &camera, hypotheses, 4, &rs)
             else {
                 continue;
             };
@@ -219,40 +219,21 @@ impl Solver {
                     );
                     return RoundEnd::LeftToVote;
                 }
-                return RoundEnd::Solved(Box::new(self.conclude(
-                    detections,
-                    &p,
-                    (refined, hypotheses, 4),
-                    epoch,
-                )));
+                return RoundEnd::Solved(Box::new(
+                    self.conclude(detections, band, &rs, refined, epoch),
+                ));
             }
         }
         RoundEnd::Nothing
     }
 
-    /// The pass settings at a quad's focal length, as the scale walk's at that scale: its
-    /// band, the scale step's tolerance, the focal length fitted (a searched scale), or the
-    /// vote's (a known one).
-    fn scale_free_prepared(&self, scale: f64) -> Prepared {
-        let mut s = self.settings.identify;
+    /// A quad's focal length as the scale walk's pass at that scale takes it: the camera, its
+    /// band, and the refinement settings (the focal length fitted when the scale is searched).
+    fn scale_free_camera(&self, scale: f64) -> (Camera, usize, RefineSettings) {
         let mut rs = self.settings.refine;
-        if self.settings.scale_range.is_some() {
-            s.scale_tol += SCALE_STEP / 2.0;
-            if rs.fit == CameraFit::None {
-                rs.fit = CameraFit::Scale;
-            }
+        if self.settings.scale_range.is_some() && rs.fit == CameraFit::None {
+            rs.fit = CameraFit::Scale;
         }
-        Prepared {
-            camera: scaled(&self.camera, scale),
-            band: self.band_of(scale),
-            vectors: Vec::new(),
-            ranges: Vec::new(),
-            n_vote: 0,
-            k: 0,
-            triangle_stars: 0,
-            identify: s,
-            refine: rs,
-            method: crate::solve::radial::Method::Vote,
-        }
+        (scaled(&self.camera, scale), self.band_of(scale), rs)
     }
 }
