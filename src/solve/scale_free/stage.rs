@@ -7,7 +7,9 @@ use super::super::outcome::Outcome;
 use super::super::refine::{self, CameraFit, RefineSettings};
 use super::super::solver::Solver;
 use super::check::permutations;
-use super::{Checked, Hypothesis, Lookup, MAX_PATTERNS, MAX_REFINED, Quad, lookup, rounds_for};
+use super::{
+    Checked, Hypothesis, Lookup, MAX_PATTERNS, MAX_REFINED, Quad, ScaleFree, lookup, rounds_for,
+};
 use crate::camera::Camera;
 use crate::catalog::patterns;
 use crate::cpu::pattern::Rows;
@@ -82,19 +84,17 @@ impl Solver {
         epoch: Option<f64>,
         checked: &mut Checked,
     ) -> Option<Outcome> {
-        let perms = permutations();
         let rounds = self.scale_free_rounds(detections.len());
         let sf = self.scale_free.as_ref()?;
         if checked.spent {
             return None;
         }
-        let mut refinable = sf.limits.max_refined.saturating_sub(checked.refined);
         for round in 0..rounds {
             let mut quads = lookup.quads.iter().filter(|q| q.round == round).peekable();
             if quads.peek().is_none() {
                 continue;
             }
-            if refinable == 0 {
+            if checked.refined >= sf.limits.max_refined {
                 checked.spent = true;
                 break;
             }
@@ -112,16 +112,7 @@ impl Solver {
             }
             checked.patterns += found;
             tracing::debug!("scale-free round {round}: {found} patterns found");
-            let before = refinable;
-            let end = self.scale_free_round(
-                detections,
-                quads,
-                rows,
-                (rounds, &mut refinable),
-                epoch,
-                &perms,
-            );
-            checked.refined += before - refinable;
+            let end = self.scale_free_round(sf, detections, quads, rows, (rounds, checked), epoch);
             match end {
                 RoundEnd::Solved(o) => return Some(*o),
                 RoundEnd::LeftToVote => {
@@ -135,20 +126,18 @@ impl Solver {
     }
 
     /// One round of the pass: its quads' hypotheses that pass the geometric checks, judged
-    /// against the round's share of the false-match budget; at most `refinable` of them
-    /// refined (and counted off it), of the frame's `rounds`.
+    /// against the round's share of the false-match budget, of the frame's `rounds`; refined
+    /// while `checked.refined` is within the pass's limit (and counted there).
     fn scale_free_round<'a>(
         &self,
+        sf: &ScaleFree,
         detections: &[Detection],
         quads: impl Iterator<Item = &'a Quad> + Clone,
         rows: &[Rows],
-        (rounds, refinable): (usize, &mut usize),
+        (rounds, checked): (usize, &mut Checked),
         epoch: Option<f64>,
-        perms: &[[usize; 4]],
     ) -> RoundEnd {
-        let Some(sf) = self.scale_free.as_ref() else {
-            return RoundEnd::Nothing;
-        };
+        let perms = permutations();
         let share = sf.limits.share;
         let (lo, hi) = self.pattern_range();
         let refs = &self.bands[sf.band].refs;
@@ -168,7 +157,7 @@ impl Solver {
                         )
                     });
                     if let Some(h) =
-                        self.check_quad(detections, quad.stars, &img1, ids, refs, (lo, hi), perms)
+                        self.check_quad(detections, quad.stars, &img1, ids, refs, (lo, hi), &perms)
                     {
                         hyps.push(h);
                     }
@@ -192,8 +181,9 @@ impl Solver {
                 * self.detection_stages()
                 * self.parities(),
         );
-        for h in hyps.iter().take(MAX_REFINED.min(*refinable)) {
-            *refinable -= 1;
+        let refinable = sf.limits.max_refined.saturating_sub(checked.refined);
+        for h in hyps.iter().take(MAX_REFINED.min(refinable)) {
+            checked.refined += 1;
             let (mut camera, band, rs) = self.scale_free_camera(h.scale);
             camera.mirrored ^= h.mirrored;
             let refs = self.bands[band].refs_at(epoch);
