@@ -19,8 +19,8 @@ use crate::solve::identify::VoteResult;
 use crate::solve::kernels::Kernels;
 use crate::solve::radial;
 use crate::solve::scale_free::Lookup;
-use crate::solve::{Prepared, Solution, Solver};
-use crate::streaks::{self, StreakOptions, fit::StreakFit};
+use crate::solve::{Prepared, Solver};
+use crate::streaks::{self, fit::StreakFit};
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -104,13 +104,26 @@ impl GpuRunner {
                 }
             }
         };
-        if self.failed {
-            let recs = group.iter().zip(&regional);
-            return recs
-                .map(|(d, r)| cpu_record(solvers, r, &global, d))
-                .collect();
+        if let Some(records) = self.on_gpu(|g| g.gpu_group(solvers, &global, &regional, group)) {
+            return records;
         }
-        self.solve_group(solvers, &global, group, &regional)
+        let recs = group.iter().zip(&regional);
+        recs.map(|(d, r)| cpu_record(solvers, r, &global, d))
+            .collect()
+    }
+
+    /// `run` on the GPU, unless it has failed: on its first error (warned once) the rest of the
+    /// run goes to the CPU. None: the CPU's turn.
+    fn on_gpu<T>(&mut self, run: impl FnOnce(&mut Self) -> Result<T>) -> Option<T> {
+        if self.failed {
+            return None;
+        }
+        let out = run(self);
+        if let Err(e) = &out {
+            tracing::warn!("{e:#}; this batch and the rest of the run use the CPU");
+            self.failed = true;
+        }
+        out.ok()
     }
 
     /// The pixel stages alone (`--sequence`): the brightest `max_stars`, completed by the matched
@@ -129,29 +142,17 @@ impl GpuRunner {
         for (_, group) in by_size {
             let batch: Vec<&Frame> = group.iter().map(|&i| decoded_frame(&frames[i])).collect();
             let t0 = Instant::now();
-            let stars = if self.failed {
-                Err(error!(Gpu, "the GPU failed earlier"))
-            } else {
-                self.detect_with_faint(&batch, s)
-            };
-            match stars {
-                Ok(stars) => {
-                    let ms = t0.elapsed().as_secs_f64() * 1e3 / group.len() as f64;
-                    for (&i, d) in group.iter().zip(stars) {
-                        found[i] = Some((d, ms));
-                    }
+            if let Some(stars) = self.on_gpu(|g| g.detect_with_faint(&batch, s)) {
+                let ms = t0.elapsed().as_secs_f64() * 1e3 / group.len() as f64;
+                for (&i, d) in group.iter().zip(stars) {
+                    found[i] = Some((d, ms));
                 }
-                Err(e) => {
-                    if !self.failed {
-                        tracing::warn!("{e:#}; this batch and the rest of the run use the CPU");
-                        self.failed = true;
-                    }
-                    for &i in &group {
-                        let t0 = Instant::now();
-                        let dets = detect::faint::detect_with_faint(decoded_frame(&frames[i]), s);
-                        found[i] = Some((dets, t0.elapsed().as_secs_f64() * 1e3));
-                    }
-                }
+                continue;
+            }
+            for &i in &group {
+                let t0 = Instant::now();
+                let dets = detect::faint::detect_with_faint(decoded_frame(&frames[i]), s);
+                found[i] = Some((dets, t0.elapsed().as_secs_f64() * 1e3));
             }
         }
         let backend = self.name();
@@ -203,81 +204,26 @@ impl GpuRunner {
         }
     }
 
-    /// Frames of one size on the GPU; on a GPU error, the CPU takes over for good.
-    pub(crate) fn solve_group(
+    /// One batch on the GPU (frames of one size): detection (with the streak mask, when asked)
+    /// in one submission, then the driver's flow (`identify_batch`) on the GPU's kernels, with
+    /// streak fits, verification and refinement on the CPU. A record per frame.
+    fn gpu_group(
         &mut self,
         solvers: &Solvers,
         global: &Global,
-        group: &[&Decoded],
         regional: &[Option<Solver>],
-    ) -> Vec<Record> {
+        group: &[&Decoded],
+    ) -> Result<Vec<Record>> {
         let frames: Vec<&Frame> = group.iter().map(|d| decoded_frame(d)).collect();
         let epochs: Vec<Option<f64>> = group.iter().map(|d| d.epoch).collect();
-        match self.gpu_group(
-            &solvers.settings.detect,
-            global,
-            regional,
-            &frames,
-            &epochs,
-            solvers.streaks.as_ref(),
-        ) {
-            Ok((solutions, found, detect_ms, identify_ms)) => {
-                let backend = self.gpu.backend_name();
-                let n = group.len() as f64;
-                group
-                    .iter()
-                    .zip(solutions)
-                    .zip(found)
-                    .zip(&frames)
-                    .zip(regional)
-                    .map(|((((d, sol), found), frame), r)| {
-                        let timing = Timing {
-                            decode: d.decode_ms,
-                            detect: detect_ms / n,
-                            identify: identify_ms / n,
-                            total: d.decode_ms + (detect_ms + identify_ms) / n,
-                        };
-                        // Any solver of the size makes the record (they share the camera).
-                        let lead = r.as_ref().or(global.ready());
-                        solvers.record(lead, d, frame, &sol, found.as_deref(), timing, &backend)
-                    })
-                    .collect()
-            }
-            Err(e) => {
-                tracing::warn!("{e:#}; this batch and the rest of the run use the CPU");
-                self.failed = true;
-                group
-                    .iter()
-                    .zip(regional)
-                    .map(|(d, r)| cpu_record(solvers, r, global, d))
-                    .collect()
-            }
-        }
-    }
-
-    /// One batch on the GPU: detection (with the streak mask, when asked) in one submission,
-    /// then the frames with a pointing hint within its region (`regional`; the CPU twin votes:
-    /// a region's table is a few thousand rows, less work than its upload), then for each
-    /// scale tried (one, unless the scale is searched) a vote of the frames not solved yet in
-    /// one submission; streak fits, verification and refinement on the CPU.
-    /// Returns the solutions, the streaks, and the batch's detection and identification times
-    /// (ms).
-    pub(crate) fn gpu_group(
-        &mut self,
-        settings: &DetectSettings,
-        global: &Global,
-        regional: &[Option<Solver>],
-        frames: &[&Frame],
-        epochs: &[Option<f64>],
-        streak_opts: Option<&StreakOptions>,
-    ) -> Result<GroupOut> {
+        let settings = &solvers.settings.detect;
         let t0 = Instant::now();
-        let (blobs, found) = match streak_opts {
+        let (blobs, found): (_, Vec<Option<Vec<StreakFit>>>) = match &solvers.streaks {
             None => (
-                by_gain(frames, settings, |f, p| self.gpu.detect(f, p))?,
+                by_gain(&frames, settings, |f, p| self.gpu.detect(f, p))?,
                 vec![None; frames.len()],
             ),
-            Some(o) => by_gain(frames, settings, |f, p| {
+            Some(o) => by_gain(&frames, settings, |f, p| {
                 let sp = o.settings.params(p, settings.k_sigma);
                 let (blobs, pixels) = self.gpu.detect_streaks(f, p, &sp)?;
                 Ok((blobs.iter().zip(&pixels).zip(f))
@@ -290,31 +236,43 @@ impl GpuRunner {
             .into_iter()
             .unzip(),
         };
-        let detections = gpu_stars(&self.gpu, frames, &blobs, settings)?;
+        let detections = gpu_stars(&self.gpu, &frames, &blobs, settings)?;
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
         let t1 = Instant::now();
-        let regional: Vec<Option<&Solver>> = regional.iter().map(Option::as_ref).collect();
+        let regions: Vec<Option<&Solver>> = regional.iter().map(Option::as_ref).collect();
         // With streaks, detection took them out first: no second detection stage.
         let sizes: Vec<(u32, u32)> = frames.iter().map(|f| (f.width, f.height)).collect();
-        let sizes = streak_opts.is_none().then_some(sizes.as_slice());
+        let sizes = solvers.streaks.is_none().then_some(sizes.as_slice());
         let mut kernels = GpuKernels {
             runner: self,
-            frames,
+            frames: &frames,
         };
         let solutions = identify_batch(
             &mut kernels,
-            &regional,
+            &regions,
             || global.solver(),
             detections,
-            epochs,
+            &epochs,
             sizes,
         )?;
-        Ok((
-            solutions,
-            found,
-            detect_ms,
-            t1.elapsed().as_secs_f64() * 1e3,
-        ))
+        let identify_ms = t1.elapsed().as_secs_f64() * 1e3;
+        let backend = self.gpu.backend_name();
+        let n = group.len() as f64;
+        let each = group.iter().zip(solutions).zip(found).zip(regional);
+        Ok(each
+            .map(|(((d, sol), found), r)| {
+                let timing = Timing {
+                    decode: d.decode_ms,
+                    detect: detect_ms / n,
+                    identify: identify_ms / n,
+                    total: d.decode_ms + (detect_ms + identify_ms) / n,
+                };
+                // Any solver of the size makes the record (they share the camera).
+                let lead = r.as_ref().or(global.ready());
+                let frame = decoded_frame(d);
+                solvers.record(lead, d, frame, &sol, found.as_deref(), timing, &backend)
+            })
+            .collect())
     }
 }
 
@@ -346,10 +304,6 @@ pub(crate) fn gpu_stars(
     let blobs: Vec<&[Blob]> = blobs.iter().map(|b| b.as_slice()).collect();
     detect::stars_with(frames, &blobs, s, |w| gpu.psf_fit(w))
 }
-
-/// What a GPU batch gives: solutions, streaks (with `--streaks`), detection and
-/// identification times (ms).
-pub(crate) type GroupOut = (Vec<Solution>, Vec<Option<Vec<StreakFit>>>, f64, f64);
 
 /// The decoded frames (by index) grouped by size and saturation, in order of first
 /// appearance; frames that failed to decode are in no group.
@@ -486,5 +440,87 @@ impl Kernels for GpuKernels<'_, '_> {
             })
             .collect();
         r.gpu.radial(table, &jobs)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::catalog::Catalog;
+    use crate::sequence::DETECT_STARS;
+    use crate::simulate::{SimSettings, render};
+
+    /// A GPU error hands the rest of the run to the CPU, and only to it: the records then are
+    /// the CPU backend's, and the sequences' detections the CPU twins'.
+    #[test]
+    fn after_a_gpu_error_the_cpu_takes_the_run() {
+        let gpu = match Gpu::new(std::env::var("GPUSTAR_ADAPTER").ok().as_deref()) {
+            Ok(g) => g,
+            Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+                panic!("no GPU adapter in CI: {e:#}")
+            }
+            Err(e) => return eprintln!("SKIPPED after_a_gpu_error_the_cpu_takes_the_run: {e:#}"),
+        };
+        let mut runner = GpuRunner::new(gpu);
+        assert_eq!(runner.on_gpu(|_| Ok(1)), Some(1));
+        assert_ne!(runner.name(), BACKEND_CPU);
+        assert_eq!(runner.on_gpu(|_| Err::<u8, _>(error!(Gpu, "lost"))), None);
+        assert_eq!(runner.name(), BACKEND_CPU);
+        let not_run = |_: &mut GpuRunner| -> Result<u8> { panic!("the GPU ran after it failed") };
+        assert_eq!(runner.on_gpu(not_run), None);
+
+        let s = SimSettings {
+            width: 512,
+            height: 512,
+            fov_x_deg: 18.0,
+            seed: 3,
+            ..Default::default()
+        };
+        let camera = s.camera().unwrap();
+        let frames = || -> Vec<Decoded<'static>> {
+            (0..2)
+                .map(|k| {
+                    let (pixels, _) = render(&Catalog::builtin(), &s, k).unwrap();
+                    let frame = Frame {
+                        width: 512,
+                        height: 512,
+                        pixels: pixels.into(),
+                        saturation: 65535,
+                    };
+                    let name = format!("f{k}");
+                    Decoded::in_memory(&name, Ok((frame, Vec::new())), None, Default::default())
+                })
+                .collect()
+        };
+        let solvers = Solvers::new(
+            Catalog::builtin(),
+            crate::solve::Settings::default(),
+            CameraSource::Fixed(camera),
+        );
+        let untimed = |mut r: Record| {
+            r.timing_ms = Timing::default();
+            r
+        };
+        let after = runner.solve(&solvers, frames());
+        let cpu: Vec<Record> = frames().into_iter().map(|d| solvers.solve_cpu(d)).collect();
+        assert_eq!(after.len(), 2);
+        assert!(
+            after
+                .iter()
+                .all(|r| r.status == crate::record::Status::Solved)
+        );
+        assert_eq!(
+            after.into_iter().map(untimed).collect::<Vec<_>>(),
+            cpu.into_iter().map(untimed).collect::<Vec<_>>()
+        );
+        let detected = runner.detect(&solvers, frames(), DETECT_STARS);
+        for (d, f) in detected.iter().zip(frames()) {
+            assert_eq!(d.backend, BACKEND_CPU);
+            let cpu = solvers.detect_cpu(f, DETECT_STARS);
+            assert_eq!(
+                d.detections.as_ref().unwrap(),
+                cpu.detections.as_ref().unwrap()
+            );
+        }
     }
 }
