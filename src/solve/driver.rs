@@ -411,28 +411,6 @@ impl Solver {
         identify_list_cpu(None, || Some(self), detections, epoch)
     }
 
-    /// The walk alone (step 4) on the CPU, as after a scale-free pass that did not solve.
-    pub fn identify_walk(&self, detections: Vec<Detection>, epoch: Option<f64>) -> Solution {
-        let dets = vec![detections];
-        let mut outcomes = vec![Outcome::Unsolved(Unsolved::TooFewStars)];
-        let Ok(()) = walk(
-            &mut CpuKernels::star_lists(),
-            self,
-            &dets,
-            &[epoch],
-            &[0],
-            &mut outcomes,
-        );
-        let outcome = outcomes
-            .pop()
-            .unwrap_or(Outcome::Unsolved(Unsolved::TooFewStars));
-        Solution {
-            detections: dets.into_iter().next().unwrap_or_default(),
-            outcome,
-            epoch,
-        }
-    }
-
     /// Solve a decoded frame on the CPU.
     pub fn solve_frame(&self, frame: &Frame) -> (Solution, f64, f64) {
         self.solve_frame_at(frame, None)
