@@ -18,13 +18,9 @@ impl Solvers {
         self
     }
 
-    /// The pointing hint of a frame, if the run uses hints and the frame has one.
-    pub fn hint_of(&self, d: &Decoded, frame: &Frame) -> Option<Hint> {
-        self.hint_and_notes(d, frame).0
-    }
-
-    /// [`Solvers::hint_of`], and with `--hint header` why the frame's pointing keywords that
-    /// were not used were not (for its record's warnings).
+    /// The pointing hint of a frame, if the run uses hints and the frame has one, and with
+    /// `--hint header` why the frame's pointing keywords that were not used were not (for its
+    /// record's warnings).
     pub fn hint_and_notes(&self, d: &Decoded, frame: &Frame) -> (Option<Hint>, Vec<String>) {
         match self.hint {
             None => (None, Vec::new()),
@@ -40,7 +36,7 @@ impl Solvers {
     /// The solver of a frame's hinted region, if it has a hint (None also when the region
     /// holds too few catalog stars: the frame is then solved lost-in-space alone).
     pub fn regional(&self, d: &Decoded, frame: &Frame) -> Option<Solver> {
-        let hint = self.hint_of(d, frame)?;
+        let hint = self.hint_and_notes(d, frame).0?;
         let scale = self.header_scale(d);
         let camera = self
             .camera

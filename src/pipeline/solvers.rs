@@ -195,18 +195,16 @@ impl Solvers {
         });
         let mut map = self.map.lock().unwrap_or_else(|e| e.into_inner());
         map.entry((width, height, bits.0, bits.1))
-            .or_insert_with(|| self.build(width, height, scale.as_ref()).map(Arc::new))
+            .or_insert_with(|| {
+                let camera = self.camera.camera_for(width, height, scale.as_ref())?;
+                Solver::new(&self.catalog, camera, self.settings).map(Arc::new)
+            })
             .clone()
     }
 
     /// With [`CameraSource::Header`]: the pixel scale the frame's header states, if any.
     pub fn header_scale(&self, d: &Decoded) -> Option<PixelScale> {
         self.camera.header_scale(&d.keywords)
-    }
-
-    fn build(&self, width: u32, height: u32, scale: Option<&PixelScale>) -> Result<Solver> {
-        let camera = self.camera.camera_for(width, height, scale)?;
-        Solver::new(&self.catalog, camera, self.settings)
     }
 
     /// The pixel stages alone on the CPU (`--sequence`): the brightest `max_stars`, completed by

@@ -338,11 +338,9 @@ fn retry<K: Kernels + ?Sized>(
     // Stage 3 has detected these again, and run the scale-free pass on what it found.
     let (passed, missing): (Vec<usize>, Vec<usize>) =
         (unsolved.iter()).partition(|&&i| filtered[i].is_some());
-    if !missing.is_empty() {
-        let stars = kernels.detect_filtered(&missing, &lead.settings.detect.filtered())?;
-        for (&i, s) in missing.iter().zip(stars) {
-            filtered[i] = Some(s);
-        }
+    let stars = kernels.detect_filtered(&missing, &lead.settings.detect.filtered())?;
+    for (&i, s) in missing.iter().zip(stars) {
+        filtered[i] = Some(s);
     }
     let again: Vec<usize> = (unsolved.into_iter())
         .filter(|&i| {
