@@ -199,6 +199,19 @@ pub struct Timing {
     pub total: f64,
 }
 
+impl Timing {
+    /// Each stage's time, and their sum as the total.
+    pub fn of(decode: f64, detect: f64, identify: f64) -> Timing {
+        let total = decode + detect + identify;
+        Timing {
+            decode,
+            detect,
+            identify,
+            total,
+        }
+    }
+}
+
 /// The record of one input file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Record {

@@ -46,26 +46,8 @@ impl Solvers {
         // A solved frame's catalog says which tracks are chains of its stars.
         let found = found.map(|f| streaks::catalog_chain::off_catalog_chains(f, sol));
         let found = found.as_deref();
-        self.add_streaks(&mut r, d, (frame.width, frame.height), sol, found);
-        let drawn = found.unwrap_or_default();
-        if let Err(e) = self.products.write(&d.name, &d.path, frame, sol, drawn) {
-            // The solution stands; the user learns which file is missing and why.
-            tracing::warn!("{}: {e:#}", d.name);
-            r.warnings.push(format!("{e:#}"));
-        }
-        r
-    }
-
-    /// With `--streaks`, the frame's streaks reduced into its record (and their warnings).
-    fn add_streaks(
-        &self,
-        r: &mut Record,
-        d: &Decoded,
-        size: (u32, u32),
-        sol: &Solution,
-        found: Option<&[StreakFit]>,
-    ) {
         if let (Some(opts), Some(found)) = (&self.streaks, found) {
+            let size = (frame.width, frame.height);
             let (records, warnings) = streaks::reduce::records(found, sol, &d.keywords, size, opts);
             for w in &warnings {
                 tracing::warn!("{}: {w}", d.name);
@@ -73,6 +55,13 @@ impl Solvers {
             r.warnings.extend(warnings);
             r.streaks = Some(records);
         }
+        let drawn = found.unwrap_or_default();
+        if let Err(e) = self.products.write(&d.name, &d.path, frame, sol, drawn) {
+            // The solution stands; the user learns which file is missing and why.
+            tracing::warn!("{}: {e:#}", d.name);
+            r.warnings.push(format!("{e:#}"));
+        }
+        r
     }
 
     /// Solve a decoded frame on the CPU: one record.
@@ -136,12 +125,7 @@ impl Solvers {
         stars.sort_by(|a, b| b.flux.total_cmp(&a.flux));
         let sol = solver.identify(stars, epoch);
         let ms = t0.elapsed().as_secs_f64() * 1e3;
-        let timing = Timing {
-            decode: read_ms,
-            detect: 0.0,
-            identify: ms,
-            total: read_ms + ms,
-        };
+        let timing = Timing::of(read_ms, 0.0, ms);
         (solver.record(name, &sol, timing, BACKEND_CPU), Some(sol))
     }
 
@@ -161,12 +145,7 @@ impl Solvers {
             epoch: d.epoch,
         };
         let detect_ms = t0.elapsed().as_secs_f64() * 1e3;
-        let timing = Timing {
-            decode: d.decode_ms,
-            detect: detect_ms,
-            identify: 0.0,
-            total: d.decode_ms + detect_ms,
-        };
+        let timing = Timing::of(d.decode_ms, detect_ms, 0.0);
         self.record(None, d, frame, &sol, Some(&found), timing, BACKEND_CPU)
     }
 }
@@ -205,12 +184,7 @@ pub(super) fn solve_with(
             (sol, Some(found), ms(t0, t1), ms(t1, Instant::now()))
         }
     };
-    let timing = Timing {
-        decode: d.decode_ms,
-        detect: detect_ms,
-        identify: identify_ms,
-        total: d.decode_ms + detect_ms + identify_ms,
-    };
+    let timing = Timing::of(d.decode_ms, detect_ms, identify_ms);
     solvers.record(
         Some(solver),
         d,

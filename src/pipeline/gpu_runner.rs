@@ -261,12 +261,7 @@ impl GpuRunner {
         let each = group.iter().zip(solutions).zip(found).zip(regional);
         Ok(each
             .map(|(((d, sol), found), r)| {
-                let timing = Timing {
-                    decode: d.decode_ms,
-                    detect: detect_ms / n,
-                    identify: identify_ms / n,
-                    total: d.decode_ms + (detect_ms + identify_ms) / n,
-                };
+                let timing = Timing::of(d.decode_ms, detect_ms / n, identify_ms / n);
                 // Any solver of the size makes the record (they share the camera).
                 let lead = r.as_ref().or(global.ready());
                 let frame = decoded_frame(d);

@@ -327,12 +327,7 @@ impl<'a> Sequencer<'a> {
         warnings: Vec<String>,
     ) -> Record {
         let d = &f.decoded;
-        let timing = Timing {
-            decode: d.decode_ms,
-            detect: f.detect_ms,
-            identify: identify_ms,
-            total: d.decode_ms + f.detect_ms + identify_ms,
-        };
+        let timing = Timing::of(d.decode_ms, f.detect_ms, identify_ms);
         let mut rec = self
             .solvers
             .record(Some(solver), d, frame, sol, None, timing, &f.backend);
