@@ -4,6 +4,7 @@
 use super::camera_source::CameraSource;
 use super::hints::hint_record;
 use super::solvers::{BACKEND_CPU, Decoded, Global, Solvers};
+use crate::error::error;
 use crate::io::frame::Frame;
 use crate::record::{Record, Timing};
 use crate::solve::detect;
@@ -78,10 +79,10 @@ impl Solvers {
         let scale = self.header_scale(&d);
         let mut record = if let Some(r) = self.regional(&d, frame) {
             let global = Global::Lazy(self, (frame.width, frame.height), scale.clone());
-            solve_with(self, &r, Some(&r), &global, &d, frame)
+            solve_with(self, Some(&r), &global, &d)
         } else {
             match self.get_scaled(frame.width, frame.height, scale.as_ref()) {
-                Ok(s) => solve_with(self, &s, None, &Global::Ready(s.clone()), &d, frame),
+                Ok(s) => solve_with(self, None, &Global::Ready(s), &d),
                 Err(e) => self.error_record(&d.name, &e, BACKEND_CPU),
             }
         };
@@ -151,15 +152,19 @@ impl Solvers {
 }
 
 /// Solve a decoded frame on the CPU: within its hinted region first when `regional` is given,
-/// then lost-in-space through `global`. `solver` gives detection's settings and the record.
+/// then lost-in-space through `global`.
 pub(super) fn solve_with(
     solvers: &Solvers,
-    solver: &Solver,
     regional: Option<&Solver>,
     global: &Global,
     d: &Decoded,
-    frame: &Frame,
 ) -> Record {
+    let frame = decoded_frame(d);
+    // Either solver of the size gives detection's settings and makes the record (they share
+    // the camera); a lazy global is only made when every frame has a region.
+    let Some(solver) = regional.or(global.ready()) else {
+        return solvers.error_record(&d.name, &error!(Internal, "no solver"), BACKEND_CPU);
+    };
     let (sol, found, detect_ms, identify_ms) = match &solvers.streaks {
         None => {
             let (sol, detect_ms, identify_ms) = solve_frame_cpu(

@@ -6,7 +6,7 @@ use super::solvers::{BACKEND_CPU, Decoded, DetectKey, Detected, Global, Solvers}
 use crate::cpu::centroid::Blob;
 use crate::cpu::pattern::Rows;
 use crate::cpu::threshold::DetectParams;
-use crate::error::{Result, error};
+use crate::error::Result;
 use crate::gpu::Gpu;
 use crate::gpu::pattern::GpuPatterns;
 use crate::gpu::radial::{GpuRadial, RadialJob};
@@ -97,7 +97,7 @@ impl GpuRunner {
                     // region, on the CPU; the others carry the reason.
                     let lazy = Global::Lazy(solvers, (w, h), None);
                     let recs = group.iter().zip(&regional).map(|(d, r)| match r {
-                        Some(r) => solve_with(solvers, r, Some(r), &lazy, d, decoded_frame(d)),
+                        Some(r) => solve_with(solvers, Some(r), &lazy, d),
                         None => solvers.error_record(&d.name, &e, &self.name()),
                     });
                     return recs.collect();
@@ -108,7 +108,7 @@ impl GpuRunner {
             return records;
         }
         let recs = group.iter().zip(&regional);
-        recs.map(|(d, r)| cpu_record(solvers, r, &global, d))
+        recs.map(|(d, r)| solve_with(solvers, r.as_ref(), &global, d))
             .collect()
     }
 
@@ -271,23 +271,6 @@ impl GpuRunner {
     }
 }
 
-/// A frame's record on the CPU (after a GPU failure): within its region first when it has
-/// one, lost-in-space through `global`.
-fn cpu_record(
-    solvers: &Solvers,
-    regional: &Option<Solver>,
-    global: &Global,
-    d: &Decoded,
-) -> Record {
-    let f = decoded_frame(d);
-    match (regional, global.ready()) {
-        (Some(r), _) => solve_with(solvers, r, Some(r), global, d, f),
-        (None, Some(s)) => solve_with(solvers, s, None, global, d, f),
-        // A lazy global is only made when every frame has a region.
-        (None, None) => solvers.error_record(&d.name, &error!(Internal, "no solver"), BACKEND_CPU),
-    }
-}
-
 /// The star lists of a GPU batch's frames from their blobs, the PSF fits (`--centroid ml`) by
 /// the GPU kernel in one submission.
 pub(crate) fn gpu_stars(
@@ -442,6 +425,7 @@ impl Kernels for GpuKernels<'_, '_> {
 mod tests {
     use super::*;
     use crate::catalog::Catalog;
+    use crate::error::error;
     use crate::sequence::DETECT_STARS;
     use crate::simulate::{SimSettings, render};
 

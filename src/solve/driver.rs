@@ -384,23 +384,19 @@ pub fn identify_list_cpu<G: Deref<Target = Solver>>(
 ) -> Solution {
     // The CPU twins cannot fail.
     let Ok(sols) = identify_batch(
-        &mut CpuKernels::star_lists(),
+        &mut CpuKernels::default(),
         &[regional],
         global,
         vec![detections],
         &[epoch],
         None,
     );
-    only(sols, epoch)
+    only(sols)
 }
 
-/// The one solution of a one-frame batch.
-fn only(sols: Vec<Solution>, epoch: Option<f64>) -> Solution {
-    sols.into_iter().next().unwrap_or_else(|| Solution {
-        detections: Vec::new(),
-        outcome: Outcome::Unsolved(Unsolved::TooFewStars),
-        epoch,
-    })
+/// The one solution of a one-frame batch (`identify_batch` gives one per frame).
+fn only(mut sols: Vec<Solution>) -> Solution {
+    sols.pop().expect("one solution per frame")
 }
 
 impl Solver {
@@ -438,5 +434,5 @@ pub fn solve_frame_cpu<G: Deref<Target = Solver>>(
     let Ok(sols) = identify_batch(&mut k, regional, global, first, &[epoch], Some(&sizes));
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     let detect_ms = first_ms + k.detect_ms;
-    (only(sols, epoch), detect_ms, total_ms - detect_ms)
+    (only(sols), detect_ms, total_ms - detect_ms)
 }

@@ -55,7 +55,9 @@ pub trait Kernels {
     ) -> Result<Vec<VoteResult>, Self::Error>;
 }
 
-/// The CPU twins. A frame's tile statistics are kept between its two detection stages.
+/// The CPU twins. A frame's tile statistics are kept between its two detection stages; the
+/// default has no frames (star lists: nothing to detect again).
+#[derive(Default)]
 pub struct CpuKernels<'f> {
     detectors: Vec<Detector<'f>>,
     /// Milliseconds spent in [`Kernels::detect_filtered`].
@@ -63,23 +65,17 @@ pub struct CpuKernels<'f> {
 }
 
 impl<'f> CpuKernels<'f> {
-    /// Kernels for star lists: nothing to detect again.
-    pub fn star_lists() -> CpuKernels<'static> {
-        CpuKernels {
-            detectors: Vec::new(),
-            detect_ms: 0.0,
-        }
-    }
-
     /// Kernels for `frames`, and each frame's detections under `s` (the first stage).
     pub fn detect(frames: &[&'f Frame<'f>], s: &DetectSettings) -> (Self, Vec<Vec<Detection>>) {
         let detectors: Vec<Detector> = frames.iter().map(|f| Detector::new(f, s)).collect();
         let first = detectors.iter().map(Detector::detect).collect();
-        let k = CpuKernels {
-            detectors,
-            detect_ms: 0.0,
-        };
-        (k, first)
+        (
+            Self {
+                detectors,
+                ..Self::default()
+            },
+            first,
+        )
     }
 }
 

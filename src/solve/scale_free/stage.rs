@@ -33,12 +33,6 @@ impl Solver {
         rounds_for(n).min(most)
     }
 
-    /// The focal-length factors the pass looks quads up for: the searched range, or the
-    /// camera's own (1, 1).
-    fn pattern_range(&self) -> (f64, f64) {
-        self.settings.scale_range.unwrap_or((1.0, 1.0))
-    }
-
     /// Whether a frame goes through the scale-free pass on both detection stages (and on its
     /// point sources) before any scale walk (the driver's step 3): with a searched scale, whose
     /// walk takes seconds. A known scale's passes take milliseconds: each detection stage has
@@ -56,11 +50,11 @@ impl Solver {
         detections: &[Detection],
         rounds: std::ops::Range<usize>,
     ) -> Option<Lookup> {
-        self.scale_free.as_ref()?;
-        let range = self.pattern_range();
-        if detections.len() < 4 {
+        if self.scale_free.is_none() || detections.len() < 4 {
             return None;
         }
+        // The focal-length factors looked up for: the searched range, or the camera's own.
+        let range = self.settings.scale_range.unwrap_or((1.0, 1.0));
         Some(lookup(
             detections,
             &self.camera,
@@ -139,7 +133,7 @@ impl Solver {
     ) -> RoundEnd {
         let perms = permutations();
         let share = sf.limits.share;
-        let (lo, hi) = self.pattern_range();
+        let (lo, hi) = self.settings.scale_range.unwrap_or((1.0, 1.0));
         let refs = &self.bands[sf.band].refs;
         let mut hyps: Vec<Hypothesis> = Vec::new();
         for quad in quads.clone() {
