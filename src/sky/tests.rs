@@ -1,5 +1,5 @@
 //! Unit tests of sky/: header times in every form and scale, stations, the EOP table and
-//! Az/El against astropy. Size: about 750 lines, most of them header cases written out.
+//! Az/El against astropy. Size: about 810 lines, most of them header cases written out.
 
 use super::earth::{eop_table, parse_eop};
 use super::station::parse_angle;
